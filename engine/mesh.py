@@ -1,0 +1,298 @@
+"""Triangle and polygon meshes: the two geometric types every stage passes on.
+
+``TriMesh`` is the input surface (metres), ``PolyMesh`` the grid-shell (nodes, beams
+as edges, cells as node loops). Both are frozen values: derived data are cached
+properties and stored arrays are read-only.
+
+Glossary: n_vertices / n_nodes (rows of the coordinate array), n_faces, edges (e, 2)
+with the smaller node id first.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+__all__ = ["TriMesh", "PolyMesh", "unique_edges", "boundary_loops", "best_fit_plane"]
+
+
+def _readonly(array: np.ndarray) -> np.ndarray:
+    array = np.ascontiguousarray(array)
+    array.flags.writeable = False
+    return array
+
+
+def unique_edges(faces: list[np.ndarray] | np.ndarray) -> np.ndarray:
+    """Unique undirected edges of triangles (m, 3) or of polygon loops, as (e, 2) int64, sorted."""
+    if isinstance(faces, np.ndarray) and faces.ndim == 2:
+        directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=-1).reshape(-1, 2)
+    else:
+        parts = [np.stack([f, np.roll(f, -1)], axis=-1) for f in faces if len(f)]
+        directed = np.concatenate(parts) if parts else np.zeros((0, 2), dtype=np.int64)
+    edges = np.sort(directed.astype(np.int64), axis=1)
+    return np.unique(edges, axis=0) if len(edges) else edges
+
+
+def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
+    """Closed boundary loops of a manifold triangle mesh, each an ordered vertex array.
+
+    A boundary edge is used by one face; loops follow the faces' orientation.
+    Returned longest first.
+    """
+    directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=-1).reshape(-1, 2)
+    key = np.sort(directed, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    border = directed[counts[inverse.ravel()] == 1]
+    successor: dict[int, int] = {}
+    for a, b in border:
+        successor[int(a)] = int(b)
+    loops: list[np.ndarray] = []
+    seen: set[int] = set()
+    for start in list(successor):
+        if start in seen:
+            continue
+        loop = [start]
+        seen.add(start)
+        nxt = successor[start]
+        while nxt != start and nxt not in seen:
+            loop.append(nxt)
+            seen.add(nxt)
+            nxt = successor.get(nxt, start)
+        loops.append(np.array(loop, dtype=np.int64))
+    loops.sort(key=len, reverse=True)
+    return loops
+
+
+def best_fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares plane of (k, 3) points: (centroid (3,), unit normal (3,))."""
+    centroid = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - centroid)
+    return centroid, vt[-1]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TriMesh:
+    """A triangulated surface in metres.
+
+    vertices: (n_vertices, 3) float64; faces: (n_faces, 3) int64, consistently oriented
+    (normals up or outward after ``engine.surfaces.clean_mesh``); flagged: (n_vertices,)
+    bool, vertices marked as supports in the input file (red in a PLY), all False if none.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    flagged: np.ndarray = field(default=None)  # type: ignore[assignment]
+    name: str = "surface"
+
+    def __post_init__(self) -> None:
+        vertices = np.asarray(self.vertices, dtype=np.float64)
+        faces = np.asarray(self.faces, dtype=np.int64)
+        if vertices.ndim != 2 or vertices.shape[1] != 3:
+            raise ValueError(f"vertices must be (n, 3), got {vertices.shape}")
+        if faces.ndim != 2 or faces.shape[1] != 3:
+            raise ValueError(f"faces must be (m, 3), got {faces.shape}")
+        flagged = (np.zeros(len(vertices), dtype=bool) if self.flagged is None
+                   else np.asarray(self.flagged, dtype=bool))
+        object.__setattr__(self, "vertices", _readonly(vertices))
+        object.__setattr__(self, "faces", _readonly(faces))
+        object.__setattr__(self, "flagged", _readonly(flagged))
+
+    @property
+    def n_vertices(self) -> int:
+        return len(self.vertices)
+
+    @property
+    def n_faces(self) -> int:
+        return len(self.faces)
+
+    @cached_property
+    def triangles(self) -> np.ndarray:
+        """(n_faces, 3, 3) corner coordinates."""
+        return _readonly(self.vertices[self.faces])
+
+    @cached_property
+    def _face_cross(self) -> np.ndarray:
+        t = self.triangles
+        return np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+
+    @cached_property
+    def face_areas(self) -> np.ndarray:
+        """(n_faces,) true areas in m^2."""
+        return _readonly(0.5 * np.linalg.norm(self._face_cross, axis=1))
+
+    @cached_property
+    def face_plan_areas(self) -> np.ndarray:
+        """(n_faces,) areas projected on the horizontal plane, m^2."""
+        return _readonly(0.5 * np.abs(self._face_cross[:, 2]))
+
+    @cached_property
+    def face_normals(self) -> np.ndarray:
+        """(n_faces, 3) unit normals following the face orientation."""
+        cross = self._face_cross
+        norm = np.linalg.norm(cross, axis=1, keepdims=True)
+        return _readonly(cross / np.where(norm > 0, norm, 1.0))
+
+    @cached_property
+    def face_centroids(self) -> np.ndarray:
+        return _readonly(self.triangles.mean(axis=1))
+
+    @cached_property
+    def vertex_normals(self) -> np.ndarray:
+        """(n_vertices, 3) area-weighted unit normals."""
+        acc = np.zeros((self.n_vertices, 3))
+        for k in range(3):
+            np.add.at(acc, self.faces[:, k], self._face_cross)
+        norm = np.linalg.norm(acc, axis=1, keepdims=True)
+        return _readonly(acc / np.where(norm > 0, norm, 1.0))
+
+    @cached_property
+    def vertex_areas(self) -> np.ndarray:
+        """(n_vertices,) barycentric (one third of each adjacent face) areas, m^2."""
+        acc = np.zeros(self.n_vertices)
+        for k in range(3):
+            np.add.at(acc, self.faces[:, k], self.face_areas / 3.0)
+        return _readonly(acc)
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """(n_edges, 2) unique undirected edges."""
+        return _readonly(unique_edges(self.faces))
+
+    @cached_property
+    def boundary_loops(self) -> list[np.ndarray]:
+        """Ordered vertex loops of the boundary, longest (outer) first."""
+        return boundary_loops(self.faces)
+
+    @cached_property
+    def boundary_vertices(self) -> np.ndarray:
+        """(n_vertices,) bool, True on any boundary loop."""
+        mask = np.zeros(self.n_vertices, dtype=bool)
+        for loop in self.boundary_loops:
+            mask[loop] = True
+        return _readonly(mask)
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) lower and upper corners of the bounding box."""
+        return np.array([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+
+    @property
+    def diagonal(self) -> float:
+        """Length of the bounding-box diagonal, m."""
+        lo, hi = self.bounds
+        return float(np.linalg.norm(hi - lo))
+
+    @property
+    def area(self) -> float:
+        return float(self.face_areas.sum())
+
+    def to_trimesh(self):  # -> trimesh.Trimesh
+        """A ``trimesh.Trimesh`` view (no processing) for I/O and queries."""
+        import trimesh
+
+        return trimesh.Trimesh(self.vertices.copy(), self.faces.copy(), process=False)
+
+
+@dataclass(frozen=True, kw_only=True)
+class PolyMesh:
+    """A polygonal grid-shell: nodes (joints), faces (cells as node loops), beams = edges.
+
+    nodes: (n_nodes, 3) float64 m; faces: tuple of int64 node loops, each a simple
+    polygon, consistently oriented; boundary: (n_nodes,) bool on the surface boundary;
+    supports: (n_nodes,) bool, supported nodes; corners: (n_nodes,) bool, surface
+    corners kept as nodes (fixed during optimisation).
+    """
+
+    nodes: np.ndarray
+    faces: tuple[np.ndarray, ...]
+    boundary: np.ndarray = field(default=None)  # type: ignore[assignment]
+    supports: np.ndarray = field(default=None)  # type: ignore[assignment]
+    corners: np.ndarray = field(default=None)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        nodes = np.asarray(self.nodes, dtype=np.float64)
+        n = len(nodes)
+        faces = tuple(_readonly(np.asarray(f, dtype=np.int64)) for f in self.faces)
+        object.__setattr__(self, "nodes", _readonly(nodes))
+        object.__setattr__(self, "faces", faces)
+        for name in ("boundary", "supports", "corners"):
+            value = getattr(self, name)
+            mask = np.zeros(n, dtype=bool) if value is None else np.asarray(value, dtype=bool)
+            if mask.shape != (n,):
+                raise ValueError(f"{name} must be ({n},) bool, got {mask.shape}")
+            object.__setattr__(self, name, _readonly(mask))
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.nodes)
+
+    @property
+    def n_faces(self) -> int:
+        return len(self.faces)
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """(n_beams, 2) unique beams, smaller node id first."""
+        return _readonly(unique_edges(list(self.faces)))
+
+    @property
+    def beams(self) -> np.ndarray:
+        """Alias of ``edges``: a grid-shell's edges are its beams."""
+        return self.edges
+
+    @cached_property
+    def beam_lengths(self) -> np.ndarray:
+        """(n_beams,) node-to-node lengths, m."""
+        e = self.edges
+        return _readonly(np.linalg.norm(self.nodes[e[:, 1]] - self.nodes[e[:, 0]], axis=1))
+
+    @property
+    def total_length(self) -> float:
+        """Total beam length L_tot, m."""
+        return float(self.beam_lengths.sum())
+
+    @cached_property
+    def face_degrees(self) -> np.ndarray:
+        """(n_faces,) number of nodes of each cell."""
+        return _readonly(np.array([len(f) for f in self.faces], dtype=np.int64))
+
+    @cached_property
+    def valence(self) -> np.ndarray:
+        """(n_nodes,) number of beams at each node."""
+        return _readonly(np.bincount(self.edges.ravel(), minlength=self.n_nodes))
+
+    @cached_property
+    def face_boundary(self) -> np.ndarray:
+        """(n_faces,) bool: the cell has an edge on the surface boundary (used by one face)."""
+        directed = np.concatenate([np.stack([f, np.roll(f, -1)], axis=-1) for f in self.faces])
+        key = np.sort(directed, axis=1)
+        _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+        once = counts[inverse.ravel()] == 1
+        owner = np.repeat(np.arange(self.n_faces), self.face_degrees)
+        out = np.zeros(self.n_faces, dtype=bool)
+        out[owner[once]] = True
+        return _readonly(out)
+
+    def face_planarity(self) -> np.ndarray:
+        """(n_faces,) largest distance of a face's nodes from its best-fit plane, m."""
+        out = np.zeros(self.n_faces)
+        for i, f in enumerate(self.faces):
+            if len(f) > 3:
+                c, n = best_fit_plane(self.nodes[f])
+                out[i] = np.abs((self.nodes[f] - c) @ n).max()
+        return out
+
+    def face_areas(self) -> np.ndarray:
+        """(n_faces,) vector areas' norms of the (possibly non-planar) node loops, m^2."""
+        out = np.zeros(self.n_faces)
+        for i, f in enumerate(self.faces):
+            p = self.nodes[f]
+            out[i] = 0.5 * np.linalg.norm(np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0))
+        return out
+
+    def replace_nodes(self, nodes: np.ndarray) -> "PolyMesh":
+        """A copy with moved nodes and the same topology and flags."""
+        return PolyMesh(nodes=nodes, faces=self.faces, boundary=self.boundary,
+                        supports=self.supports, corners=self.corners)

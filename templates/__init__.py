@@ -1,0 +1,1 @@
+"""Data only: ready project files and report templates."""

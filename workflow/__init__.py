@@ -1,0 +1,1 @@
+"""gridshell workflow: project files, stage runner with caching, command line, report."""

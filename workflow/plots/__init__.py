@@ -1,0 +1,1 @@
+"""Pictures of each stage (matplotlib, Agg backend, PNG). One module per stage."""
