@@ -1,0 +1,114 @@
+"""Reading and writing surface meshes: OBJ, PLY, STL, OFF (trimesh) and Rhino .3dm (rhino3dm).
+
+Readers return raw arrays; ``engine.surfaces.clean_mesh`` does the cleaning and checking.
+The red vertices (255, 0, 0) of a PLY are returned as support flags.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from engine.errors import InputError
+from engine.mesh import TriMesh
+from fabrication.files import atomic_path
+
+__all__ = ["SURFACE_SUFFIXES", "read_surface", "write_surface_ply"]
+
+SURFACE_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".3dm")
+
+
+def _red_flags(mesh, n_vertices: int) -> np.ndarray:
+    """Support flags from vertex colours: pure red (255, 0, 0) vertices."""
+    raw = (getattr(mesh, "metadata", None) or {}).get("_ply_raw")
+    if raw and "vertex" in raw:
+        data = raw["vertex"]["data"]
+        names = data.keys() if isinstance(data, dict) else (data.dtype.names or ())
+        if {"red", "green", "blue"} <= set(names):
+            rgb = np.stack([np.asarray(data[c]).ravel() for c in ("red", "green", "blue")], axis=1)
+            if len(rgb) == n_vertices:
+                return (rgb[:, 0] == 255) & (rgb[:, 1] == 0) & (rgb[:, 2] == 0)
+    colours = getattr(getattr(mesh, "visual", None), "vertex_colors", None)
+    if getattr(mesh.visual, "kind", None) == "vertex" and colours is not None and len(colours) == n_vertices:
+        return (colours[:, 0] == 255) & (colours[:, 1] == 0) & (colours[:, 2] == 0)
+    return np.zeros(n_vertices, dtype=bool)
+
+
+def _read_3dm(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    import rhino3dm
+
+    model = rhino3dm.File3dm.Read(str(path))
+    if model is None:
+        raise InputError(f"{path}: not a readable Rhino .3dm file", hint="save it again from Rhino 6 or later")
+    vertices: list[np.ndarray] = []
+    faces: list[np.ndarray] = []
+    offset = 0
+    skipped: list[str] = []
+    for obj in model.Objects:
+        geometry = obj.Geometry
+        if not isinstance(geometry, rhino3dm.Mesh):
+            skipped.append(type(geometry).__name__)
+            continue
+        v = np.array([[p.X, p.Y, p.Z] for p in geometry.Vertices], dtype=float)
+        tris = []
+        for i in range(len(geometry.Faces)):
+            a, b, c, d = geometry.Faces[i]
+            tris.append((a, b, c))
+            if d != c:
+                tris.append((a, c, d))
+        vertices.append(v)
+        faces.append(np.array(tris, dtype=np.int64) + offset)
+        offset += len(v)
+    if not vertices:
+        what = f" (it holds {', '.join(sorted(set(skipped)))})" if skipped else ""
+        raise InputError(f"{path}: no mesh object in the .3dm file{what}",
+                         hint="in Rhino, mesh the surface (_Mesh) and save the mesh")
+    scale = {2: 1e-3, 3: 1e-2, 4: 1.0}.get(int(model.Settings.ModelUnitSystem), 1.0)
+    v_all = np.concatenate(vertices) * scale
+    return v_all, np.concatenate(faces), np.zeros(len(v_all), dtype=bool)
+
+
+def read_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Raw (vertices (n,3) m, faces (m,3), flagged (n,) bool) of a mesh file.
+
+    Raises ``InputError`` for a missing file, an unknown suffix or an unreadable file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"surface file {path} does not exist", hint="check the path (relative paths are "
+                         "relative to the project file)")
+    suffix = path.suffix.lower()
+    if suffix not in SURFACE_SUFFIXES:
+        raise InputError(f"surface file {path}: unknown format {suffix!r}; allowed: {', '.join(SURFACE_SUFFIXES)}")
+    if suffix == ".3dm":
+        return _read_3dm(path)
+    import trimesh
+
+    try:
+        loaded = trimesh.load(str(path), process=False, force="mesh")
+    except Exception as exc:  # trimesh raises many kinds for corrupt files
+        raise InputError(f"surface file {path} could not be read: {exc}",
+                         hint="re-export it as a triangle mesh (OBJ, PLY, STL or OFF)") from exc
+    vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=float)
+    faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), dtype=np.int64)
+    if len(vertices) == 0 or len(faces) == 0:
+        raise InputError(f"surface file {path} holds no triangles", hint="export the surface as a mesh, not as points or curves")
+    return vertices, faces, _red_flags(loaded, len(vertices))
+
+
+def write_surface_ply(mesh: TriMesh, path: str | Path) -> Path:
+    """Write an ASCII PLY with the support flags as red vertices (others white), atomically."""
+    colours = np.full((mesh.n_vertices, 4), 255, dtype=np.uint8)
+    colours[mesh.flagged, 1:3] = 0
+    header = "\n".join([
+        "ply", "format ascii 1.0", "comment gridshell surface, metres; red vertices are flagged supports",
+        f"element vertex {mesh.n_vertices}", "property double x", "property double y", "property double z",
+        "property uchar red", "property uchar green", "property uchar blue", "property uchar alpha",
+        f"element face {mesh.n_faces}", "property list uchar int vertex_indices", "end_header"])
+    vertex_lines = [f"{x:.9g} {y:.9g} {z:.9g} {r} {g} {b} {a}"
+                    for (x, y, z), (r, g, b, a) in zip(mesh.vertices.tolist(), colours.tolist())]
+    face_lines = [f"3 {a} {b} {c}" for a, b, c in mesh.faces.tolist()]
+    with atomic_path(path) as tmp:
+        tmp.write_text("\n".join([header, *vertex_lines, *face_lines]) + "\n", encoding="ascii")
+    return Path(path)
