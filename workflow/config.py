@@ -1,0 +1,470 @@
+"""The project file (TOML), validated by pydantic.
+
+One section per concern: ``project``, ``surface``, ``supports`` (a list), ``loads``
+(cases and combinations), ``material``, ``section``, and one section per stage
+(``shell``, ``field``, ``remesh``, ``optimize``, ``analysis``, ``fabrication``,
+``report``). Quantities may carry units; bare numbers are SI. Unknown keys are errors.
+``load_project`` raises ``ConfigError`` naming the file, the key, the value and what is
+allowed.
+"""
+
+from __future__ import annotations
+
+import tomllib
+import types
+import typing
+from pathlib import Path
+from typing import Annotated, Any, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from engine.errors import GridshellError
+from engine.supports import restraint_flags
+
+from .units import AreaLoad, Density, Force, Length, Stress, to_si
+
+__all__ = ["ConfigError", "Project", "load_project", "parse_project", "project_from_surface",
+           "STAGE_SECTIONS"]
+
+
+class ConfigError(GridshellError):
+    """Raised when a project file is missing, is not TOML, or fails validation."""
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+Vector3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+
+
+class ProjectInfo(_Section):
+    name: str = "gridshell"
+    description: str = ""
+    author: str = ""
+
+
+SurfaceTemplate = Literal["mockup", "cap", "vault", "hypar", "courtyard"]
+
+
+class SurfaceConfig(_Section):
+    """Either ``file`` (OBJ, PLY, STL, OFF, 3DM; relative to the project file) or ``template``."""
+
+    file: str | None = None
+    file_units: Literal["m", "cm", "mm", "in", "ft"] = "m"
+    template: SurfaceTemplate | None = None
+    parameters: dict[str, float | int | str] = Field(default_factory=dict)
+    merge_tolerance: Length | None = None
+
+    @model_validator(mode="after")
+    def _one_source(self) -> "SurfaceConfig":
+        if (self.file is None) == (self.template is None):
+            raise ValueError("give exactly one of 'file' (a mesh file) or 'template' "
+                             "(mockup, cap, vault, hypar, courtyard)")
+        if self.file is not None and self.parameters:
+            raise ValueError("'parameters' apply to templates only, not to a surface file")
+        return self
+
+
+class SupportSpec(_Section):
+    """One support selection and its restraint.
+
+    select: boundary | loop (with ``loop``) | plane (``point``, ``normal``, ``tolerance``) |
+    box (``lower``, ``upper``) | flagged | ids (``ids``) | nearest (``points``).
+    restraint: pinned | fixed | roller_x | roller_y | roller_z | six 0/1 flags.
+    """
+
+    select: Literal["boundary", "loop", "plane", "box", "flagged", "ids", "nearest"]
+    restraint: str | list[int] = "pinned"
+    loop: int | None = None
+    point: list[Length] | None = None
+    normal: list[float] | None = None
+    tolerance: Length = 1e-3
+    lower: list[Length] | None = None
+    upper: list[Length] | None = None
+    ids: list[int] | None = None
+    points: list[list[Length]] | None = None
+
+    @field_validator("restraint")
+    @classmethod
+    def _restraint(cls, value: str | list[int]) -> str | list[int]:
+        restraint_flags(value)
+        return value
+
+    @model_validator(mode="after")
+    def _required(self) -> "SupportSpec":
+        needs = {"loop": ["loop"], "plane": ["point", "normal"], "box": ["lower", "upper"],
+                 "ids": ["ids"], "nearest": ["points"]}.get(self.select, [])
+        missing = [k for k in needs if getattr(self, k) is None]
+        if missing:
+            raise ValueError(f"select = '{self.select}' needs {', '.join(missing)}")
+        for key in ("point", "normal", "lower", "upper"):
+            value = getattr(self, key)
+            if value is not None and len(value) != 3:
+                raise ValueError(f"'{key}' must have 3 values [x, y, z]")
+        if self.points is not None and any(len(p) != 3 for p in self.points):
+            raise ValueError("'points' must be a list of [x, y, z]")
+        return self
+
+
+class PointLoadSpec(_Section):
+    """A point load at ``node`` (0-based id) or at the node nearest to ``nearest`` [x, y, z].
+
+    ``force`` is [Fx, Fy, Fz] in N (units allowed); ``moment`` optional [Mx, My, Mz] in N m.
+    """
+
+    node: int | None = None
+    nearest: list[Length] | None = None
+    force: list[Force] = Field(min_length=3, max_length=3)
+    moment: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3)
+
+    @model_validator(mode="after")
+    def _where(self) -> "PointLoadSpec":
+        if (self.node is None) == (self.nearest is None):
+            raise ValueError("give exactly one of 'node' or 'nearest'")
+        return self
+
+
+class LoadCaseSpec(_Section):
+    """A load case. Area loads: a single value is a downward load, or [qx, qy, qz] (N/m^2)."""
+
+    self_weight: float = 0.0
+    area_true: AreaLoad | list[AreaLoad] = 0.0
+    area_plan: AreaLoad | list[AreaLoad] = 0.0
+    points: list[PointLoadSpec] = Field(default_factory=list)
+
+    @field_validator("area_true", "area_plan")
+    @classmethod
+    def _vector(cls, value: float | list[float]) -> float | list[float]:
+        if isinstance(value, list) and len(value) != 3:
+            raise ValueError("an area load is one downward value or [qx, qy, qz]")
+        return value
+
+    def area_vector(self, which: str) -> list[float]:
+        value = getattr(self, which)
+        return list(value) if isinstance(value, list) else [0.0, 0.0, -float(value)]
+
+
+class CombinationSpec(_Section):
+    limit_state: Literal["ULS", "SLS"]
+    factors: dict[str, float]
+
+
+class LoadsConfig(_Section):
+    cases: dict[str, LoadCaseSpec] = Field(default_factory=lambda: {"dead": LoadCaseSpec(self_weight=1.0)})
+    combinations: dict[str, CombinationSpec] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _known_cases(self) -> "LoadsConfig":
+        for name, combo in self.combinations.items():
+            unknown = sorted(set(combo.factors) - set(self.cases))
+            if unknown:
+                raise ValueError(f"combination '{name}' uses unknown load case(s) {unknown}; "
+                                 f"defined cases: {sorted(self.cases)}")
+        return self
+
+    def combination_names(self, limit_state: str) -> list[str]:
+        return [n for n, c in self.combinations.items() if c.limit_state == limit_state]
+
+
+class MaterialConfig(_Section):
+    """Beam material: a named one (steel_s235, steel_s355, aluminium_6063, aluminium_6061,
+    glulam_gl24h, pla, petg) with optional overrides of its properties."""
+
+    name: str = "steel_s355"
+    E: Stress | None = None
+    G: Stress | None = None
+    density: Density | None = None
+    yield_strength: Stress | None = None
+
+
+class SectionConfig(_Section):
+    """Beam cross-section: circular_hollow (diameter, thickness), rectangular_hollow (height,
+    width, thickness), solid_round (diameter), solid_rectangle (height, width)."""
+
+    kind: Literal["circular_hollow", "rectangular_hollow", "solid_round", "solid_rectangle"] = "circular_hollow"
+    diameter: Length | None = None
+    thickness: Length | None = None
+    height: Length | None = None
+    width: Length | None = None
+
+    @model_validator(mode="after")
+    def _dimensions(self) -> "SectionConfig":
+        needs = {"circular_hollow": ["diameter", "thickness"], "rectangular_hollow": ["height", "width", "thickness"],
+                 "solid_round": ["diameter"], "solid_rectangle": ["height", "width"]}[self.kind]
+        missing = [k for k in needs if getattr(self, k) is None]
+        if missing:
+            raise ValueError(f"section kind '{self.kind}' needs {', '.join(missing)}")
+        for k in needs:
+            if getattr(self, k) <= 0:
+                raise ValueError(f"section {k} must be positive")
+        return self
+
+    def dimensions(self) -> dict[str, float]:
+        return {k: getattr(self, k) for k in ("diameter", "thickness", "height", "width") if getattr(self, k) is not None}
+
+
+class ShellConfig(_Section):
+    """Continuous-shell analysis of the surface (METHOD.md 1). thickness None: span / 100."""
+
+    thickness: Length | None = None
+    E: Stress = 210e9
+    nu: float = Field(0.3, ge=0.0, lt=0.5)
+    density: Density = 7850.0
+    combination: str | None = None
+
+
+class SymmetryPlane(_Section):
+    point: list[Length] = Field(min_length=3, max_length=3)
+    normal: list[float] = Field(min_length=3, max_length=3)
+
+
+class FieldConfig(_Section):
+    """Guiding field (METHOD.md 2): D = max_size_ratio, A = max_aspect."""
+
+    max_size_ratio: float = Field(2.0, ge=1.0, le=20.0)
+    max_aspect: float = Field(2.0, ge=1.0, le=20.0)
+    size_map: Literal["energy", "linear"] = "energy"
+    anisotropy_map: Literal["energy", "linear"] = "energy"
+    opposite_sign_anisotropy: float = Field(1.0, ge=1.0)
+    clamp_percentiles: tuple[float, float] = (1.0, 99.0)
+    smoothing_iterations: int = Field(10, ge=0)
+    direction_smoothing_iterations: int = Field(10, ge=0)
+    symmetry_planes: list[SymmetryPlane] = Field(default_factory=list, max_length=2)
+
+
+class RemeshConfig(_Section):
+    """Size target: one of n_cells, mean_beam_length, total_length (default 120 cells)."""
+
+    n_cells: int | None = Field(None, ge=4)
+    mean_beam_length: Length | None = None
+    total_length: Length | None = None
+    lloyd_iterations: int = Field(30, ge=0)
+    seed: int = 0
+
+    @model_validator(mode="after")
+    def _one_target(self) -> "RemeshConfig":
+        given = [k for k in ("n_cells", "mean_beam_length", "total_length") if getattr(self, k) is not None]
+        if len(given) > 1:
+            raise ValueError(f"give one size target, not {', '.join(given)}")
+        return self
+
+
+class OptimizeConfig(_Section):
+    iterations: int = Field(50, ge=0)
+    regularity_weight: float = Field(1.0, ge=0)
+    planarity_weight: float = Field(1.0, ge=0)
+    closeness_weight: float = Field(1.0, ge=0)
+    fairness_weight: float = Field(0.1, ge=0)
+    planar: bool = True
+
+
+class AnalysisConfig(_Section):
+    """Beam grid-shell analysis (METHOD.md 5). imperfection_amplitude None: L/300 of the shorter plan side."""
+
+    elements_per_beam: int = Field(4, ge=1, le=20)
+    n_modes: int = Field(6, ge=1, le=50)
+    imperfection_amplitude: Length | None = None
+    imperfection_shapes: list[Literal["linear", "nonlinear", "mode1", "mode2", "mode3"]] = Field(
+        default_factory=lambda: ["linear", "nonlinear", "mode1", "mode2", "mode3"])
+    nonlinear: bool = True
+    max_load_factor: float = Field(10.0, gt=0)
+    required_load_factor: float = Field(1.5, gt=0)
+    deflection_limit_ratio: float = Field(250.0, gt=0)
+    buckling_length_factor: float = Field(1.0, gt=0)
+    uls_combination: str | None = None
+    sls_combination: str | None = None
+    control_points: dict[str, list[Length]] = Field(default_factory=dict)
+
+
+class JointsConfig(_Section):
+    kind: Literal["socket", "steel"] = "socket"
+    hub_radius: Length | None = None
+    sleeve_length: Length | None = None
+    clearance: Length = 0.0003
+    wall: Length = 0.002
+    min_wall: Length = 0.0015
+    pin_hole: Length = 0.003
+    engrave: bool = True
+    plate_thickness: Length = 0.01
+    bolt_hole: Length = 0.018
+
+
+class BeamsConfig(_Section):
+    stock_length: Length = 6.0
+    kerf: Length = 0.003
+
+
+class PanelsConfig(_Section):
+    enabled: bool = True
+    thickness: Length = 0.003
+    material: str = "acrylic"
+    density: Density = 1190.0
+    clearance: Length = 0.002
+    hole_diameter: Length = 0.0
+    hole_inset: Length = 0.01
+    planarity_tolerance: Length = 0.002
+    split_nonplanar: bool = False
+
+
+class SheetsConfig(_Section):
+    width: Length = 1.2
+    height: Length = 0.6
+    spacing: Length = 0.004
+    margin: Length = 0.01
+    rotations: bool = True
+
+
+class AssemblyConfig(_Section):
+    deflection_limit: Length | None = None
+
+
+class FabricationConfig(_Section):
+    joints: JointsConfig = Field(default_factory=JointsConfig)
+    beams: BeamsConfig = Field(default_factory=BeamsConfig)
+    panels: PanelsConfig = Field(default_factory=PanelsConfig)
+    sheets: SheetsConfig = Field(default_factory=SheetsConfig)
+    assembly: AssemblyConfig = Field(default_factory=AssemblyConfig)
+    workers: int | None = Field(None, ge=1)
+
+
+class ReportConfig(_Section):
+    title: str | None = None
+
+
+class Project(_Section):
+    """A whole project file."""
+
+    project: ProjectInfo = Field(default_factory=ProjectInfo)
+    surface: SurfaceConfig
+    supports: list[SupportSpec] = Field(default_factory=lambda: [SupportSpec(select="boundary")], min_length=1)
+    loads: LoadsConfig = Field(default_factory=LoadsConfig)
+    material: MaterialConfig = Field(default_factory=MaterialConfig)
+    section: SectionConfig = Field(default_factory=lambda: SectionConfig(diameter=0.0483, thickness=0.0032))
+    shell: ShellConfig = Field(default_factory=ShellConfig)
+    field: FieldConfig = Field(default_factory=FieldConfig)
+    remesh: RemeshConfig = Field(default_factory=RemeshConfig)
+    optimize: OptimizeConfig = Field(default_factory=OptimizeConfig)
+    analysis: AnalysisConfig = Field(default_factory=AnalysisConfig)
+    fabrication: FabricationConfig = Field(default_factory=FabricationConfig)
+    report: ReportConfig = Field(default_factory=ReportConfig)
+
+    @model_validator(mode="after")
+    def _combinations_exist(self) -> "Project":
+        for key, name in (("shell.combination", self.shell.combination),
+                          ("analysis.uls_combination", self.analysis.uls_combination),
+                          ("analysis.sls_combination", self.analysis.sls_combination)):
+            if name is not None and name not in self.loads.combinations and name not in self.loads.cases:
+                raise ValueError(f"{key} = '{name}' is neither a load combination nor a load case; "
+                                 f"defined: {sorted(self.loads.combinations) + sorted(self.loads.cases)}")
+        return self
+
+
+STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
+    "surface": ("surface", "supports", "loads"),
+    "shell": ("shell", "loads"),
+    "field": ("field",),
+    "remesh": ("remesh",),
+    "optimize": ("optimize",),
+    "analysis": ("analysis", "material", "section", "loads"),
+    "fabrication": ("fabrication", "material", "section"),
+    "report": ("report", "project"),
+}
+"""The project sections each stage reads: its cache key."""
+
+
+def _unwrap(annotation: Any) -> Any:
+    """Strip Annotated and Optional layers; a Union of models resolves to its first model."""
+    while True:
+        origin = typing.get_origin(annotation)
+        if origin is Annotated:
+            annotation = typing.get_args(annotation)[0]
+        elif origin in (Union, types.UnionType):
+            args = [a for a in typing.get_args(annotation) if a is not type(None)]
+            models = [a for a in args if isinstance(a, type) and issubclass(a, BaseModel)]
+            containers = [a for a in args if typing.get_origin(a) in (list, dict)]
+            annotation = (models or containers or args)[0]
+        else:
+            return annotation
+
+
+def _model_for(loc: tuple, model: type[BaseModel] = Project) -> type[BaseModel] | None:
+    """The pydantic model class that owns the last key of ``loc`` (for listing allowed keys)."""
+    current: Any = model
+    for part in loc[:-1]:
+        current = _unwrap(current)
+        if isinstance(current, type) and issubclass(current, BaseModel):
+            field_info = current.model_fields.get(str(part))
+            if field_info is None:
+                return None
+            current = field_info.annotation
+        elif typing.get_origin(current) is list:
+            current = typing.get_args(current)[0]
+        elif typing.get_origin(current) is dict:
+            current = typing.get_args(current)[1]
+        else:
+            return None
+    current = _unwrap(current)
+    return current if isinstance(current, type) and issubclass(current, BaseModel) else None
+
+
+def _format_errors(error: ValidationError, source: str) -> str:
+    lines = [f"{source}: invalid project file"]
+    for item in error.errors():
+        loc = tuple(p for p in item["loc"] if not (isinstance(p, str) and p.startswith("function-")))
+        key = ".".join(str(p) if not isinstance(p, int) else f"[{p}]" for p in loc).replace(".[", "[") or "(top level)"
+        value = item.get("input")
+        shown = repr(value) if not isinstance(value, dict) else "{...}"
+        if item["type"] == "extra_forbidden":
+            owner = _model_for(loc)
+            allowed = ", ".join(owner.model_fields) if owner else "see the template"
+            lines.append(f"  {key} = {shown}: unknown key; allowed keys here: {allowed}")
+        elif item["type"] == "missing":
+            lines.append(f"  {key}: required key is missing")
+        elif item["type"] == "literal_error":
+            expected = item.get("ctx", {}).get("expected", "")
+            lines.append(f"  {key} = {shown}: not allowed; expected one of {expected}")
+        else:
+            message = item["msg"].removeprefix("Value error, ")
+            lines.append(f"  {key} = {shown}: {message}")
+    return "\n".join(lines)
+
+
+def parse_project(data: dict, *, source: str = "project", base_dir: Path | None = None) -> Project:
+    """Validate a project dictionary; relative surface paths resolve against ``base_dir``."""
+    try:
+        project = Project.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(_format_errors(exc, source),
+                          hint="compare with a template: gridshell init DIR --template mockup") from None
+    if project.surface.file is not None and base_dir is not None:
+        path = Path(project.surface.file)
+        if not path.is_absolute():
+            surface = project.surface.model_copy(update={"file": str((base_dir / path).resolve())})
+            project = project.model_copy(update={"surface": surface})
+    return project
+
+
+def load_project(path: str | Path) -> Project:
+    """Read and validate a TOML project file."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"project file {path} does not exist",
+                          hint="create one with: gridshell init DIR --template mockup")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not a text file") from None
+    return parse_project(data, source=str(path), base_dir=path.parent.resolve())
+
+
+def project_from_surface(surface: str | Path, supports: str = "boundary") -> Project:
+    """The quick-start project: a mesh file, supports 'boundary' or 'flagged', defaults elsewhere."""
+    if supports not in ("boundary", "flagged"):
+        raise ConfigError(f"--supports {supports!r}: allowed are boundary, flagged")
+    return parse_project({"project": {"name": Path(surface).stem},
+                          "surface": {"file": str(Path(surface).resolve())},
+                          "supports": [{"select": supports, "restraint": "pinned"}]},
+                         source=f"--surface {surface}")
