@@ -12,7 +12,13 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_path", "write_text_atomic", "write_bytes_atomic"]
+__all__ = ["atomic_path", "atomic_folder", "write_text_atomic", "write_bytes_atomic"]
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 @contextlib.contextmanager
@@ -28,6 +34,7 @@ def atomic_path(target: str | os.PathLike, *, suffix: str | None = None) -> Iter
                                     dir=target.parent)
     os.close(fd)
     tmp = Path(tmp_name)
+    os.chmod(tmp, 0o666 & ~_umask())
     try:
         yield tmp
         os.replace(tmp, target)
@@ -48,3 +55,13 @@ def write_bytes_atomic(target: str | os.PathLike, data: bytes) -> Path:
     with atomic_path(target) as tmp:
         tmp.write_bytes(data)
     return Path(target)
+
+
+def atomic_folder(parent: str | os.PathLike, name: str) -> Path:
+    """A new empty temporary folder in ``parent`` (mode as for an ordinary new folder).
+
+    The caller fills it and renames it onto its final name when complete.
+    """
+    path = Path(tempfile.mkdtemp(prefix=f".{name}.", dir=parent))
+    os.chmod(path, 0o777 & ~_umask())
+    return path

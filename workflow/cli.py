@@ -1,0 +1,215 @@
+"""The ``gridshell`` command line: a thin shell over the runner and the solver interfaces.
+
+Results and paths go to stdout, progress and messages to stderr. A user mistake
+(``GridshellError``) ends with one clear message and exit code 2; ``--debug`` shows the
+traceback. Heavy modules are imported inside each command.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from engine.errors import GridshellError, InputError
+
+__all__ = ["main", "build_parser"]
+
+TEMPLATE_NAMES = ("mockup", "cap", "vault", "hypar", "courtyard")
+
+
+def _template_path(name: str) -> Path:
+    import templates
+
+    path = Path(templates.__file__).parent / f"{name}.toml"
+    if name not in TEMPLATE_NAMES or not path.is_file():
+        raise InputError(f"unknown template {name!r}; templates: {', '.join(TEMPLATE_NAMES)}")
+    return path
+
+
+def _read_json(path: str) -> dict:
+    file = Path(path)
+    if not file.is_file():
+        raise InputError(f"model file {file} does not exist")
+    try:
+        data = json.loads(file.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{file}: not valid JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{file}: the model must be a JSON object with nodes, ...")
+    return data
+
+
+def _write_json(data: dict, path: str) -> None:
+    from fabrication.files import write_text_atomic
+
+    write_text_atomic(path, json.dumps(data, indent=1))
+    print(Path(path).resolve())
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from .config import load_project, project_from_surface
+    from .progress import Progress
+    from .runner import run_project
+    from .stages import STAGES
+
+    if args.project and args.surface:
+        raise InputError("give a PROJECT file or --surface MESH, not both")
+    if args.supports and not args.surface:
+        raise InputError("--supports applies to --surface MESH only; a project file lists its supports")
+    if args.only and args.until:
+        raise InputError("--only and --until cannot be combined")
+    if args.surface:
+        project = project_from_surface(args.surface, args.supports or "boundary")
+        default_out = Path("out") / Path(args.surface).stem
+        project_file = None
+    else:
+        project_path = Path(args.project) if args.project else _template_path("mockup")
+        project = load_project(project_path)
+        default_out = Path("out") / (project_path.stem if args.project else "mockup")
+        project_file = str(project_path.resolve())
+    out_dir = Path(args.out) if args.out else default_out
+    progress = Progress(enabled=not args.quiet)
+    progress.message(f"gridshell: {project.project.name} -> {out_dir}")
+    summary = run_project(project, out_dir, STAGES, until=args.until, only=args.only, force=args.force,
+                          progress=progress, project_file=project_file)
+    if summary.message:
+        print(f"stopped: {summary.message}", file=sys.stderr)
+    report = out_dir / "report.html"
+    print(f"manifest: {summary.manifest_path.resolve()}")
+    if report.is_file():
+        print(f"report: {report.resolve()}")
+    return 0
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    from .config import load_project
+
+    project = load_project(args.project)
+    source = project.surface.file or f"template {project.surface.template}"
+    print(f"{args.project}: valid ({project.project.name}; surface {source}; "
+          f"{len(project.supports)} support selection(s); {len(project.loads.cases)} load case(s))")
+    return 0
+
+
+def cmd_init(args: argparse.Namespace) -> int:
+    from fabrication.files import write_text_atomic
+
+    source = _template_path(args.template)
+    target = Path(args.dir) / "project.toml"
+    if target.exists() and not args.force:
+        raise InputError(f"{target} already exists", hint="use --force to overwrite it")
+    write_text_atomic(target, source.read_text(encoding="utf-8"))
+    print(target.resolve())
+    print(f"next: gridshell run {target}", file=sys.stderr)
+    return 0
+
+
+def cmd_shell(args: argparse.Namespace) -> int:
+    try:
+        from engine.shell import solve_shell_json
+    except ImportError:
+        raise GridshellError("the shell solver is not available in this version of gridshell") from None
+    _write_json(solve_shell_json(_read_json(args.model)), args.out)
+    return 0
+
+
+def cmd_frame(args: argparse.Namespace) -> int:
+    try:
+        from engine.frame import solve_frame_json
+    except ImportError:
+        raise GridshellError("the frame solver is not available in this version of gridshell") from None
+    control = None
+    if args.control:
+        node, dof = args.control
+        try:
+            control = (int(node), dof)
+        except ValueError:
+            raise InputError(f"--control NODE DOF: NODE must be a 0-based node id, got {node!r}") from None
+        if dof not in ("ux", "uy", "uz", "rx", "ry", "rz"):
+            raise InputError(f"--control NODE DOF: DOF must be one of ux, uy, uz, rx, ry, rz, got {dof!r}")
+    result = solve_frame_json(_read_json(args.model), analysis=args.analysis, modes=args.modes,
+                              control=control, max_load_factor=args.max_load_factor)
+    _write_json(result, args.out)
+    return 0
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    try:
+        from .compare import run_compare
+    except ImportError:
+        raise GridshellError("'gridshell compare' is not available in this version of gridshell") from None
+    return run_compare(args)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from .runner import product_version
+
+    parser = argparse.ArgumentParser(prog="gridshell", description="Statics-aware Voronoi grid-shells: "
+                                     "from a free-form surface to shop drawings.")
+    parser.add_argument("--version", action="version", version=f"gridshell {product_version()}")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    run = sub.add_parser("run", help="run a project (default: the 2.4 m mock-up template)")
+    run.add_argument("project", nargs="?", help="project file (TOML)")
+    run.add_argument("--surface", metavar="MESH", help="quick start from a mesh file (OBJ, PLY, STL, OFF, 3DM)")
+    run.add_argument("--supports", choices=("boundary", "flagged"), help="supports for --surface (default boundary)")
+    run.add_argument("--out", metavar="DIR", help="output folder (default out/NAME)")
+    run.add_argument("--until", metavar="STAGE", help="stop after this stage")
+    run.add_argument("--only", metavar="STAGE", help="run only this stage (earlier results must exist)")
+    run.add_argument("--force", action="store_true", help="ignore cached results")
+    run.add_argument("--quiet", action="store_true", help="no progress output")
+    run.set_defaults(func=cmd_run)
+
+    validate = sub.add_parser("validate", help="check a project file")
+    validate.add_argument("project")
+    validate.set_defaults(func=cmd_validate)
+
+    init = sub.add_parser("init", help="write a starter project file")
+    init.add_argument("dir")
+    init.add_argument("--template", default="mockup", help=f"one of {', '.join(TEMPLATE_NAMES)}")
+    init.add_argument("--force", action="store_true", help="overwrite an existing project.toml")
+    init.set_defaults(func=cmd_init)
+
+    shell = sub.add_parser("shell", help="solve a shell model given as JSON (see docs/formats.md)")
+    shell.add_argument("model")
+    shell.add_argument("--out", required=True, metavar="RESULT.json")
+    shell.set_defaults(func=cmd_shell)
+
+    frame = sub.add_parser("frame", help="solve a frame model given as JSON (see docs/formats.md)")
+    frame.add_argument("model")
+    frame.add_argument("--analysis", choices=("linear", "buckling", "nonlinear"), default="linear")
+    frame.add_argument("--modes", type=int, default=6)
+    frame.add_argument("--control", nargs=2, metavar=("NODE", "DOF"))
+    frame.add_argument("--max-load-factor", type=float, dest="max_load_factor")
+    frame.add_argument("--out", required=True, metavar="RESULT.json")
+    frame.set_defaults(func=cmd_frame)
+
+    compare = sub.add_parser("compare", help="compare Voronoi, quad and triangular grids of equal length")
+    compare.add_argument("project")
+    compare.add_argument("--out", metavar="DIR")
+    compare.add_argument("--quiet", action="store_true")
+    compare.set_defaults(func=cmd_compare)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except GridshellError as exc:
+        if args.debug:
+            raise
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

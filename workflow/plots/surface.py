@@ -1,0 +1,54 @@
+"""Picture of the input surface with its supports: a 3D view and a plan."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from engine.mesh import TriMesh
+from fabrication.files import atomic_path
+
+__all__ = ["plot_surface"]
+
+
+def plot_surface(mesh: TriMesh, support_nodes: np.ndarray, path: Path, *, title: str = "") -> Path:
+    """Write a PNG: shaded 3D view (left) and plan with boundary loops and supports (right)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.tri import Triangulation
+
+    v, f = mesh.vertices, mesh.faces
+    fig = plt.figure(figsize=(12, 5.5), dpi=110)
+    ax3 = fig.add_subplot(1, 2, 1, projection="3d")
+    ax3.plot_trisurf(v[:, 0], v[:, 1], v[:, 2], triangles=f, cmap="Greys", linewidth=0.1,
+                     edgecolor=(0.3, 0.3, 0.3, 0.3), alpha=0.9, shade=True)
+    s = v[support_nodes]
+    ax3.scatter(s[:, 0], s[:, 1], s[:, 2], c="crimson", s=8, depthshade=False, label="supports")
+    span = np.ptp(v, axis=0)
+    ax3.set_box_aspect((span[0], span[1], max(span[2], 0.05 * span.max())))
+    ax3.set_xlabel("x (m)"), ax3.set_ylabel("y (m)"), ax3.set_zlabel("z (m)")
+    ax3.legend(loc="upper left")
+
+    ax = fig.add_subplot(1, 2, 2)
+    tri = Triangulation(v[:, 0], v[:, 1], f)
+    contour = ax.tricontourf(tri, v[:, 2], levels=14, cmap="viridis")
+    ax.triplot(tri, color=(1, 1, 1, 0.25), linewidth=0.3)
+    for loop in mesh.boundary_loops:
+        closed = np.r_[loop, loop[:1]]
+        ax.plot(v[closed, 0], v[closed, 1], color="k", linewidth=1.2)
+    ax.scatter(s[:, 0], s[:, 1], c="crimson", s=14, zorder=3, label=f"{len(support_nodes)} supported nodes")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
+    fig.colorbar(contour, ax=ax, label="height z (m)", shrink=0.8)
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_title("plan: height and supports")
+    fig.suptitle(title or f"{mesh.name}: {mesh.n_vertices} vertices, {mesh.n_faces} triangles, "
+                 f"{len(mesh.boundary_loops)} boundary loop(s)")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return Path(path)

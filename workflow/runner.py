@@ -1,0 +1,254 @@
+"""The stage runner: ordered stages, hash-based caching, atomic stage folders, manifest.
+
+Each stage declares its folder, the project sections it reads and the stages it needs.
+Its cache key hashes the product version, its config sections, the keys of the stages
+it depends on and any external input (the surface file's bytes). A stage whose key and
+artifacts are unchanged since the last run is skipped ("cached"). A stage writes into a
+temporary folder that replaces ``OUT/NN-stage`` only when the stage succeeds, so an
+interrupted or failed run never leaves half-written artifacts under the real name.
+``OUT/manifest.json`` records every stage's status, duration, key and artifacts.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from engine.errors import GridshellError
+from fabrication.files import atomic_folder, write_text_atomic
+
+from .config import STAGE_SECTIONS, Project
+from .progress import Progress
+
+__all__ = ["Stage", "StageContext", "RunSummary", "StageNotAvailable", "run_project", "product_version",
+           "STATUS_RAN", "STATUS_CACHED", "STATUS_FAILED", "STATUS_NOT_AVAILABLE", "STATUS_NOT_RUN"]
+
+STATUS_RAN, STATUS_CACHED, STATUS_FAILED = "ran", "cached", "failed"
+STATUS_NOT_AVAILABLE, STATUS_NOT_RUN = "not available", "not run"
+
+
+class StageNotAvailable(GridshellError):
+    """Raised by a stage whose implementation is not in this version of gridshell."""
+
+
+def product_version() -> str:
+    try:
+        return metadata.version("gridshell")
+    except metadata.PackageNotFoundError:
+        return "0+unknown"
+
+
+def library_versions() -> dict[str, str]:
+    out = {"python": platform.python_version(), "gridshell": product_version()}
+    for name in ("numpy", "scipy", "trimesh", "pydantic", "pint", "ezdxf", "pandas", "shapely",
+                 "build123d", "cadquery", "matplotlib", "rhino3dm", "pyacvd", "pyfe3d"):
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            pass
+    return out
+
+
+def file_digest(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+@dataclass
+class StageContext:
+    """What a stage sees: the project, its folder to write into, upstream results, progress."""
+
+    project: Project
+    folder: Path
+    out_dir: Path
+    progress: Progress
+    _results: dict[str, Any]
+    _loader: Callable[[str], Any]
+
+    def result(self, stage: str) -> Any:
+        """The in-memory result of an earlier stage (reloaded from its artifacts if cached)."""
+        if stage not in self._results:
+            self._results[stage] = self._loader(stage)
+        return self._results[stage]
+
+    def step(self, text: str, fraction: float | None = None) -> None:
+        """Report the current step of the stage (and optionally its completed fraction)."""
+        self.progress.step(text, fraction)
+
+
+@dataclass(frozen=True)
+class Stage:
+    """A registered stage.
+
+    run(ctx) -> result writes its artifacts into ctx.folder and returns the in-memory result;
+    load(folder, ctx) -> result rebuilds that result from the artifacts of a cached run.
+    external(project) -> bytes digests of inputs outside the project file (e.g. a mesh file).
+    """
+
+    name: str
+    folder: str
+    run: Callable[[StageContext], Any]
+    load: Callable[[Path, StageContext], Any]
+    depends: tuple[str, ...] = ()
+    external: Callable[[Project], str] | None = None
+
+
+@dataclass
+class RunSummary:
+    out_dir: Path
+    stages: list[dict] = field(default_factory=list)
+    stopped_at: str | None = None
+    message: str | None = None
+
+    @property
+    def manifest_path(self) -> Path:
+        return self.out_dir / "manifest.json"
+
+
+def _stage_key(stage: Stage, project: Project, keys: dict[str, str], version: str) -> str:
+    config = {name: getattr(project, name).model_dump(mode="json") if hasattr(getattr(project, name), "model_dump")
+              else [item.model_dump(mode="json") for item in getattr(project, name)]
+              for name in STAGE_SECTIONS.get(stage.name, ())}
+    payload = {"stage": stage.name, "version": version, "config": config,
+               "upstream": {d: keys[d] for d in stage.depends},
+               "external": stage.external(project) if stage.external else None}
+    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
+
+
+def _artifacts(folder: Path, out_dir: Path) -> list[dict]:
+    if not folder.is_dir():
+        return []
+    return [{"path": p.relative_to(out_dir).as_posix(), "sha256": file_digest(p), "bytes": p.stat().st_size}
+            for p in sorted(folder.rglob("*")) if p.is_file()]
+
+
+def _still_valid(entry: dict | None, key: str, out_dir: Path) -> bool:
+    if not entry or entry.get("key") != key or entry.get("status") not in (STATUS_RAN, STATUS_CACHED):
+        return False
+    for artifact in entry.get("artifacts", []):
+        path = out_dir / artifact["path"]
+        if not path.is_file() or path.stat().st_size != artifact["bytes"] or file_digest(path) != artifact["sha256"]:
+            return False
+    return bool(entry.get("artifacts"))
+
+
+def _read_manifest(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+
+
+def run_project(project: Project, out_dir: Path, stages: list[Stage], *, until: str | None = None,
+                only: str | None = None, force: bool = False, progress: Progress | None = None,
+                project_file: str | None = None) -> RunSummary:
+    """Run (or skip when cached) the stages of a project in order; write OUT/manifest.json.
+
+    until: stop after this stage; only: run just this stage (its inputs must be available);
+    force: ignore the cache. A stage raising ``StageNotAvailable`` ends the run there.
+    """
+    names = [s.name for s in stages]
+    for option, value in (("--until", until), ("--only", only)):
+        if value is not None and value not in names:
+            raise GridshellError(f"{option} {value!r}: unknown stage; stages are {', '.join(names)}")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    progress = progress or Progress(enabled=False)
+    version = product_version()
+    manifest_path = out_dir / "manifest.json"
+    previous = {s["name"]: s for s in _read_manifest(manifest_path).get("stages", [])}
+    by_name = {s.name: s for s in stages}
+    results: dict[str, Any] = {}
+    keys: dict[str, str] = {}
+    records: dict[str, dict] = {}
+    summary = RunSummary(out_dir=out_dir)
+
+    def loader(name: str) -> Any:
+        stage = by_name[name]
+        folder = out_dir / stage.folder
+        entry = records.get(name) or previous.get(name)
+        if not entry or entry.get("status") not in (STATUS_RAN, STATUS_CACHED) or entry.get("key") != keys.get(name):
+            raise GridshellError(f"stage '{name}' has no up-to-date results in {out_dir}",
+                                 hint=f"run the earlier stages first: gridshell run ... --until {name}")
+        return stage.load(folder, context(stage, folder))
+
+    def context(stage: Stage, folder: Path) -> StageContext:
+        return StageContext(project=project, folder=folder, out_dir=out_dir, progress=progress,
+                            _results=results, _loader=loader)
+
+    def write_manifest() -> None:
+        ordered = [records.get(n) or {"name": n, "folder": by_name[n].folder, "status": STATUS_NOT_RUN}
+                   for n in names]
+        manifest = {"product": "gridshell", "version": version,
+                    "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+                    "project_file": project_file, "out_dir": str(out_dir.resolve()),
+                    "stopped_at": summary.stopped_at, "message": summary.message,
+                    "stages": ordered, "config": project.model_dump(mode="json"),
+                    "versions": library_versions()}
+        write_text_atomic(manifest_path, json.dumps(manifest, indent=2))
+
+    last = names.index(until) if until else len(names) - 1
+    for index, stage in enumerate(stages):
+        keys[stage.name] = _stage_key(stage, project, keys, version)
+        if index > last:
+            break
+        if only is not None and stage.name != only:
+            entry = previous.get(stage.name)
+            if entry and entry.get("key") == keys[stage.name]:
+                records[stage.name] = entry
+            continue
+        folder = out_dir / stage.folder
+        entry = previous.get(stage.name)
+        if not force and _still_valid(entry, keys[stage.name], out_dir):
+            records[stage.name] = {**entry, "status": STATUS_CACHED, "duration_s": 0.0}
+            progress.stage_done(stage.name, STATUS_CACHED, 0.0)
+            summary.stages.append(records[stage.name])
+            continue
+        progress.stage_start(stage.name)
+        started = time.perf_counter()
+        tmp = atomic_folder(out_dir, stage.folder)
+        try:
+            results[stage.name] = stage.run(context(stage, tmp))
+        except StageNotAvailable as exc:
+            shutil.rmtree(tmp, ignore_errors=True)
+            records[stage.name] = {"name": stage.name, "folder": stage.folder, "status": STATUS_NOT_AVAILABLE,
+                                   "message": str(exc), "key": keys[stage.name], "artifacts": []}
+            summary.stages.append(records[stage.name])
+            summary.stopped_at, summary.message = stage.name, str(exc)
+            progress.stage_done(stage.name, STATUS_NOT_AVAILABLE, time.perf_counter() - started)
+            write_manifest()
+            return summary
+        except BaseException as exc:
+            shutil.rmtree(tmp, ignore_errors=True)
+            shutil.rmtree(folder, ignore_errors=True)
+            records[stage.name] = {"name": stage.name, "folder": stage.folder, "status": STATUS_FAILED,
+                                   "message": str(exc).splitlines()[0] if str(exc) else type(exc).__name__,
+                                   "duration_s": round(time.perf_counter() - started, 3),
+                                   "key": keys[stage.name], "artifacts": []}
+            summary.stopped_at = stage.name
+            progress.stage_done(stage.name, STATUS_FAILED, time.perf_counter() - started)
+            write_manifest()
+            raise
+        shutil.rmtree(folder, ignore_errors=True)
+        tmp.rename(folder)
+        duration = time.perf_counter() - started
+        records[stage.name] = {"name": stage.name, "folder": stage.folder, "status": STATUS_RAN,
+                               "duration_s": round(duration, 3), "key": keys[stage.name],
+                               "artifacts": _artifacts(folder, out_dir)}
+        summary.stages.append(records[stage.name])
+        progress.stage_done(stage.name, STATUS_RAN, duration)
+        write_manifest()
+    write_manifest()
+    return summary
