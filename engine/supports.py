@@ -105,6 +105,10 @@ class Supports:
         return {str(int(n)): [int(b) for b in r] for n, r in zip(self.nodes, self.restraints)}
 
 
+def _fmt(vector) -> str:
+    return "[" + ", ".join(f"{float(x):g}" for x in np.ravel(vector)) + "]"
+
+
 def _nonempty(ids: np.ndarray, what: str) -> np.ndarray:
     ids = np.unique(np.asarray(ids, dtype=np.int64))
     if len(ids) == 0:
@@ -135,14 +139,14 @@ def select_plane(points: np.ndarray, point: np.ndarray, normal: np.ndarray, tole
     normal = normal / np.linalg.norm(normal)
     distance = np.abs((points - np.asarray(point, dtype=float)) @ normal)
     return _nonempty(np.flatnonzero(distance <= tolerance),
-                     f"'plane through {list(point)} normal {list(normal.round(3))} (tolerance {tolerance} m)'")
+                     f"'plane through {_fmt(point)} normal {_fmt(normal.round(3))} (tolerance {tolerance:g} m)'")
 
 
 def select_box(points: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """Nodes inside the axis-aligned box [lower, upper] (m), faces included."""
     lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
     inside = np.all((points >= lower) & (points <= upper), axis=1)
-    return _nonempty(np.flatnonzero(inside), f"'box {list(lower)} .. {list(upper)}'")
+    return _nonempty(np.flatnonzero(inside), f"'box {_fmt(lower)} .. {_fmt(upper)}'")
 
 
 def select_flagged(flagged: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from engine import parametric
-from engine.errors import InputError
+from engine.errors import GridshellError, InputError
 from engine.loads import LimitState, LoadCase, LoadCombination
 from engine.mesh import TriMesh
 from engine.supports import (Supports, restraint_flags, select_box, select_boundary, select_flagged, select_ids,
@@ -111,7 +111,7 @@ def resolve_supports(mesh: TriMesh, specs: list[SupportSpec]) -> Supports:
     for index, spec in enumerate(specs):
         try:
             parts.append((_select(mesh, spec), restraint_flags(spec.restraint)))
-        except InputError as exc:
+        except GridshellError as exc:
             exc.args = (f"supports[{index}]: {exc.args[0]}",)
             raise
     return Supports.merge(parts)

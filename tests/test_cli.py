@@ -1,0 +1,104 @@
+"""The command line: bad input ends with exit code 2 and one message, never a traceback."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from workflow.cli import main
+
+
+def _run(capsys, *argv):
+    code = main(list(argv))
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_missing_project_file(capsys, tmp_path):
+    code, out, err = _run(capsys, "run", str(tmp_path / "nope.toml"))
+    assert code == 2 and "does not exist" in err and "Traceback" not in err
+
+
+def test_bad_key_in_project(capsys, tmp_path):
+    path = tmp_path / "p.toml"
+    path.write_text('[surface]\ntemplate = "cap"\ncolour = "red"\n')
+    code, out, err = _run(capsys, "validate", str(path))
+    assert code == 2 and "surface.colour" in err and "p.toml" in err
+
+
+def test_bad_mesh(capsys, tmp_path):
+    path = tmp_path / "bad.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n")
+    code, out, err = _run(capsys, "run", "--surface", str(path), "--out", str(tmp_path / "o"), "--quiet")
+    assert code == 2 and "NaN" in err and "Traceback" not in err
+
+
+def test_empty_selection(capsys, tmp_path):
+    path = tmp_path / "p.toml"
+    path.write_text('[surface]\ntemplate = "hypar"\n[[supports]]\nselect = "box"\nlower = [50, 50, 0]\nupper = [60, 60, 1]\n')
+    code, out, err = _run(capsys, "run", str(path), "--out", str(tmp_path / "o"), "--quiet")
+    assert code == 2 and "supports[0]" in err and "matched no node" in err
+
+
+def test_flagged_without_red_vertices(capsys, tmp_path):
+    path = tmp_path / "roof.obj"
+    from engine.parametric import hypar
+
+    hypar(divisions=4).to_trimesh().export(path)
+    code, out, err = _run(capsys, "run", "--surface", str(path), "--supports", "flagged", "--out", str(tmp_path / "o"), "--quiet")
+    assert code == 2 and "flagged" in err and "red" in err
+
+
+def test_contradictory_options(capsys, tmp_path):
+    code, out, err = _run(capsys, "run", "p.toml", "--surface", "x.obj")
+    assert code == 2 and "not both" in err
+    code, out, err = _run(capsys, "run", "--until", "nonsense", "--out", str(tmp_path / "o"), "--quiet")
+    assert code == 2 and "unknown stage" in err
+
+
+def test_debug_shows_the_traceback(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "workflow.cli", "--debug", "run", str(tmp_path / "nope.toml")],
+                            capture_output=True, text=True)
+    assert result.returncode != 0 and "Traceback" in result.stderr
+
+
+def test_init_writes_a_valid_project(capsys, tmp_path):
+    code, out, err = _run(capsys, "init", str(tmp_path / "job"), "--template", "courtyard")
+    assert code == 0
+    code, out, err = _run(capsys, "validate", str(tmp_path / "job" / "project.toml"))
+    assert code == 0 and "valid" in out
+    code, out, err = _run(capsys, "init", str(tmp_path / "job"), "--template", "courtyard")
+    assert code == 2 and "already exists" in err
+    code, out, err = _run(capsys, "init", str(tmp_path / "job2"), "--template", "blob")
+    assert code == 2 and "templates:" in err
+
+
+def test_quick_start_surface_stage(capsys, tmp_path):
+    from engine.parametric import vault
+
+    path = tmp_path / "vault.stl"
+    vault(divisions=8).to_trimesh().export(path)
+    out_dir = tmp_path / "o"
+    code, out, err = _run(capsys, "run", "--surface", str(path), "--out", str(out_dir), "--until", "surface", "--quiet")
+    assert code == 0
+    supports = json.loads((out_dir / "01-surface" / "supports.json").read_text())["supports"]
+    assert len(supports) > 0 and all(flags == [1, 1, 1, 0, 0, 0] for flags in supports.values())
+    assert (out_dir / "01-surface" / "surface.png").stat().st_size > 10_000
+    manifest = json.loads((out_dir / "manifest.json").read_text())
+    assert manifest["stages"][0]["status"] == "ran"
+
+
+def test_default_job_surface_stage(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, out, err = _run(capsys, "run", "--until", "surface", "--quiet")
+    assert code == 0 and (tmp_path / "out" / "mockup" / "01-surface" / "surface.ply").is_file()
+    info = json.loads((tmp_path / "out" / "mockup" / "01-surface" / "surface.json").read_text())
+    assert info["form_finding"]["equilibrium_residual"] < 1e-6
+    import trimesh
+
+    mesh = trimesh.load(tmp_path / "out" / "mockup" / "01-surface" / "surface.ply", process=False)
+    assert np.ptp(mesh.vertices[:, 0]) == pytest.approx(2.4)

@@ -1,0 +1,112 @@
+"""The stage runner: caching by hash, reruns downstream only, atomic stage folders, manifest."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from workflow.config import parse_project
+from workflow.runner import Stage, StageNotAvailable, run_project
+
+
+def _stages(calls: list[str], fail: str | None = None, missing: str | None = None):
+    def make(name):
+        def run(ctx):
+            calls.append(name)
+            if name == missing:
+                raise StageNotAvailable(f"stage '{name}' is not available")
+            (ctx.folder / f"{name}.txt").write_text(name)
+            if name == fail:
+                (ctx.folder / "half.txt").write_text("half")
+                raise RuntimeError("boom")
+            return name
+
+        return run
+
+    def load(folder, ctx):
+        return (folder / f"{folder.name.split('-')[1]}.txt").read_text()
+
+    names = [("surface", ()), ("shell", ("surface",)), ("field", ("shell",)), ("remesh", ("field",))]
+    return [Stage(name=n, folder=f"0{i + 1}-{n}", run=make(n), load=load, depends=d) for i, (n, d) in enumerate(names)]
+
+
+def _project(ratio=2.0, thickness=None):
+    return parse_project({"surface": {"template": "cap"}, "field": {"max_size_ratio": ratio},
+                          "shell": {"thickness": thickness}})
+
+
+def _statuses(out):
+    return {s["name"]: s["status"] for s in json.loads((out / "manifest.json").read_text())["stages"]}
+
+
+def test_second_run_is_cached(tmp_path):
+    calls: list[str] = []
+    run_project(_project(), tmp_path, _stages(calls))
+    assert calls == ["surface", "shell", "field", "remesh"]
+    calls.clear()
+    run_project(_project(), tmp_path, _stages(calls))
+    assert calls == []
+    assert set(_statuses(tmp_path).values()) == {"cached"}
+
+
+def test_config_change_reruns_that_stage_and_later_only(tmp_path):
+    calls: list[str] = []
+    run_project(_project(), tmp_path, _stages(calls))
+    calls.clear()
+    run_project(_project(ratio=3.0), tmp_path, _stages(calls))
+    assert calls == ["field", "remesh"]
+    assert _statuses(tmp_path) == {"surface": "cached", "shell": "cached", "field": "ran", "remesh": "ran"}
+    calls.clear()
+    run_project(_project(ratio=3.0, thickness=0.1), tmp_path, _stages(calls))
+    assert calls == ["shell", "field", "remesh"]
+
+
+def test_changed_artifact_invalidates_cache_and_force_reruns(tmp_path):
+    calls: list[str] = []
+    run_project(_project(), tmp_path, _stages(calls))
+    (tmp_path / "02-shell" / "shell.txt").write_text("edited by hand")
+    calls.clear()
+    run_project(_project(), tmp_path, _stages(calls))
+    assert calls == ["shell"]
+    calls.clear()
+    run_project(_project(), tmp_path, _stages(calls), force=True)
+    assert calls == ["surface", "shell", "field", "remesh"]
+
+
+def test_until_and_only(tmp_path):
+    calls: list[str] = []
+    run_project(_project(), tmp_path, _stages(calls), until="shell")
+    assert calls == ["surface", "shell"]
+    assert _statuses(tmp_path)["field"] == "not run"
+    calls.clear()
+    run_project(_project(), tmp_path, _stages(calls), only="field")
+    assert calls == ["field"]
+
+
+def test_failed_stage_leaves_no_half_written_folder(tmp_path):
+    calls: list[str] = []
+    with pytest.raises(RuntimeError):
+        run_project(_project(), tmp_path, _stages(calls, fail="field"))
+    assert not (tmp_path / "03-field").exists()
+    assert not list(tmp_path.glob(".03-field*"))
+    statuses = _statuses(tmp_path)
+    assert statuses["field"] == "failed" and statuses["remesh"] == "not run"
+
+
+def test_unavailable_stage_stops_the_run_and_is_named(tmp_path):
+    calls: list[str] = []
+    summary = run_project(_project(), tmp_path, _stages(calls, missing="field"))
+    assert calls == ["surface", "shell", "field"]
+    assert summary.stopped_at == "field" and "field" in summary.message
+    assert _statuses(tmp_path)["field"] == "not available"
+    assert not (tmp_path / "03-field").exists()
+
+
+def test_manifest_records_artifacts_config_and_versions(tmp_path):
+    run_project(_project(), tmp_path, _stages([]))
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    shell = next(s for s in manifest["stages"] if s["name"] == "shell")
+    assert shell["artifacts"][0]["path"] == "02-shell/shell.txt" and len(shell["artifacts"][0]["sha256"]) == 64
+    assert manifest["config"]["field"]["max_size_ratio"] == 2.0
+    assert "numpy" in manifest["versions"] and "python" in manifest["versions"]

@@ -1,0 +1,95 @@
+"""Support selections, restraint codes, load cases and combinations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine import parametric
+from engine.errors import InputError, SelectionError
+from engine.loads import LimitState, LoadCase, LoadCombination, combine, lump_area_load
+from engine.supports import (Supports, restraint_flags, select_box, select_boundary, select_flagged, select_ids,
+                             select_loop, select_nearest, select_plane)
+
+
+@pytest.fixture(scope="module")
+def courtyard():
+    return parametric.courtyard(divisions=12)
+
+
+def test_boundary_and_loops(courtyard):
+    loops = courtyard.boundary_loops
+    everything = select_boundary(loops)
+    outer, inner = select_loop(loops, 0), select_loop(loops, 1)
+    assert len(everything) == len(outer) + len(inner)
+    lo, hi = courtyard.bounds
+    assert np.allclose(np.abs(courtyard.vertices[inner, 2]), 0)
+    on_edge = (np.isclose(courtyard.vertices[outer, 0], [[lo[0]], [hi[0]]]).any(0)
+               | np.isclose(courtyard.vertices[outer, 1], [[lo[1]], [hi[1]]]).any(0))
+    assert on_edge.all()
+    with pytest.raises(SelectionError, match="2 boundary loop"):
+        select_loop(loops, 2)
+
+
+def test_plane_box_nearest_ids(courtyard):
+    v = courtyard.vertices
+    x_max = v[:, 0].max()
+    plane = select_plane(v, [x_max, 0, 0], [1, 0, 0], 1e-6)
+    assert np.allclose(v[plane, 0], x_max) and len(plane) == np.isclose(v[:, 0], x_max).sum()
+    box = select_box(v, [-1, -1, -1], [1, 11, 10])
+    assert ((np.abs(v[box, 0]) <= 1) & (v[box, 1] >= -1)).all()
+    nearest = select_nearest(v, [[100, 100, 0]])
+    assert nearest.tolist() == [int(np.argmax(v[:, 0] + v[:, 1]))]
+    assert select_ids(len(v), [3, 1, 3]).tolist() == [1, 3]
+
+
+def test_empty_selections_say_which(courtyard):
+    v = courtyard.vertices
+    with pytest.raises(SelectionError, match="plane through"):
+        select_plane(v, [1000, 0, 0], [1, 0, 0], 0.01)
+    with pytest.raises(SelectionError, match="box"):
+        select_box(v, [500, 500, 500], [600, 600, 600])
+    with pytest.raises(SelectionError, match="flagged"):
+        select_flagged(np.zeros(len(v), dtype=bool))
+    with pytest.raises(SelectionError, match="outside"):
+        select_ids(len(v), [len(v)])
+
+
+@pytest.mark.parametrize("code, flags", [
+    ("pinned", [1, 1, 1, 0, 0, 0]), ("fixed", [1] * 6), ("roller_x", [0, 1, 1, 0, 0, 0]),
+    ("roller_z", [1, 1, 0, 0, 0, 0]), ([1, 0, 1, 0, 1, 0], [1, 0, 1, 0, 1, 0]),
+])
+def test_restraint_codes(code, flags):
+    assert restraint_flags(code).astype(int).tolist() == flags
+
+
+def test_bad_restraints():
+    with pytest.raises(InputError, match="allowed"):
+        restraint_flags("glued")
+    with pytest.raises(InputError, match="six"):
+        restraint_flags([1, 1, 1])
+
+
+def test_merged_supports_or_their_flags():
+    s = Supports.merge([(np.array([1, 2]), restraint_flags("roller_x")), (np.array([2, 5]), restraint_flags("roller_y"))])
+    assert s.nodes.tolist() == [1, 2, 5]
+    assert s.restraints[1].astype(int).tolist() == [1, 1, 1, 0, 0, 0]
+    assert s.dof_mask(6).sum() == 2 + 3 + 2
+
+
+def test_area_loads_sum_to_true_and_plan_area(courtyard):
+    case = LoadCase(name="x", area_true=[0, 0, -100.0], area_plan=[0, 0, -50.0])
+    forces = lump_area_load(courtyard.vertices, courtyard.faces, case)
+    plan_area = 30 * 20 - 10 * 6  # the courtyard's plan, opening removed
+    assert forces[:, 2].sum() == pytest.approx(-100 * courtyard.area - 50 * plan_area)
+
+
+def test_combinations_are_factored_sums():
+    cases = {"dead": LoadCase(name="dead", self_weight=1.0, area_true=[0, 0, -10]),
+             "snow": LoadCase(name="snow", area_plan=[0, 0, -20], point_nodes=[3], point_forces=[[0, 0, -5, 0, 0, 0]])}
+    uls = combine(cases, LoadCombination(name="ULS", limit_state=LimitState.ULS, factors={"dead": 1.35, "snow": 1.5}))
+    assert uls.self_weight == pytest.approx(1.35)
+    assert uls.area_true[2] == pytest.approx(-13.5) and uls.area_plan[2] == pytest.approx(-30)
+    assert uls.point_load_array(5)[3, 2] == pytest.approx(-7.5)
+    with pytest.raises(InputError, match="wind"):
+        combine(cases, LoadCombination(name="x", limit_state=LimitState.SLS, factors={"wind": 1.0}))

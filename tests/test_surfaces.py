@@ -1,0 +1,200 @@
+"""Surface reading, cleaning and checking; the parametric templates; force-density form-finding."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from engine import parametric
+from engine.errors import InputError, MeshError
+from engine.form_finding import force_density
+from engine.surfaces import clean_mesh
+from workflow.surface_io import read_surface, write_surface_ply
+
+from .conftest import real_surfaces
+
+
+@pytest.mark.parametrize("path", real_surfaces())
+def test_real_surfaces_load_clean_with_their_flagged_supports(path):
+    vertices, faces, flagged = read_surface(path)
+    # independent count of red vertices straight from the ASCII PLY text
+    lines = path.read_text().splitlines()
+    header = lines[: lines.index("end_header")]
+    props = [l.split()[-1] for l in header if l.startswith("property") and "list" not in l]
+    n_vertices = int(next(l for l in header if l.startswith("element vertex")).split()[-1])
+    body = [l.split() for l in lines[len(header) + 1: len(header) + 1 + n_vertices]]
+    r, g, b = (props.index(c) for c in ("red", "green", "blue"))
+    red = sum(1 for row in body if (row[r], row[g], row[b]) == ("255", "0", "0"))
+    assert flagged.sum() == red > 0
+    mesh, report = clean_mesh(vertices, faces, flagged, name=path.stem)
+    assert mesh.flagged.sum() == red
+    assert mesh.to_trimesh().is_winding_consistent
+    assert (mesh.face_normals[:, 2].mean()) > 0  # normals up
+    assert len(mesh.boundary_loops) >= 1
+
+
+def test_duplicate_vertices_are_merged(square_grid):
+    vertices, faces = square_grid
+    split_vertices = vertices[faces].reshape(-1, 3)  # every face with its own corners
+    split_faces = np.arange(len(split_vertices)).reshape(-1, 3)
+    mesh, report = clean_mesh(split_vertices, split_faces)
+    assert mesh.n_vertices == len(vertices)
+    assert report.merged_vertices == len(split_vertices) - len(vertices)
+    assert mesh.area == pytest.approx(1.0)
+
+
+def test_degenerate_and_duplicate_faces_are_dropped(square_grid):
+    vertices, faces = square_grid
+    vertices = np.vstack([vertices, [[0.5, 0.5, 0.0]]])  # a copy of an existing grid vertex
+    faces = np.vstack([faces, [[0, 0, 1]], [[0, 1, 2]], faces[:3]])  # repeated index, collinear, duplicates
+    mesh, report = clean_mesh(vertices, faces)
+    assert report.degenerate_faces == 2 and report.duplicate_faces == 3
+    assert mesh.n_faces == len(square_grid[1])
+
+
+def test_inconsistent_orientation_is_fixed_with_normals_up(square_grid):
+    vertices, faces = square_grid
+    faces = faces.copy()
+    faces[::3] = faces[::3, ::-1]
+    mesh, report = clean_mesh(vertices, faces)
+    assert report.flipped_faces > 0
+    assert np.allclose(mesh.face_normals, [0, 0, 1])
+
+
+def test_non_manifold_edge_is_reported_with_its_place(square_grid):
+    vertices, faces = square_grid
+    vertices = np.vstack([vertices, [[0.06, 0.06, 0.5]]])
+    a, b = faces[0][1:]  # an interior edge, already shared by two faces
+    faces = np.vstack([faces, [[a, b, len(vertices) - 1]]])
+    with pytest.raises(MeshError, match="non-manifold edge") as info:
+        clean_mesh(vertices, faces)
+    assert "at (" in str(info.value) and info.value.hint
+
+
+def test_nan_is_reported_with_vertex_ids(square_grid):
+    vertices, faces = square_grid
+    vertices = vertices.copy()
+    vertices[5, 2] = np.nan
+    with pytest.raises(MeshError, match=r"NaN.*\[5\]"):
+        clean_mesh(vertices, faces)
+
+
+def test_closed_surface_and_handles_are_rejected():
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    with pytest.raises(MeshError, match="closed"):
+        clean_mesh(sphere.vertices, sphere.faces)
+    torus = trimesh.creation.torus(major_radius=2.0, minor_radius=0.5)
+    cut = torus.faces[~(torus.faces == 0).any(axis=1)]  # removing one vertex's star opens it; the handle stays
+    with pytest.raises(MeshError, match="handle"):
+        clean_mesh(torus.vertices, cut)
+
+
+def test_pinched_vertex_is_rejected():
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [-1, 0, 0], [-1, -1, 0.0]])
+    faces = np.array([[0, 1, 2], [0, 3, 4]])
+    with pytest.raises(MeshError, match="non-manifold vertex"):
+        clean_mesh(vertices, faces)
+
+
+def test_holes_and_several_patches_are_accepted():
+    mesh = parametric.courtyard()
+    assert len(mesh.boundary_loops) == 2
+    other = parametric.hypar(divisions=4)
+    vertices = np.vstack([mesh.vertices, other.vertices + [100, 0, 0]])
+    faces = np.vstack([mesh.faces, other.faces + mesh.n_vertices])
+    joined, report = clean_mesh(vertices, faces)
+    assert report.patches == 2 and report.boundary_loops == 3
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".ply", ".stl", ".off"])
+def test_mesh_formats_round_trip(tmp_path, suffix):
+    source = parametric.hypar(divisions=6)
+    path = tmp_path / f"roof{suffix}"
+    source.to_trimesh().export(path)
+    vertices, faces, _ = read_surface(path)
+    mesh, _ = clean_mesh(vertices, faces)
+    assert mesh.n_faces == source.n_faces and mesh.area == pytest.approx(source.area)
+
+
+def test_rhino_3dm_mesh_is_read_in_metres(tmp_path):
+    rhino3dm = pytest.importorskip("rhino3dm")
+    source = parametric.hypar(divisions=4)
+    model = rhino3dm.File3dm()
+    model.Settings.ModelUnitSystem = rhino3dm.UnitSystem.Millimeters
+    rmesh = rhino3dm.Mesh()
+    for x, y, z in source.vertices * 1000:
+        rmesh.Vertices.Add(float(x), float(y), float(z))
+    for a, b, c in source.faces:
+        rmesh.Faces.AddFace(int(a), int(b), int(c))
+    model.Objects.AddMesh(rmesh)
+    path = tmp_path / "roof.3dm"
+    model.Write(str(path), 7)
+    vertices, faces, _ = read_surface(path)
+    mesh, _ = clean_mesh(vertices, faces)
+    assert mesh.area == pytest.approx(source.area, rel=1e-6)
+
+
+def test_written_ply_keeps_flags(tmp_path):
+    mesh = parametric.hypar(divisions=4)
+    flagged = np.zeros(mesh.n_vertices, dtype=bool)
+    flagged[[0, 3, 7]] = True
+    from engine.mesh import TriMesh
+
+    write_surface_ply(TriMesh(vertices=mesh.vertices, faces=mesh.faces, flagged=flagged), tmp_path / "s.ply")
+    _, _, read_flags = read_surface(tmp_path / "s.ply")
+    assert np.flatnonzero(read_flags).tolist() == [0, 3, 7]
+
+
+def test_unreadable_inputs_are_input_errors(tmp_path):
+    with pytest.raises(InputError, match="does not exist"):
+        read_surface(tmp_path / "none.obj")
+    (tmp_path / "roof.dwg").write_text("x")
+    with pytest.raises(InputError, match="unknown format"):
+        read_surface(tmp_path / "roof.dwg")
+    (tmp_path / "empty.obj").write_text("# nothing\n")
+    with pytest.raises(InputError):
+        read_surface(tmp_path / "empty.obj")
+
+
+def test_force_density_single_node_closed_form():
+    """One free node hung from four corners: 4 q z = P."""
+    nodes = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0], [0.3, 0.2, 5.0]])
+    edges = np.array([[0, 4], [1, 4], [2, 4], [3, 4]])
+    loads = np.zeros((5, 3))
+    loads[4, 2] = 10.0
+    result = force_density(nodes, edges, 2.0, loads, np.array([1, 1, 1, 1, 0], dtype=bool))
+    assert result.nodes[4] == pytest.approx([0, 0, 10.0 / (4 * 2.0)])
+
+
+def test_mockup_form_finding_is_in_equilibrium():
+    made = parametric.mockup()
+    assert made.form_finding.residual < 1e-6
+    assert made.mesh.vertices[:, 2].max() == pytest.approx(0.45)
+    lo, hi = made.mesh.bounds
+    assert hi[:2] - lo[:2] == pytest.approx([2.4, 2.4])
+    # independent check: the vertical forces of all edges at the crown node balance its load
+    ff = made.form_finding
+    crown = int(np.argmax(ff.nodes[:, 2]))
+    neighbours = np.flatnonzero(np.isclose(np.linalg.norm(ff.nodes[:, :2] - ff.nodes[crown, :2], axis=1), 0.1))
+    vertical = made.force_density * (ff.nodes[neighbours, 2] - ff.nodes[crown, 2]).sum()
+    assert vertical + made.applied_load / 23**2 == pytest.approx(0.0, abs=1e-6 * made.applied_load)
+
+
+@pytest.mark.parametrize("name", ["cap", "vault", "hypar", "courtyard"])
+def test_templates_are_valid_open_surfaces(name):
+    mesh = getattr(parametric, name)()
+    assert mesh.to_trimesh().is_winding_consistent
+    assert (mesh.face_normals[:, 2] > 0).mean() > 0.5
+
+
+def test_cap_span_to_rise():
+    mesh = parametric.cap(span=20.0, span_to_rise=21.43)
+    assert 20.0 / np.ptp(mesh.vertices[:, 2]) == pytest.approx(21.43, rel=1e-3)
+
+
+def test_bad_template_parameters():
+    with pytest.raises(InputError, match="span"):
+        parametric.cap(span=-1)
+    with pytest.raises(InputError, match="divisions"):
+        parametric.mockup(divisions=5)
