@@ -1,0 +1,68 @@
+"""Stage ``field``: the statics-aware guiding field (size, anisotropy, direction per vertex).
+
+Sizes are relative here (smallest = 1); the remesh stage scales them to its size target.
+Artifacts (03-field/): field.npz (size, anisotropy, direction, normals), field.json
+(achieved ratio and aspect against D and A) and field.png.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from fabrication.files import atomic_path, write_text_atomic
+
+from ..config import Project
+from ._require import require
+
+__all__ = ["run", "load", "field_settings"]
+
+
+def field_settings(project: Project):
+    """The engine's FieldSettings from the project's [field] section."""
+    FieldSettings, SizeMap, AnisotropyMap = require("field", "engine.field", "FieldSettings", "SizeMap", "AnisotropyMap")
+    config = project.field
+    return FieldSettings(
+        max_size_ratio=config.max_size_ratio, max_aspect=config.max_aspect,
+        size_map=SizeMap(config.size_map), anisotropy_map=AnisotropyMap(config.anisotropy_map),
+        opposite_sign_anisotropy=config.opposite_sign_anisotropy,
+        clamp_percentiles=tuple(config.clamp_percentiles),
+        smoothing_iterations=config.smoothing_iterations,
+        direction_smoothing_iterations=config.direction_smoothing_iterations,
+        symmetry_planes=tuple((tuple(p.point), tuple(p.normal)) for p in config.symmetry_planes))
+
+
+def run(ctx):
+    guiding_field = require("field", "engine.field", "guiding_field")
+    project: Project = ctx.project
+    mesh = ctx.result("surface").mesh
+    shell = ctx.result("shell")
+    ctx.step("stress to metric")
+    field = guiding_field(mesh, shell.vertex_membrane_forces, field_settings(project))
+    with atomic_path(ctx.folder / "field.npz") as tmp:
+        with open(tmp, "wb") as handle:
+            np.savez_compressed(handle, size=field.size, anisotropy=field.anisotropy,
+                                direction=field.direction, normals=field.normals)
+    summary = {"max_size_ratio_D": project.field.max_size_ratio, "max_aspect_A": project.field.max_aspect,
+               "achieved_size_ratio": float(field.size.max() / field.size.min()),
+               "achieved_max_aspect": float(field.anisotropy.max()),
+               "mean_aspect": float(field.anisotropy.mean()),
+               "size_map": project.field.size_map, "anisotropy_map": project.field.anisotropy_map,
+               "symmetry_planes": len(project.field.symmetry_planes)}
+    write_text_atomic(ctx.folder / "field.json", json.dumps(summary, indent=1))
+    ctx.step("drawing")
+    from ..plots.field import plot_field
+
+    plot_field(mesh, field, ctx.folder / "field.png",
+               title=f"{project.project.name}: guiding field Voro({project.field.max_size_ratio:g}, "
+                     f"{project.field.max_aspect:g})")
+    return field
+
+
+def load(folder: Path, ctx):
+    GuidingField = require("field", "engine.field", "GuidingField")
+    with np.load(folder / "field.npz") as data:
+        return GuidingField(size=data["size"], anisotropy=data["anisotropy"], direction=data["direction"],
+                            normals=data["normals"])

@@ -1,0 +1,83 @@
+"""Stage ``shell``: the surface as a continuous thin shell under its supports and loads.
+
+Artifacts (02-shell/): shell.npz (every field of ``engine.shell.ShellResult``),
+shell.json (the load combination used, thickness, largest displacement, force ranges,
+equilibrium check) and stress.png (principal membrane force crosses).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from engine.loads import LoadCase, LoadCombination, combine
+from fabrication.files import write_text_atomic
+
+from ..config import Project
+from ._arrays import load_result, save_result
+from ._require import require
+
+__all__ = ["run", "load", "shell_load_case", "notional_thickness"]
+
+
+def notional_thickness(project: Project, mesh) -> float:
+    """The shell thickness: the project's, or span / 100 with span the larger plan extent (METHOD.md 1)."""
+    if project.shell.thickness is not None:
+        return project.shell.thickness
+    lo, hi = mesh.bounds
+    return float(max(hi[0] - lo[0], hi[1] - lo[1]) / 100.0)
+
+
+def shell_load_case(project: Project, cases: dict[str, LoadCase],
+                    combinations: dict[str, LoadCombination]) -> LoadCase:
+    """The load of the shell analysis: ``shell.combination`` (a combination or a case), else the
+    first SLS combination, else all cases added."""
+    name = project.shell.combination
+    if name is None:
+        sls = [n for n, c in combinations.items() if c.limit_state.value == "SLS"]
+        name = sls[0] if sls else None
+    if name in combinations:
+        return combine(cases, combinations[name])
+    if name in cases:
+        return cases[name]
+    return combine(cases, LoadCombination(name="all", limit_state="SLS", factors={n: 1.0 for n in cases}))
+
+
+def run(ctx):
+    ShellMaterial, analyse_shell, shell_nodal_loads = require("shell", "engine.shell", "ShellMaterial",
+                                                              "analyse_shell", "shell_nodal_loads")
+
+    project: Project = ctx.project
+    surface = ctx.result("surface")
+    mesh = surface.mesh
+    thickness = notional_thickness(project, mesh)
+    case = shell_load_case(project, surface.load_cases, surface.combinations)
+    material = ShellMaterial(E=project.shell.E, nu=project.shell.nu, density=project.shell.density)
+    ctx.step("loads")
+    loads = shell_nodal_loads(mesh, case, thickness=thickness, density=project.shell.density)
+    ctx.step(f"solving {mesh.n_vertices * 6} DOF")
+    result = analyse_shell(mesh, surface.supports, loads, thickness=thickness, material=material)
+    ctx.step("writing")
+    save_result(result, ctx.folder / "shell.npz")
+    n1, n2 = result.face_principal_forces[:, 0], result.face_principal_forces[:, 1]
+    summary = {"load_case": case.name, "thickness_m": thickness, "E_Pa": project.shell.E, "nu": project.shell.nu,
+               "max_displacement_m": float(np.linalg.norm(result.displacements[:, :3], axis=1).max()),
+               "N1_max_N_per_m": float(n1.max()), "N2_min_N_per_m": float(n2.min()),
+               "equilibrium_error": float(result.equilibrium_error),
+               "total_load_N": [float(x) for x in result.load_total[:3]],
+               "total_reaction_N": [float(x) for x in result.reactions[:, :3].sum(axis=0)]}
+    write_text_atomic(ctx.folder / "shell.json", json.dumps(summary, indent=1))
+    ctx.step("drawing")
+    from ..plots.shell import plot_principal_forces
+
+    plot_principal_forces(mesh, result.face_principal_forces, result.face_principal_directions,
+                          ctx.folder / "stress.png", support_nodes=surface.supports.nodes,
+                          title=f"{project.project.name}: principal membrane forces ({case.name})")
+    return result
+
+
+def load(folder: Path, ctx):
+    ShellResult = require("shell", "engine.shell", "ShellResult")
+    return load_result(ShellResult, folder / "shell.npz")
