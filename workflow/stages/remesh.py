@@ -1,0 +1,58 @@
+"""Stage ``remesh``: the statics-aware Voronoi grid-shell (anisotropic CVT under the field's metric).
+
+Artifacts (04-remesh/): gridshell.obj (+ gridshell.nodes.json), remesh.json (quality
+figures) and pictures coloured by face degree.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from fabrication.files import write_text_atomic
+
+from ..config import Project
+from ._require import require
+from .polymesh_io import read_polymesh_obj, write_polymesh_obj
+
+__all__ = ["run", "load", "remesh_settings"]
+
+DEFAULT_CELLS = 120
+
+
+def remesh_settings(project: Project):
+    RemeshSettings = require("remesh", "engine.voronoi", "RemeshSettings")
+    config = project.remesh
+    target = {"n_cells": config.n_cells, "mean_beam_length": config.mean_beam_length,
+              "total_length": config.total_length}
+    if all(v is None for v in target.values()):
+        target["n_cells"] = DEFAULT_CELLS
+    return RemeshSettings(**target, lloyd_iterations=config.lloyd_iterations, seed=config.seed)
+
+
+def run(ctx):
+    remesh = require("remesh", "engine.voronoi", "remesh")
+    project: Project = ctx.project
+    surface = ctx.result("surface")
+    field = ctx.result("field")
+    support_vertices = np.zeros(surface.mesh.n_vertices, dtype=bool)
+    support_vertices[surface.supports.nodes] = True
+    result = remesh(surface.mesh, field, remesh_settings(project), support_vertices=support_vertices,
+                    progress=ctx.step)
+    write_polymesh_obj(result.polymesh, ctx.folder / "gridshell.obj",
+                       header=f"{project.project.name}: statics-aware Voronoi grid-shell (remesh)")
+    quality = dict(result.quality)
+    quality.update({"max_size_ratio_D": project.field.max_size_ratio, "max_aspect_A": project.field.max_aspect})
+    write_text_atomic(ctx.folder / "remesh.json", json.dumps(quality, indent=1, default=float))
+    ctx.step("drawing")
+    from ..plots.remesh import plot_gridshell
+
+    plot_gridshell(result.polymesh, ctx.folder / "degree.png", color_by="degree",
+                   title=f"{project.project.name}: remeshed grid-shell, cells by number of sides")
+    return result.polymesh
+
+
+def load(folder: Path, ctx):
+    return read_polymesh_obj(folder / "gridshell.obj")
