@@ -1,0 +1,197 @@
+"""Stage ``analysis``: the beam grid-shell checked as an engineer signs it off.
+
+Linear static under SLS (deflection) and ULS (member forces and checks), linear buckling,
+geometrically non-linear analysis of the perfect and imperfect shapes (METHOD.md 5), and
+for projects with named control points the incremental load test (dead load held, then a
+proportional load). Artifacts (06-analysis/): analysis.json (figures and the verdict
+table), members.csv, response.csv and pictures (response, modes, utilisation, axial).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from engine.errors import MechanismError
+from engine.loads import LoadCombination, combine
+from engine.structure import BeamProperties, beam_up_vectors, gridshell_loads, node_normals, support_restraints
+from engine.supports import Supports
+from fabrication.files import atomic_path, write_text_atomic
+
+from ..config import Project
+from ._require import require
+
+__all__ = ["run", "load", "beam_properties", "build_frame", "pick_combination", "AnalysisSummary"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class AnalysisSummary:
+    """What later stages need: the figures (analysis.json) and per-beam axial forces (N)."""
+
+    figures: dict
+    axial_forces: np.ndarray
+
+
+def beam_properties(project: Project):
+    """(BeamProperties, section object, material object) from the project's material and section."""
+    material_by_name, section_from_spec = require("analysis", "engine.sections", "material", "section_from_spec")
+    material = material_by_name(project.material.name)
+    overrides = {k: v for k, v in (("E", project.material.E), ("G", project.material.G),
+                                   ("density", project.material.density),
+                                   ("fy", project.material.yield_strength)) if v is not None}
+    if overrides:
+        from dataclasses import replace
+
+        material = replace(material, **overrides)
+    section = section_from_spec(project.section.kind, **project.section.dimensions())
+    props = BeamProperties(E=material.E, G=material.G, A=section.A, Iy=section.Iy, Iz=section.Iz, J=section.J,
+                           mass_per_length=section.A * material.density)
+    return props, section, material
+
+
+def pick_combination(project: Project, surface, limit_state: str) -> LoadCombination:
+    name = project.analysis.uls_combination if limit_state == "ULS" else project.analysis.sls_combination
+    combos = surface.combinations
+    if name is None:
+        named = [n for n, c in combos.items() if c.limit_state.value == limit_state]
+        name = named[0] if named else None
+    if name in combos:
+        return combos[name]
+    if name in surface.load_cases:
+        return LoadCombination(name=name, limit_state=limit_state, factors={name: 1.0})
+    return LoadCombination(name=limit_state, limit_state=limit_state, factors={n: 1.0 for n in surface.load_cases})
+
+
+def build_frame(polymesh, surface, props: BeamProperties, elements_per_beam: int):
+    """(FrameModel, Supports, node normals) of the grid-shell."""
+    FrameModel = require("analysis", "engine.frame", "FrameModel")
+    normals = node_normals(polymesh, surface.mesh)
+    up = beam_up_vectors(polymesh, normals)
+    n_beams = len(polymesh.edges)
+    model = FrameModel(nodes=polymesh.nodes, beams=polymesh.edges, E=np.full(n_beams, props.E),
+                       G=np.full(n_beams, props.G), A=np.full(n_beams, props.A), Iy=np.full(n_beams, props.Iy),
+                       Iz=np.full(n_beams, props.Iz), J=np.full(n_beams, props.J), up=up,
+                       elements_per_beam=elements_per_beam)
+    nodes, flags = support_restraints(polymesh, surface.supports.nodes, surface.supports.restraints,
+                                      surface.mesh.vertices)
+    if len(nodes) == 0:
+        raise MechanismError("the grid-shell has no supported node, so it is a free body",
+                             n_modes=6, hint="check the supports of the surface: they must lie on the "
+                                             "grid-shell's boundary")
+    return model, Supports(nodes=nodes, restraints=flags), normals
+
+
+def _plan_span(polymesh) -> float:
+    extent = np.ptp(polymesh.nodes[:, :2], axis=0)
+    return float(extent.min())
+
+
+def run(ctx):
+    project: Project = ctx.project
+    config = project.analysis
+    surface = ctx.result("surface")
+    polymesh = ctx.result("optimize")
+    run_protocol, ProtocolSettings = require("analysis", "engine.protocol", "run_protocol", "ProtocolSettings")
+    member_checks = require("analysis", "engine.checks", "member_checks")
+    props, section, material = beam_properties(project)
+    ctx.step("frame model")
+    model, supports, normals = build_frame(polymesh, surface, props, config.elements_per_beam)
+    uls_combo, sls_combo = pick_combination(project, surface, "ULS"), pick_combination(project, surface, "SLS")
+    uls_loads = gridshell_loads(polymesh, combine(surface.load_cases, uls_combo),
+                                mass_per_length=props.mass_per_length, surface_vertices=surface.mesh.vertices)
+    sls_loads = gridshell_loads(polymesh, combine(surface.load_cases, sls_combo),
+                                mass_per_length=props.mass_per_length, surface_vertices=surface.mesh.vertices)
+    span = _plan_span(polymesh)
+    amplitude = config.imperfection_amplitude or span / 300.0
+    settings = ProtocolSettings(n_modes=config.n_modes, amplitude=amplitude, shapes=tuple(config.imperfection_shapes),
+                                nonlinear=config.nonlinear, max_load_factor=config.max_load_factor)
+    result = run_protocol(model, supports, sls_loads, uls_loads, settings, progress=ctx.step)
+    ctx.step("member checks")
+    lengths = polymesh.beam_lengths
+    checks = member_checks(result.uls_beam_end_forces, lengths, section, material,
+                           buckling_length_factor=config.buckling_length_factor)
+    utilisation = np.asarray(checks.utilisation)
+    deflection_limit = span / config.deflection_limit_ratio
+    vertical_sls = float(np.abs(result.sls_displacements[:, 2]).max())
+    worst = result.worst
+    verdicts = [
+        {"check": "member utilisation (ULS)", "value": float(utilisation.max()), "limit": 1.0,
+         "pass": bool(utilisation.max() <= 1.0)},
+        {"check": f"deflection (SLS) vs span/{config.deflection_limit_ratio:g}", "value": vertical_sls,
+         "limit": deflection_limit, "pass": bool(vertical_sls <= deflection_limit), "unit": "m"},
+    ]
+    if result.lambda_LB is not None:
+        verdicts.append({"check": "linear buckling factor lambda_LB", "value": result.lambda_LB,
+                         "limit": config.required_load_factor, "pass": bool(result.lambda_LB >= config.required_load_factor)})
+    if worst is not None:
+        value = worst.limit_load_factor if worst.limit_load_factor is not None else config.max_load_factor
+        verdicts.append({"check": f"worst non-linear limit factor lambda_NL ({worst.name})", "value": float(value),
+                         "limit": config.required_load_factor, "pass": bool(value >= config.required_load_factor)})
+    axial = 0.5 * (result.uls_beam_end_forces[:, 0, 0] - result.uls_beam_end_forces[:, 1, 0]) \
+        if result.uls_beam_end_forces.ndim == 3 else np.zeros(len(lengths))
+    figures = {
+        "nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
+        "supported_nodes": int(len(supports.nodes)), "total_beam_length_m": float(lengths.sum()),
+        "beam_mass_kg": float(lengths.sum() * props.mass_per_length),
+        "uls_combination": uls_combo.name, "sls_combination": sls_combo.name,
+        "material": project.material.name, "section": project.section.model_dump(mode="json"),
+        "delta_L_m": result.delta_L, "max_vertical_sls_m": vertical_sls, "deflection_limit_m": deflection_limit,
+        "max_utilisation": float(utilisation.max()), "governing_member": f"B{int(utilisation.argmax()) + 1:04d}",
+        "lambda_LB": result.lambda_LB, "buckling_factors": [float(x) for x in result.buckling_factors],
+        "lambda_NL_perfect": None if result.perfect is None else result.perfect.limit_load_factor,
+        "lambda_NL_worst": None if worst is None else worst.limit_load_factor,
+        "worst_imperfection": None if worst is None else worst.name, "knock_down": result.knock_down,
+        "imperfection_amplitude_m": amplitude, "control_node": f"N{result.control_node + 1:04d}",
+        "equilibrium_error": result.equilibrium_error,
+        "imperfections": [{"shape": c.name, "lambda_NL": c.limit_load_factor} for c in result.imperfect],
+        "verdicts": verdicts,
+    }
+    ctx.step("writing")
+    write_text_atomic(ctx.folder / "analysis.json", json.dumps(figures, indent=1, default=float))
+    import pandas as pd
+
+    members = pd.DataFrame({"beam": [f"B{i + 1:04d}" for i in range(len(lengths))],
+                            "start_node": [f"N{a + 1:04d}" for a in polymesh.edges[:, 0]],
+                            "end_node": [f"N{b + 1:04d}" for b in polymesh.edges[:, 1]],
+                            "length_m": lengths, "axial_force_kN": axial / 1e3, "utilisation": utilisation,
+                            "governing_check": list(getattr(checks, "governing", [""] * len(lengths)))})
+    with atomic_path(ctx.folder / "members.csv") as tmp:
+        members.to_csv(tmp, index=False, float_format="%.6g")
+    rows = []
+    for case in ([result.perfect] if result.perfect else []) + list(result.imperfect):
+        rows += [{"shape": case.name, "load_factor": lf, "control_displacement_m": u} for lf, u in case.path]
+    with atomic_path(ctx.folder / "response.csv") as tmp:
+        pd.DataFrame(rows, columns=["shape", "load_factor", "control_displacement_m"]).to_csv(tmp, index=False)
+    ctx.step("drawing")
+    _draw(ctx, polymesh, result, utilisation, axial, project)
+    return AnalysisSummary(figures=figures, axial_forces=axial)
+
+
+def _draw(ctx, polymesh, result, utilisation, axial, project: Project) -> None:
+    plots = require("analysis", "workflow.plots.analysis", "plot_utilisation", "plot_axial_forces",
+                    "plot_buckling_modes", "plot_response")
+    plot_utilisation, plot_axial_forces, plot_buckling_modes, plot_response = plots
+    name = project.project.name
+    plot_utilisation(polymesh.nodes, polymesh.edges, utilisation, ctx.folder / "utilisation.png",
+                     title=f"{name}: member utilisation (ULS)")
+    plot_axial_forces(polymesh.nodes, polymesh.edges, axial, ctx.folder / "axial.png",
+                      title=f"{name}: axial forces (ULS), compression red, tension blue")
+    if len(result.buckling_factors):
+        plot_buckling_modes(polymesh.nodes, polymesh.edges, result.buckling_modes[:4], result.buckling_factors[:4],
+                            ctx.folder / "modes.png", title=f"{name}: linear buckling modes")
+    curves = {c.name: np.asarray(c.path) for c in ([result.perfect] if result.perfect else []) + list(result.imperfect)}
+    if curves:
+        worst = result.worst.name if result.worst else None
+        plot_response(curves, ctx.folder / "response.png", worst=worst,
+                      title=f"{name}: load factor against control-node deflection")
+
+
+def load(folder: Path, ctx):
+    figures = json.loads((folder / "analysis.json").read_text())
+    import pandas as pd
+
+    members = pd.read_csv(folder / "members.csv")
+    return AnalysisSummary(figures=figures, axial_forces=members["axial_force_kN"].to_numpy() * 1e3)

@@ -1,0 +1,152 @@
+"""Stage ``fabrication``: everything a workshop needs to build the checked grid-shell.
+
+Artifacts (07-fabrication/): joints/ (J0001.step, J0001.stl ..., joints.step), beams/
+(cutlist.csv, cutlist.xlsx, bars.csv, beams.step), panels/ (P0001.dxf ..., sheets/S01.dxf
+..., panels.csv), assembly/ (sequence.csv, steps/*.png), drawings/ (plan.dxf, plan.pdf),
+gridshell.step, gridshell.3dm and fabrication.json (counts and checks). Lengths in mm.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from engine.structure import node_normals
+from fabrication.files import write_text_atomic
+
+from ..config import Project
+from ._require import require
+
+__all__ = ["run", "load", "beam_outer_size_mm"]
+
+MM = 1000.0
+
+
+def beam_outer_size_mm(project: Project) -> float:
+    """The beam's largest outer dimension in mm (tube or rod diameter, or the section height)."""
+    s = project.section
+    return MM * (s.diameter if s.diameter is not None else max(s.height or 0.0, s.width or 0.0))
+
+
+def run(ctx):
+    project: Project = ctx.project
+    config = project.fabrication
+    surface = ctx.result("surface")
+    polymesh = ctx.result("optimize")
+    ctx.result("analysis")
+    folder: Path = ctx.folder
+    normals = node_normals(polymesh, surface.mesh)
+    size_mm = beam_outer_size_mm(project)
+    summary: dict = {"nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces}
+
+    JointSettings, build_joints = require("fabrication", "fabrication.joints", "JointSettings", "build_joints")
+    j = config.joints
+    joint_settings = JointSettings(**{k: v for k, v in {
+        "kind": j.kind, "clearance_mm": MM * j.clearance, "wall_mm": MM * j.wall, "min_wall_mm": MM * j.min_wall,
+        "pin_hole_mm": MM * j.pin_hole, "engrave": j.engrave,
+        "hub_radius_mm": None if j.hub_radius is None else MM * j.hub_radius,
+        "sleeve_length_mm": None if j.sleeve_length is None else MM * j.sleeve_length,
+        "plate_thickness_mm": MM * j.plate_thickness, "bolt_hole_mm": MM * j.bolt_hole}.items() if v is not None})
+    ctx.step("joints")
+    joint_reports = build_joints(polymesh, normals, size_mm, joint_settings, folder / "joints",
+                                 workers=config.workers, progress=ctx.step)
+    summary["joints"] = len(joint_reports)
+    summary["joint_problems"] = [r for r in joint_reports if not r.get("ok", True)]
+
+    ctx.step("beams")
+    beams = require("fabrication", "fabrication.beams", "BeamSettings", "cut_list", "write_cut_list", "write_beams_step")
+    BeamSettings, cut_list, write_cut_list, write_beams_step = beams
+    nest_bars = require("fabrication", "fabrication.nesting_bars", "nest_bars")
+    b = config.beams
+    beam_settings = BeamSettings(profile_name=_profile_name(project), material_name=project.material.name,
+                                 density=_density(project), stock_length_mm=MM * b.stock_length, kerf_mm=MM * b.kerf)
+    table = cut_list(polymesh, normals, beam_settings, joint_settings)
+    write_cut_list(table, folder / "beams")
+    nesting = nest_bars(table["cut_length_mm"].to_numpy(), table["label"].tolist(), MM * b.stock_length, MM * b.kerf)
+    _write_bars(nesting, folder / "beams" / "bars.csv")
+    write_beams_step(polymesh, table, folder / "beams" / "beams.step")
+    summary["bars_used"] = int(getattr(nesting, "bars_used", 0))
+    summary["bars_lower_bound"] = int(getattr(nesting, "lower_bound", 0))
+
+    panels_summary = {}
+    if config.panels.enabled:
+        ctx.step("panels")
+        (PanelSettings, SheetSettings, flatten_panels, write_panel_dxfs, nest_sheets, write_sheet_dxfs,
+         write_panels_csv) = require("fabrication", "fabrication.panels", "PanelSettings", "SheetSettings",
+                                     "flatten_panels", "write_panel_dxfs", "nest_sheets", "write_sheet_dxfs",
+                                     "write_panels_csv")
+        p, s = config.panels, config.sheets
+        panel_settings = PanelSettings(thickness_mm=MM * p.thickness, material_name=p.material, density=p.density,
+                                       clearance_mm=MM * p.clearance, hole_diameter_mm=MM * p.hole_diameter,
+                                       hole_inset_mm=MM * p.hole_inset, planarity_tolerance_mm=MM * p.planarity_tolerance,
+                                       split_nonplanar=p.split_nonplanar)
+        panels = flatten_panels(polymesh, panel_settings)
+        write_panel_dxfs(panels, folder / "panels", panel_settings)
+        sheet_nesting = nest_sheets(panels, SheetSettings(width_mm=MM * s.width, height_mm=MM * s.height,
+                                                          spacing_mm=MM * s.spacing, margin_mm=MM * s.margin,
+                                                          rotations=s.rotations))
+        write_sheet_dxfs(sheet_nesting, panels, folder / "panels" / "sheets")
+        write_panels_csv(panels, sheet_nesting, panel_settings, folder / "panels" / "panels.csv")
+        panels_summary = {"panels": len(panels), "sheets": int(len(getattr(sheet_nesting, "sheets", []))),
+                          "sheet_utilisation": float(getattr(sheet_nesting, "utilisation", 0.0))}
+    else:
+        panels = []
+    summary.update(panels_summary)
+
+    ctx.step("drawings and model")
+    write_plan_drawings = require("fabrication", "fabrication.drawings", "write_plan_drawings")
+    write_plan_drawings(polymesh, folder / "drawings", project_name=project.project.name)
+    write_gridshell_step, write_gridshell_3dm = require("fabrication", "fabrication.model3d", "write_gridshell_step",
+                                                        "write_gridshell_3dm")
+    joint_radius_mm = getattr(joint_settings, "hub_radius_mm", None) or 1.5 * size_mm
+    write_gridshell_step(polymesh, panels, size_mm / 2, joint_radius_mm, folder / "gridshell.step")
+    write_gridshell_3dm(polymesh, panels, size_mm / 2, joint_radius_mm, folder / "gridshell.3dm")
+
+    ctx.step("assembly sequence")
+    try:
+        plan_assembly = require("fabrication", "fabrication.assembly", "plan_assembly")
+    except Exception:
+        plan_assembly = None
+    if plan_assembly is not None:
+        summary["assembly"] = plan_assembly(polymesh, surface, project, folder / "assembly")
+    write_text_atomic(folder / "fabrication.json", json.dumps(summary, indent=1, default=_jsonable))
+    return summary
+
+
+def _jsonable(value):
+    if isinstance(value, (np.integer, np.floating)):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return str(value)
+
+
+def _profile_name(project: Project) -> str:
+    s = project.section
+    mm = {k: round(MM * v, 2) for k, v in s.dimensions().items()}
+    return {"circular_hollow": f"CHS {mm.get('diameter')}x{mm.get('thickness')}",
+            "rectangular_hollow": f"RHS {mm.get('height')}x{mm.get('width')}x{mm.get('thickness')}",
+            "solid_round": f"RD {mm.get('diameter')}",
+            "solid_rectangle": f"{mm.get('height')}x{mm.get('width')}"}[s.kind]
+
+
+def _density(project: Project) -> float:
+    if project.material.density is not None:
+        return project.material.density
+    material = require("fabrication", "engine.sections", "material")
+    return material(project.material.name).density
+
+
+def _write_bars(nesting, path: Path) -> None:
+    writer = getattr(nesting, "to_csv", None)
+    if writer is not None:
+        writer(path)
+        return
+    write_bars_csv = require("fabrication", "fabrication.nesting_bars", "write_bars_csv")
+    write_bars_csv(nesting, path)
+
+
+def load(folder: Path, ctx):
+    return json.loads((folder / "fabrication.json").read_text())
