@@ -95,6 +95,8 @@ class Stage:
     run(ctx) -> result writes its artifacts into ctx.folder and returns the in-memory result;
     load(folder, ctx) -> result rebuilds that result from the artifacts of a cached run.
     external(project) -> bytes digests of inputs outside the project file (e.g. a mesh file).
+    published: files the stage writes outside its folder (relative to OUT, e.g. report.html),
+    recorded and checked like its artifacts.
     """
 
     name: str
@@ -103,6 +105,7 @@ class Stage:
     load: Callable[[Path, StageContext], Any]
     depends: tuple[str, ...] = ()
     external: Callable[[Project], str] | None = None
+    published: tuple[str, ...] = ()
 
 
 @dataclass
@@ -127,11 +130,11 @@ def _stage_key(stage: Stage, project: Project, keys: dict[str, str], version: st
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
 
 
-def _artifacts(folder: Path, out_dir: Path) -> list[dict]:
-    if not folder.is_dir():
-        return []
+def _artifacts(folder: Path, out_dir: Path, published: tuple[str, ...] = ()) -> list[dict]:
+    files = sorted(p for p in folder.rglob("*") if p.is_file()) if folder.is_dir() else []
+    files += [out_dir / name for name in published if (out_dir / name).is_file()]
     return [{"path": p.relative_to(out_dir).as_posix(), "sha256": file_digest(p), "bytes": p.stat().st_size}
-            for p in sorted(folder.rglob("*")) if p.is_file()]
+            for p in files]
 
 
 def _still_valid(entry: dict | None, key: str, out_dir: Path) -> bool:
@@ -246,7 +249,7 @@ def run_project(project: Project, out_dir: Path, stages: list[Stage], *, until: 
         duration = time.perf_counter() - started
         records[stage.name] = {"name": stage.name, "folder": stage.folder, "status": STATUS_RAN,
                                "duration_s": round(duration, 3), "key": keys[stage.name],
-                               "artifacts": _artifacts(folder, out_dir)}
+                               "artifacts": _artifacts(folder, out_dir, stage.published)}
         summary.stages.append(records[stage.name])
         progress.stage_done(stage.name, STATUS_RAN, duration)
         write_manifest()

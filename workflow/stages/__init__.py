@@ -39,11 +39,13 @@ def _build() -> list[Stage]:
             module = importlib.import_module(f"{__name__}.{name}")
             run, load = module.run, module.load
             external = getattr(module, "external", None)
+            published = tuple(getattr(module, "published", ()))
         except ModuleNotFoundError as exc:
             if exc.name != f"{__name__}.{name}":
                 raise
-            (run, load), external = _not_available(name), None
-        stages.append(Stage(name=name, folder=folder, run=run, load=load, depends=depends, external=external))
+            (run, load), external, published = _not_available(name), None, ()
+        stages.append(Stage(name=name, folder=folder, run=run, load=load, depends=depends, external=external,
+                            published=published))
     return stages
 
 

@@ -1,0 +1,231 @@
+"""Stage ``report``: one page that shows the whole job, ``OUT/report.html``.
+
+The page is self-contained (opens offline); its figures are also copied as PNG to
+``report/figures/`` and its tables written as CSV to ``report/tables/``. Figures and figures'
+numbers are read from the earlier stages' artifacts, so the report never recomputes anything.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+
+from fabrication.files import atomic_path, write_bytes_atomic, write_text_atomic
+
+from ..config import Project
+from ..report import Figure, Section, Table, Viewer, figure_from_file, render_report
+
+__all__ = ["run", "load", "published"]
+
+#: Files this stage writes outside its own folder (checked by the runner like its artifacts).
+published = ("report.html",)
+
+FIGURES = {
+    "surface": [("01-surface/surface.png", "The surface and its supports (black)")],
+    "shell": [("02-shell/stress.png", "Principal membrane forces of the continuous shell: compression red, "
+                                      "tension blue")],
+    "field": [("03-field/field.png", "Guiding field: cell size and anisotropy with its direction")],
+    "remesh": [("04-remesh/degree.png", "Remeshed grid-shell, cells by number of sides")],
+    "optimize": [("05-optimize/degree.png", "Optimised grid-shell, cells by number of sides"),
+                 ("05-optimize/planarity.png", "Optimised grid-shell, planarity of the cells")],
+    "analysis": [("06-analysis/axial.png", "Axial forces (ULS): compression red, tension blue"),
+                 ("06-analysis/utilisation.png", "Member utilisation (ULS)"),
+                 ("06-analysis/modes.png", "Linear buckling modes"),
+                 ("06-analysis/response.png", "Load factor against control-node deflection, worst imperfection bold")],
+    "compare": [("compare/response.png", "Same-length comparison: response diagrams of the three grids")],
+    "fabrication": [("07-fabrication/assembly/steps_strip.png", "Assembly sequence, from the supports inward"),
+                    ("07-fabrication/panels/sheets.png", "Panels nested on stock sheets")],
+}
+
+
+def _json(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+
+
+def _figures(out_dir: Path, key: str) -> list[Figure]:
+    figures = []
+    for relative, caption in FIGURES.get(key, []):
+        name = relative.replace("/", "-").removesuffix(".png")
+        figure = figure_from_file(out_dir / relative, caption, name=name)
+        if figure is not None:
+            figures.append(figure)
+    return figures
+
+
+def _csv_table(path: Path, name: str, caption: str, max_rows: int = 12, sort_by: str | None = None) -> Table | None:
+    import pandas as pd
+
+    if not path.is_file():
+        return None
+    frame = pd.read_csv(path)
+    if sort_by in frame.columns:
+        frame = frame.sort_values(sort_by, ascending=False)
+    shown = frame.head(max_rows)
+    more = f" (first {max_rows} of {len(frame)})" if len(frame) > max_rows else ""
+    return Table(name=name, caption=caption + more, columns=[str(c) for c in shown.columns],
+                 rows=shown.astype(object).where(shown.notna(), None).values.tolist())
+
+
+def _pairs(name: str, caption: str, values: dict) -> Table:
+    return Table(name=name, caption=caption, columns=["item", "value"], rows=[[k, v] for k, v in values.items()])
+
+
+def _summary(project: Project, surface, polymesh, analysis: dict, fabrication: dict, shell: dict) -> Section:
+    supports = surface.supports
+    loads = ", ".join(surface.load_cases) or "-"
+    combos = ", ".join(f"{n} ({c.limit_state.value})" for n, c in surface.combinations.items())
+    values = {
+        "project": project.project.name,
+        "surface": surface.info.get("source", surface.mesh.name),
+        "surface area (m^2)": float(surface.mesh.area),
+        "supported vertices": int(len(supports.nodes)),
+        "load cases": loads, "combinations": combos,
+        "D (largest size ratio)": project.field.max_size_ratio,
+        "A (largest aspect)": project.field.max_aspect,
+        "material / section": f"{project.material.name} / {project.section.kind} "
+                              + " x ".join(f"{1000 * v:g} mm" for v in project.section.dimensions().values()),
+        "nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
+        "panels": fabrication.get("panels", "-"), "joints": fabrication.get("joints", "-"),
+        "total beam length (m)": float(polymesh.total_length),
+        "beam mass (kg)": analysis.get("beam_mass_kg"),
+    }
+    tables = [_pairs("summary", "The job", values)]
+    verdicts = analysis.get("verdicts", [])
+    if verdicts:
+        rows = [[v.get("check"), v.get("value"), v.get("limit"), v.get("unit", ""), bool(v.get("pass"))] for v in verdicts]
+        tables.insert(0, Table(name="verdicts", caption="Verdicts", columns=["check", "value", "limit", "unit", "result"],
+                               rows=rows, verdict_column="result"))
+    passed = all(bool(v.get("pass")) for v in verdicts) if verdicts else None
+    text = {True: "Every check passes.", False: "At least one check fails: see the verdicts below.",
+            None: "No structural verdicts (the analysis did not run)."}[passed]
+    return Section(title="Summary", text=text, tables=tables)
+
+
+def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
+    shell = _json(out_dir / "02-shell/shell.json")
+    field = _json(out_dir / "03-field/field.json")
+    remesh = _json(out_dir / "04-remesh/remesh.json")
+    optimize = _json(out_dir / "05-optimize/optimize.json")
+    analysis = _json(out_dir / "06-analysis/analysis.json")
+    sections = [Section(title="1. Surface and supports", figures=_figures(out_dir, "surface"))]
+    shell_rows = {k: shell[k] for k in ("load_case", "thickness_m", "max_displacement_m", "N1_max_N_per_m",
+                                        "N2_min_N_per_m", "equilibrium_error") if k in shell}
+    sections.append(Section(title="2. Shell statics", figures=_figures(out_dir, "shell"),
+                            tables=[_pairs("shell", "Continuous shell under the serviceability load", shell_rows)]))
+    sections.append(Section(title="3. Guiding field", figures=_figures(out_dir, "field"),
+                            tables=[_pairs("field", "Field against the bounds D and A", field)] if field else []))
+    quality_keys = ("hexagon_share_interior", "valence3_share_interior", "achieved_size_ratio", "achieved_max_aspect",
+                    "size_correlation", "n_nodes", "n_beams", "n_faces", "total_length_m", "mean_beam_length_m",
+                    "shortest_beam_m", "smallest_angle_deg")
+    remesh_rows = {k: remesh[k] for k in quality_keys if k in remesh}
+    sections.append(Section(title="4. Statics-aware Voronoi remeshing", figures=_figures(out_dir, "remesh"),
+                            tables=[_pairs("remesh", "Remeshing quality", remesh_rows)]))
+    after = optimize.get("after", {})
+    before = optimize.get("before", {})
+    rows = [[k, before.get(k), after.get(k)] for k in after if not isinstance(after.get(k), (dict, list))]
+    sections.append(Section(title="5. Regular and planar cells", figures=_figures(out_dir, "optimize"),
+                            tables=[Table(name="optimize", caption="Before and after the optimisation",
+                                          columns=["figure", "before", "after"], rows=rows)] if rows else []))
+    figure_keys = ("uls_combination", "sls_combination", "delta_L_m", "max_vertical_sls_m", "deflection_limit_m",
+                   "max_utilisation", "governing_member", "lambda_LB", "lambda_NL_perfect", "lambda_NL_worst",
+                   "worst_imperfection", "knock_down", "imperfection_amplitude_m", "control_node", "equilibrium_error")
+    tables = [_pairs("analysis", "Beam grid-shell analysis", {k: analysis.get(k) for k in figure_keys if k in analysis})]
+    imperfections = analysis.get("imperfections", [])
+    if imperfections:
+        tables.append(Table(name="imperfections", caption="Non-linear limit load factor per imperfection",
+                            columns=["shape", "lambda_NL"], rows=[[i["shape"], i["lambda_NL"]] for i in imperfections]))
+    members = _csv_table(out_dir / "06-analysis/members.csv", "members", "Most utilised members", sort_by="utilisation")
+    if members:
+        tables.append(members)
+    sections.append(Section(title="6. Structural analysis", figures=_figures(out_dir, "analysis"), tables=tables,
+                            links=[("members.csv", "06-analysis/members.csv"), ("response.csv", "06-analysis/response.csv"),
+                                   ("analysis.json", "06-analysis/analysis.json")]))
+    compare = _csv_table(out_dir / "compare/compare.csv", "compare", "Grids of the same total length", max_rows=20)
+    if compare:
+        sections.append(Section(title="7. Same-length comparison", figures=_figures(out_dir, "compare"),
+                                tables=[compare], links=[("compare.md", "compare/compare.md")]))
+    sections.append(_fabrication_section(out_dir))
+    return sections
+
+
+def _fabrication_section(out_dir: Path) -> Section:
+    import pandas as pd
+
+    folder = out_dir / "07-fabrication"
+    tables: list[Table] = []
+    cut = folder / "beams/cutlist.csv"
+    if cut.is_file():
+        frame = pd.read_csv(cut)
+        group = frame.groupby("profile").agg(beams=("id", "count"), cut_length_m=("cut_length_mm", lambda s: s.sum() / 1000),
+                                             mass_kg=("mass_kg", "sum")).reset_index()
+        tables.append(Table(name="cutlist", caption="Cut list by profile", columns=list(group.columns),
+                            rows=group.values.tolist()))
+    fabrication = _json(folder / "fabrication.json")
+    bars = {k: fabrication.get(k) for k in ("bars_used", "bars_lower_bound") if k in fabrication}
+    if bars:
+        tables.append(_pairs("bars", "Bar nesting (stock bars used against the lower bound)", bars))
+    panels = _csv_table(folder / "panels/panels.csv", "panels", "Panel schedule", max_rows=10)
+    if panels:
+        tables.append(panels)
+    summary = {k: fabrication.get(k) for k in ("joints", "panels", "sheets", "sheet_utilisation") if k in fabrication}
+    problems = fabrication.get("joint_problems", [])
+    summary["joints with a problem"] = len(problems)
+    tables.insert(0, _pairs("fabrication", "Fabrication", summary))
+    sequence = _csv_table(folder / "assembly/sequence.csv", "assembly", "Assembly sequence", max_rows=10)
+    if sequence:
+        tables.append(sequence)
+    links = [(p.relative_to(out_dir).as_posix(), p.relative_to(out_dir).as_posix())
+             for p in [folder / "beams/cutlist.csv", folder / "beams/cutlist.xlsx", folder / "beams/bars.csv",
+                       folder / "beams/beams.step", folder / "panels/panels.csv", folder / "joints/joints.step",
+                       folder / "assembly/sequence.csv", folder / "drawings/plan.pdf", folder / "drawings/plan.dxf",
+                       folder / "gridshell.step", folder / "gridshell.3dm"] if p.is_file()]
+    return Section(title="8. Fabrication", figures=_figures(out_dir, "fabrication"), tables=tables, links=links)
+
+
+def _safe_name(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", text).strip("-") or "table"
+
+
+def run(ctx):
+    project: Project = ctx.project
+    out_dir: Path = ctx.out_dir
+    surface = ctx.result("surface")
+    polymesh = ctx.result("optimize")
+    analysis = ctx.result("analysis")
+    fabrication = ctx.result("fabrication")
+    shell = _json(out_dir / "02-shell/shell.json")
+    ctx.step("collecting")
+    summary = _summary(project, surface, polymesh, analysis.figures, fabrication or {}, shell)
+    sections = _stage_sections(out_dir, project)
+    axial = np.asarray(analysis.axial_forces, dtype=float)
+    viewer = Viewer(nodes=polymesh.nodes, beams=polymesh.edges, panels=list(polymesh.faces), supports=polymesh.supports,
+                    beam_values=axial if len(axial) == len(polymesh.edges) else None,
+                    beam_value_label="axial force (N), tension +")
+    title = project.report.title or f"{project.project.name}: grid-shell design report"
+    subtitle = project.project.description or "statics-aware Voronoi grid-shell, from the surface to shop drawings"
+    ctx.step("writing")
+    figures_dir, tables_dir = ctx.folder / "figures", ctx.folder / "tables"
+    figures_dir.mkdir(parents=True, exist_ok=True)
+    tables_dir.mkdir(parents=True, exist_ok=True)
+    import pandas as pd
+
+    for section in [summary, *sections]:
+        for figure in section.figures:
+            write_bytes_atomic(figures_dir / f"{figure.name}.png", figure.png)
+        for table in section.tables:
+            with atomic_path(tables_dir / f"{_safe_name(table.name)}.csv") as tmp:
+                pd.DataFrame(table.rows, columns=table.columns).to_csv(tmp, index=False)
+    page = render_report(title=title, subtitle=subtitle, summary=summary, sections=sections, viewer=viewer)
+    write_text_atomic(ctx.folder / "report.html", page)
+    write_text_atomic(out_dir / "report.html", page)
+    return {"report": str(out_dir / "report.html")}
+
+
+def load(folder: Path, ctx):
+    return {"report": str(ctx.out_dir / "report.html")}
