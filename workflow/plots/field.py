@@ -1,0 +1,51 @@
+"""The guiding field: size map, anisotropy map with the direction of elongation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from engine.field import GuidingField
+from engine.mesh import TriMesh
+
+from ._common import pyplot, save_png
+
+__all__ = ["plot_field"]
+
+MAX_TICKS = 900
+
+
+def plot_field(mesh: TriMesh, field: GuidingField, path: Path, *, title: str = "") -> Path:
+    """Two plan panels: relative cell size h, and anisotropy a with ticks along the direction u."""
+    plt = pyplot()
+    from matplotlib.collections import LineCollection
+    from matplotlib.tri import Triangulation
+
+    v = mesh.vertices
+    tri = Triangulation(v[:, 0], v[:, 1], mesh.faces)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.8))
+    size_plot = axes[0].tripcolor(tri, field.size / field.size.min(), shading="gouraud", cmap="viridis_r")
+    fig.colorbar(size_plot, ax=axes[0], shrink=0.8, label="cell size h / h_min")
+    axes[0].set_title(f"size: h_max / h_min = {field.size.max() / field.size.min():.2f}")
+    aspect_plot = axes[1].tripcolor(tri, field.anisotropy, shading="gouraud", cmap="magma_r",
+                                    vmin=1.0, vmax=max(1.0 + 1e-6, float(field.anisotropy.max())))
+    fig.colorbar(aspect_plot, ax=axes[1], shrink=0.8, label="anisotropy a")
+    picked = np.arange(mesh.n_vertices)
+    if len(picked) > MAX_TICKS:
+        picked = np.random.default_rng(0).choice(picked, MAX_TICKS, replace=False)
+    length = 0.4 * np.sqrt(mesh.area / max(len(picked), 1))
+    offset = field.direction[picked, :2] * length
+    centre = v[picked, :2]
+    axes[1].add_collection(LineCollection(np.stack([centre - offset, centre + offset], axis=1),
+                                          colors="#1d2330", linewidths=0.8))
+    axes[1].set_title(f"anisotropy and direction: largest a = {field.anisotropy.max():.2f}")
+    for ax in axes:
+        for loop in mesh.boundary_loops:
+            closed = np.r_[loop, loop[:1]]
+            ax.plot(v[closed, 0], v[closed, 1], color="k", linewidth=0.8)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
+    fig.suptitle(title or "guiding field")
+    fig.tight_layout()
+    return save_png(fig, path)

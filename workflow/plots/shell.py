@@ -1,0 +1,62 @@
+"""Principal membrane force crosses over the surface (compression red, tension blue)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from engine.mesh import TriMesh
+
+from ._common import pyplot, save_png
+
+__all__ = ["plot_principal_forces"]
+
+MAX_CROSSES = 1500
+
+
+def plot_principal_forces(mesh: TriMesh, principal_forces: np.ndarray, principal_directions: np.ndarray,
+                          path: Path, *, support_nodes: np.ndarray | None = None, title: str = "") -> Path:
+    """Plan view with one cross per facet (thinned to about 1500): N1 along its direction, N2
+    across it (in the facet plane), bar lengths proportional to |N|; compression red, tension blue."""
+    plt = pyplot()
+    from matplotlib.collections import LineCollection
+    from matplotlib.lines import Line2D
+
+    v, f = mesh.vertices, mesh.faces
+    centroids = mesh.face_centroids
+    normals = mesh.face_normals
+    picked = np.arange(mesh.n_faces)
+    if len(picked) > MAX_CROSSES:
+        picked = np.random.default_rng(0).choice(picked, MAX_CROSSES, replace=False)
+    first = principal_directions[picked]
+    second = np.cross(normals[picked], first)
+    values = principal_forces[picked]
+    peak = max(float(np.abs(values).max()), 1e-300)
+    spacing = np.sqrt(mesh.area / max(len(picked), 1))
+    half = 0.45 * spacing * np.abs(values) / peak
+    segments, colours = [], []
+    for k, axis in enumerate((first, second)):
+        offset = axis[:, :2] * half[:, k:k + 1]
+        c = centroids[picked, :2]
+        segments.append(np.stack([c - offset, c + offset], axis=1))
+        colours.append(np.where(values[:, k] < 0, "#c0392b", "#1f4e9e"))
+    fig, ax = plt.subplots(figsize=(9, 8))
+    ax.triplot(v[:, 0], v[:, 1], f, color=(0.6, 0.6, 0.6, 0.25), linewidth=0.3)
+    ax.add_collection(LineCollection(np.concatenate(segments), colors=np.concatenate(colours), linewidths=1.1))
+    for loop in mesh.boundary_loops:
+        closed = np.r_[loop, loop[:1]]
+        ax.plot(v[closed, 0], v[closed, 1], color="k", linewidth=1.0)
+    if support_nodes is not None and len(support_nodes):
+        s = v[np.asarray(support_nodes)]
+        ax.scatter(s[:, 0], s[:, 1], marker="^", c="k", s=16, zorder=3)
+    ax.legend(handles=[Line2D([], [], color="#c0392b", label="compression"),
+                       Line2D([], [], color="#1f4e9e", label="tension"),
+                       Line2D([], [], color="k", marker="^", linestyle="", label="supports")],
+              loc="upper right", fontsize=8)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
+    ax.set_title(title or "principal membrane forces")
+    ax.text(0.01, 0.01, f"largest |N| = {peak / 1e3:.3g} kN/m", transform=ax.transAxes, fontsize=8)
+    fig.tight_layout()
+    return save_png(fig, path)
