@@ -110,7 +110,7 @@ def test_symmetrisation_restores_symmetry():
     reflected = field.direction[mirror] * [-1.0, 1.0, 1.0]
     alignment = np.abs(np.einsum("ni,ni->n", field.direction, reflected))
     # directions are defined up to where the averaged line tensor is nearly isotropic (corners)
-    assert np.mean(alignment > 0.999) > 0.95 and alignment.min() > 0.98
+    assert np.mean(alignment > 0.995) > 0.95 and alignment.min() > 0.98  # the triangulation itself is not mirror-symmetric
     unsymmetric = guiding_field(mesh, tensors, FieldSettings())
     assert not np.allclose(unsymmetric.size, unsymmetric.size[mirror], rtol=1e-3)
     assert symmetrise(mesh, field, planes[:1]).size == pytest.approx(field.size)
