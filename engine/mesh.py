@@ -68,7 +68,7 @@ def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
 def best_fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares plane of (k, 3) points: (centroid (3,), unit normal (3,))."""
     centroid = points.mean(axis=0)
-    _, _, vt = np.linalg.svd(points - centroid)
+    _, _, vt = np.linalg.svd(points - centroid, full_matrices=False)
     return centroid, vt[-1]
 
 

@@ -239,7 +239,7 @@ class RemeshConfig(_Section):
     n_cells: int | None = Field(None, ge=4)
     mean_beam_length: Length | None = None
     total_length: Length | None = None
-    lloyd_iterations: int = Field(30, ge=0)
+    lloyd_iterations: int = Field(80, ge=0)
     seed: int = 0
 
     @model_validator(mode="after")
