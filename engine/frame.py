@@ -1,0 +1,733 @@
+"""Space-frame finite elements: linear static, linear buckling, co-rotational non-linear static.
+
+3D Euler-Bernoulli beams with 6 DOF per node (ux, uy, uz, rx, ry, rz), rigid joints, each
+beam split into ``elements_per_beam`` elements. Local axes: x along the beam, z the beam's
+``up`` vector made perpendicular to x (the strong axis: Iy is about local y, bending in the
+x-z plane), y = z cross x. Element kernels run over all elements at once; the stiffness is
+assembled once per analysis and factored once. The non-linear analysis is co-rotational: each
+element's rigid motion is followed by its chord and the mean of its end triads, its
+deformation is small in that frame; Newton iterations with Crisfield's cylindrical arc-length
+follow the path through limit points. Why our own elements and not pyfe3d: docs/decisions.md.
+
+Units: any consistent set (SI in the workflow).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .errors import ConvergenceError, InputError, MechanismError
+from .supports import Supports
+
+__all__ = ["FrameModel", "LinearResult", "BucklingResult", "NonlinearResult", "linear_static", "linear_buckling",
+           "nonlinear_static", "solve_frame_json", "DOF_NAMES"]
+
+DOF_NAMES = ("ux", "uy", "uz", "rx", "ry", "rz")
+
+
+@dataclass(frozen=True, kw_only=True)
+class FrameModel:
+    """nodes (n,3); beams (b,2) node ids; E, G, A, Iy, Iz, J (b,) per beam; up (b,3) the
+    direction of each beam's local z (strong axis normal); elements_per_beam."""
+
+    nodes: np.ndarray
+    beams: np.ndarray
+    E: np.ndarray
+    G: np.ndarray
+    A: np.ndarray
+    Iy: np.ndarray
+    Iz: np.ndarray
+    J: np.ndarray
+    up: np.ndarray
+    elements_per_beam: int = 1
+
+    def __post_init__(self) -> None:
+        nodes = np.asarray(self.nodes, dtype=float)
+        beams = np.asarray(self.beams, dtype=np.int64).reshape(-1, 2)
+        if nodes.ndim != 2 or nodes.shape[1] != 3 or not np.all(np.isfinite(nodes)):
+            raise InputError("frame model: nodes must be a finite (n, 3) array")
+        if len(beams) == 0:
+            raise InputError("frame model: no beams")
+        if beams.min() < 0 or beams.max() >= len(nodes):
+            raise InputError(f"frame model: a beam refers to a node outside 0..{len(nodes) - 1}")
+        if np.any(beams[:, 0] == beams[:, 1]):
+            raise InputError(f"frame model: beam {int(np.argmax(beams[:, 0] == beams[:, 1]))} starts and ends at one node")
+        object.__setattr__(self, "nodes", nodes)
+        object.__setattr__(self, "beams", beams)
+        for name in ("E", "G", "A", "Iy", "Iz", "J"):
+            value = np.broadcast_to(np.asarray(getattr(self, name), dtype=float), (len(beams),)).copy()
+            if not np.all(value > 0):
+                raise InputError(f"frame model: {name} must be positive for every beam")
+            object.__setattr__(self, name, value)
+        up = np.broadcast_to(np.asarray(self.up, dtype=float), (len(beams), 3)).copy()
+        object.__setattr__(self, "up", up)
+        if int(self.elements_per_beam) < 1:
+            raise InputError("frame model: elements_per_beam must be at least 1")
+        object.__setattr__(self, "elements_per_beam", int(self.elements_per_beam))
+        lengths = np.linalg.norm(nodes[beams[:, 1]] - nodes[beams[:, 0]], axis=1)
+        if np.any(lengths <= 1e-12 * max(np.ptp(nodes, axis=0).max(), 1e-300)):
+            raise InputError(f"frame model: beam {int(np.argmin(lengths))} has zero length")
+
+
+@dataclass(frozen=True, kw_only=True)
+class LinearResult:
+    """displacements (n,6) and reactions (n,6) in global axes; beam_end_forces (b,2,6): section
+    forces [N, Vy, Vz, T, My, Mz] in each beam's local axes at its start and end, N > 0 in
+    tension (at the end: the element's end forces; at the start: their negatives, so a beam
+    carrying a constant N, T or M shows the same value at both ends); equilibrium_error:
+    |loads + reactions| (forces, and moments about the origin over the model size) / |loads|."""
+
+    displacements: np.ndarray
+    reactions: np.ndarray
+    beam_end_forces: np.ndarray
+    equilibrium_error: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class BucklingResult:
+    """Positive buckling load factors (k,) ascending and mode shapes (k,n,6), largest translation 1."""
+
+    factors: np.ndarray
+    modes: np.ndarray
+
+
+@dataclass(frozen=True, kw_only=True)
+class NonlinearResult:
+    """path (s,2): [load factor, control displacement] from [0, 0]; limit_load_factor: the first
+    maximum of the load factor (None if not reached); negative_pivots (s,): negative pivots of the
+    tangent stiffness per step; displacements (n,6) at the limit point (or the last step)."""
+
+    path: np.ndarray
+    limit_load_factor: float | None
+    negative_pivots: np.ndarray
+    displacements: np.ndarray
+    converged: bool = True
+    load_factors: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+# ----------------------------------------------------------------------------- mesh of elements
+
+@dataclass(frozen=True)
+class _Elements:
+    nodes: np.ndarray        # (N,3) original nodes then internal nodes
+    connectivity: np.ndarray  # (m,2)
+    beam: np.ndarray         # (m,) beam of each element
+    up: np.ndarray           # (m,3)
+    E: np.ndarray
+    G: np.ndarray
+    A: np.ndarray
+    Iy: np.ndarray
+    Iz: np.ndarray
+    J: np.ndarray
+    first: np.ndarray        # (b,) first element of each beam
+    last: np.ndarray         # (b,) last element of each beam
+    n_original: int
+
+
+def _elements(model: FrameModel, nodes: np.ndarray | None = None) -> _Elements:
+    nodes = model.nodes if nodes is None else nodes
+    k = model.elements_per_beam
+    b = len(model.beams)
+    start, end = nodes[model.beams[:, 0]], nodes[model.beams[:, 1]]
+    n = len(nodes)
+    if k == 1:
+        all_nodes = nodes
+        connectivity = model.beams.copy()
+    else:
+        t = np.arange(1, k) / k
+        internal = start[:, None] + t[None, :, None] * (end - start)[:, None]
+        all_nodes = np.vstack([nodes, internal.reshape(-1, 3)])
+        ids = np.empty((b, k + 1), dtype=np.int64)
+        ids[:, 0], ids[:, -1] = model.beams[:, 0], model.beams[:, 1]
+        ids[:, 1:-1] = n + np.arange(b * (k - 1)).reshape(b, k - 1)
+        connectivity = np.stack([ids[:, :-1], ids[:, 1:]], axis=2).reshape(-1, 2)
+    beam = np.repeat(np.arange(b), k)
+    return _Elements(nodes=all_nodes, connectivity=connectivity, beam=beam, up=model.up[beam], E=model.E[beam],
+                     G=model.G[beam], A=model.A[beam], Iy=model.Iy[beam], Iz=model.Iz[beam], J=model.J[beam],
+                     first=np.arange(b) * k, last=np.arange(b) * k + k - 1, n_original=n)
+
+
+def _local_axes(x_axis: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(m,3,3) rotation rows [x, y, z] with z the up vector made perpendicular to x."""
+    z = up - np.einsum("mi,mi->m", up, x_axis)[:, None] * x_axis
+    norm = np.linalg.norm(z, axis=1)
+    bad = norm < 1e-6
+    if np.any(bad):
+        # up parallel to the beam: take global z, or global y for vertical beams
+        fallback = np.where(np.abs(x_axis[bad, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[0.0, 1.0, 0.0]])
+        z[bad] = fallback - np.einsum("mi,mi->m", fallback, x_axis[bad])[:, None] * x_axis[bad]
+        norm[bad] = np.linalg.norm(z[bad], axis=1)
+    z /= norm[:, None]
+    y = np.cross(z, x_axis)
+    return np.stack([x_axis, y, z], axis=1)
+
+
+def _local_stiffness(L: np.ndarray, el: _Elements) -> np.ndarray:
+    """(m,12,12) Euler-Bernoulli stiffness in local axes, DOFs [u v w rx ry rz] x 2."""
+    m = len(L)
+    K = np.zeros((m, 12, 12))
+    EA = el.E * el.A / L
+    GJ = el.G * el.J / L
+    K[:, 0, 0] = K[:, 6, 6] = EA
+    K[:, 0, 6] = K[:, 6, 0] = -EA
+    K[:, 3, 3] = K[:, 9, 9] = GJ
+    K[:, 3, 9] = K[:, 9, 3] = -GJ
+    for I, (v, r, sign) in ((el.Iz, (1, 5, 1.0)), (el.Iy, (2, 4, -1.0))):
+        a = 12 * el.E * I / L**3
+        b = 6 * el.E * I / L**2 * sign
+        c = 4 * el.E * I / L
+        d = 2 * el.E * I / L
+        vi, ri, vj, rj = v, r, v + 6, r + 6
+        K[:, vi, vi] = K[:, vj, vj] = a
+        K[:, vi, vj] = K[:, vj, vi] = -a
+        K[:, vi, ri] = K[:, ri, vi] = K[:, vi, rj] = K[:, rj, vi] = b
+        K[:, vj, ri] = K[:, ri, vj] = K[:, vj, rj] = K[:, rj, vj] = -b
+        K[:, ri, ri] = K[:, rj, rj] = c
+        K[:, ri, rj] = K[:, rj, ri] = d
+    return K
+
+
+def _geometric_stiffness(L: np.ndarray, N: np.ndarray, el: _Elements) -> np.ndarray:
+    """(m,12,12) consistent geometric stiffness of an axial force N (tension +), local axes."""
+    m = len(L)
+    K = np.zeros((m, 12, 12))
+    f = N / (30 * L)
+    for v, r, sign in ((1, 5, 1.0), (2, 4, -1.0)):
+        vi, ri, vj, rj = v, r, v + 6, r + 6
+        K[:, vi, vi] = K[:, vj, vj] = 36 * f
+        K[:, vi, vj] = K[:, vj, vi] = -36 * f
+        b = 3 * L * f * sign
+        K[:, vi, ri] = K[:, ri, vi] = K[:, vi, rj] = K[:, rj, vi] = b
+        K[:, vj, ri] = K[:, ri, vj] = K[:, vj, rj] = K[:, rj, vj] = -b
+        K[:, ri, ri] = K[:, rj, rj] = 4 * L**2 * f
+        K[:, ri, rj] = K[:, rj, ri] = -L**2 * f
+    polar = (el.Iy + el.Iz) / el.A
+    K[:, 3, 3] = K[:, 9, 9] = N * polar / L
+    K[:, 3, 9] = K[:, 9, 3] = -N * polar / L
+    return K
+
+
+def _transformation(R: np.ndarray) -> np.ndarray:
+    m = len(R)
+    T = np.zeros((m, 12, 12))
+    for block in range(4):
+        T[:, 3 * block:3 * block + 3, 3 * block:3 * block + 3] = R
+    return T
+
+
+def _dofs(connectivity: np.ndarray) -> np.ndarray:
+    return (6 * connectivity[:, :, None] + np.arange(6)).reshape(len(connectivity), 12)
+
+
+def _assemble(K_elements: np.ndarray, dofs: np.ndarray, n_dofs: int) -> sp.csc_matrix:
+    rows = np.repeat(dofs, 12, axis=1).ravel()
+    cols = np.tile(dofs, (1, 12)).ravel()
+    return sp.csc_matrix((K_elements.ravel(), (rows, cols)), shape=(n_dofs, n_dofs))
+
+
+def _geometry(el: _Elements, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    d = nodes[el.connectivity[:, 1]] - nodes[el.connectivity[:, 0]]
+    L = np.linalg.norm(d, axis=1)
+    return L, _local_axes(d / L[:, None], el.up)
+
+
+# ----------------------------------------------------------------------------- supports, solving
+
+def _restrained(supports: Supports, n_original: int, n_all: int) -> np.ndarray:
+    if len(supports.nodes) and (supports.nodes.max() >= n_original or supports.nodes.min() < 0):
+        raise InputError(f"frame: a support node is out of range 0..{n_original - 1}")
+    mask = np.zeros((n_all, 6), dtype=bool)
+    mask[:n_original] = supports.dof_mask(n_original)
+    return mask.ravel()
+
+
+def _check_rigid_modes(nodes: np.ndarray, restrained: np.ndarray) -> None:
+    from .shell import count_free_rigid_modes
+
+    free_modes = count_free_rigid_modes(nodes, restrained)
+    if free_modes:
+        raise MechanismError(f"the frame is a mechanism: its supports leave {free_modes} rigid-body mode(s) free",
+                             n_modes=free_modes, hint="support more nodes or restrain more directions")
+
+
+def _factor(K_free: sp.csc_matrix):
+    try:
+        lu = spla.splu(K_free, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    except RuntimeError as exc:
+        raise MechanismError("the frame is a mechanism: its stiffness matrix is singular", n_modes=1,
+                             hint="check for loose beams or nodes held by pinned ends only") from exc
+    diagonal = lu.U.diagonal()
+    scale = np.abs(diagonal).max() if diagonal.size else 1.0
+    tiny = np.abs(diagonal) <= 1e-12 * scale
+    if np.any(tiny):
+        raise MechanismError(f"the frame is a mechanism with {int(tiny.sum())} free mode(s) beyond rigid-body motion",
+                             n_modes=int(tiny.sum()), hint="check for loose beams or unbraced nodes")
+    return lu
+
+
+def _resultant(points: np.ndarray, forces: np.ndarray) -> np.ndarray:
+    return np.concatenate([forces[:, :3].sum(axis=0), (np.cross(points, forces[:, :3]) + forces[:, 3:]).sum(axis=0)])
+
+
+def _equilibrium_error(points: np.ndarray, loads: np.ndarray, reactions: np.ndarray) -> float:
+    size = max(float(np.ptp(points, axis=0).max()), 1e-300)
+    total = _resultant(points, loads)
+    balance = total + _resultant(points, reactions)
+    scale = np.linalg.norm(total[:3]) + np.linalg.norm(total[3:]) / size
+    return float((np.linalg.norm(balance[:3]) + np.linalg.norm(balance[3:]) / size) / max(scale, 1e-300))
+
+
+def _check_loads(loads: np.ndarray, n: int) -> np.ndarray:
+    loads = np.asarray(loads, dtype=float)
+    if loads.shape != (n, 6) or not np.all(np.isfinite(loads)):
+        raise InputError(f"frame: loads must be a finite ({n}, 6) array, got {loads.shape}")
+    return loads
+
+
+# ----------------------------------------------------------------------------- linear analyses
+
+@dataclass
+class _Linear:
+    el: _Elements
+    L: np.ndarray
+    R: np.ndarray
+    T: np.ndarray
+    K_local: np.ndarray
+    K: sp.csc_matrix
+    restrained: np.ndarray
+    free: np.ndarray
+    lu: object
+    u: np.ndarray
+    F: np.ndarray
+    local_forces: np.ndarray
+
+
+def _solve_linear(model: FrameModel, supports: Supports, loads: np.ndarray) -> _Linear:
+    el = _elements(model)
+    n_all = len(el.nodes)
+    loads = _check_loads(loads, model.nodes.shape[0])
+    F = np.zeros(6 * n_all)
+    F[:6 * el.n_original] = loads.ravel()
+    restrained = _restrained(supports, el.n_original, n_all)
+    _check_rigid_modes(el.nodes, restrained)
+    L, R = _geometry(el, el.nodes)
+    T = _transformation(R)
+    K_local = _local_stiffness(L, el)
+    dofs = _dofs(el.connectivity)
+    K = _assemble(np.einsum("mki,mkl,mlj->mij", T, K_local, T), dofs, 6 * n_all)
+    free = np.flatnonzero(~restrained)
+    lu = _factor(K[free][:, free].tocsc())
+    u = np.zeros(6 * n_all)
+    u[free] = lu.solve(F[free])
+    local_forces = np.einsum("mij,mjk,mk->mi", K_local, T, u[dofs])
+    return _Linear(el=el, L=L, R=R, T=T, K_local=K_local, K=K, restrained=restrained, free=free, lu=lu, u=u, F=F,
+                   local_forces=local_forces)
+
+
+def _section_forces(el: _Elements, local_forces: np.ndarray) -> np.ndarray:
+    out = np.zeros((len(el.first), 2, 6))
+    out[:, 0] = -local_forces[el.first, :6]
+    out[:, 1] = local_forces[el.last, 6:]
+    return out
+
+
+def linear_static(model: FrameModel, supports: Supports, loads: np.ndarray) -> LinearResult:
+    """Linear static analysis under nodal loads (n,6) on the original nodes."""
+    state = _solve_linear(model, supports, loads)
+    n = state.el.n_original
+    reactions_all = (state.K @ state.u - state.F).reshape(-1, 6)
+    reactions_all[~state.restrained.reshape(-1, 6)] = 0.0
+    displacements = state.u.reshape(-1, 6)[:n]
+    reactions = reactions_all[:n]
+    return LinearResult(displacements=displacements, reactions=reactions,
+                        beam_end_forces=_section_forces(state.el, state.local_forces),
+                        equilibrium_error=_equilibrium_error(model.nodes, np.asarray(loads, float), reactions))
+
+
+def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_modes: int = 6) -> BucklingResult:
+    """Linear buckling: (K + lambda K_G) phi = 0 with K_G from the linear axial forces.
+
+    Solved as the largest eigenvalues mu = 1/lambda of -K_G phi = mu K phi (K factored once);
+    only positive factors are returned (none when nothing is in compression)."""
+    state = _solve_linear(model, supports, loads)
+    el = state.el
+    N = state.local_forces[:, 6]
+    K_G = _assemble(np.einsum("mki,mkl,mlj->mij", state.T, _geometric_stiffness(state.L, N, el), state.T),
+                    _dofs(el.connectivity), len(state.u))
+    free = state.free
+    KG_free = (-K_G[free][:, free]).tocsc()
+    size = len(free)
+    k = int(min(max(n_modes, 1), size - 2))
+    operator = spla.LinearOperator((size, size), matvec=state.lu.solve, dtype=float)
+    if np.abs(KG_free).max() == 0:
+        return BucklingResult(factors=np.zeros(0), modes=np.zeros((0, el.n_original, 6)))
+    try:
+        values, vectors = spla.eigsh(KG_free, k=k, M=state.K[free][:, free].tocsc(), Minv=operator, which="LA",
+                                     tol=1e-10, maxiter=max(2000, 20 * size))
+    except spla.ArpackNoConvergence as exc:
+        values, vectors = exc.eigenvalues, exc.eigenvectors
+        if len(values) == 0:
+            raise ConvergenceError("linear buckling: the eigenvalue solver did not converge") from exc
+    positive = values > 1e-12 * max(np.abs(values).max(), 1e-300)
+    factors = 1.0 / values[positive]
+    vectors = vectors[:, positive]
+    order = np.argsort(factors)
+    factors, vectors = factors[order], vectors[:, order]
+    modes = np.zeros((len(factors), len(state.u)))
+    modes[:, free] = vectors.T
+    modes = modes.reshape(len(factors), -1, 6)[:, :el.n_original]
+    peak = np.linalg.norm(modes[:, :, :3], axis=2).max(axis=1)
+    modes = modes / np.where(peak > 0, peak, 1.0)[:, None, None]
+    return BucklingResult(factors=factors, modes=modes)
+
+
+# ----------------------------------------------------------------------------- co-rotational
+
+def _rotation_matrices(vectors: np.ndarray) -> np.ndarray:
+    """Rodrigues: (k,3) rotation vectors to (k,3,3) matrices."""
+    angle = np.linalg.norm(vectors, axis=1)
+    safe = np.where(angle > 1e-12, angle, 1.0)
+    axis = vectors / safe[:, None]
+    K = np.zeros((len(vectors), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -axis[:, 2], axis[:, 1], -axis[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = axis[:, 2], -axis[:, 1], axis[:, 0]
+    s, c = np.sin(angle)[:, None, None], (1 - np.cos(angle))[:, None, None]
+    R = np.eye(3)[None] + s * K + c * (K @ K)
+    small = angle <= 1e-12
+    if np.any(small):
+        v = vectors[small]
+        W = np.zeros((len(v), 3, 3))
+        W[:, 0, 1], W[:, 0, 2], W[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+        W[:, 1, 0], W[:, 2, 0], W[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+        R[small] = np.eye(3)[None] + W
+    return R
+
+
+def _rotation_vectors(R: np.ndarray) -> np.ndarray:
+    """Inverse Rodrigues (log map) of (k,3,3) rotations with angles below pi."""
+    cosine = np.clip((np.einsum("kii->k", R) - 1) / 2, -1.0, 1.0)
+    angle = np.arccos(cosine)
+    w = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1)
+    sine = np.sin(angle)
+    factor = np.where(sine > 1e-9, angle / (2 * np.where(sine > 1e-9, sine, 1.0)), 0.5)
+    return w * factor[:, None]
+
+
+class _Corotational:
+    """State and kernels of the co-rotational analysis."""
+
+    def __init__(self, model: FrameModel, supports: Supports):
+        self.el = _elements(model)
+        self.n_all = len(self.el.nodes)
+        self.X = self.el.nodes.copy()
+        self.L0, self.R0 = _geometry(self.el, self.X)
+        self.dofs = _dofs(self.el.connectivity)
+        self.restrained = _restrained(supports, self.el.n_original, self.n_all)
+        _check_rigid_modes(self.el.nodes, self.restrained)
+        self.free = np.flatnonzero(~self.restrained)
+
+    def element_state(self, x: np.ndarray, triads: np.ndarray):
+        """Current frames (m,3,3), lengths, local deformations (m,12) and local forces (m,12)."""
+        el = self.el
+        a, b = el.connectivity[:, 0], el.connectivity[:, 1]
+        chord = x[b] - x[a]
+        length = np.linalg.norm(chord, axis=1)
+        e1 = chord / length[:, None]
+        # nodal triads carry the initial element frame; their mean y orients the current frame
+        Ra = triads[a] @ np.transpose(self.R0, (0, 2, 1))
+        Rb = triads[b] @ np.transpose(self.R0, (0, 2, 1))
+        up = 0.5 * (Ra[:, :, 2] + Rb[:, :, 2])
+        R = _local_axes(e1, up)
+        # local end rotations: nodal triad relative to the element frame
+        theta_a = _rotation_vectors(np.einsum("mij,mjk->mik", R, Ra))
+        theta_b = _rotation_vectors(np.einsum("mij,mjk->mik", R, Rb))
+        d = np.zeros((len(length), 12))
+        d[:, 6] = length - self.L0
+        d[:, 3:6] = theta_a
+        d[:, 9:12] = theta_b
+        K_local = _local_stiffness(self.L0, el)
+        f_local = np.einsum("mij,mj->mi", K_local, d)
+        return R, length, K_local, f_local
+
+    def internal_forces(self, x: np.ndarray, triads: np.ndarray) -> tuple[np.ndarray, object]:
+        R, length, K_local, f_local = self.element_state(x, triads)
+        T = _transformation(R)
+        f_global = np.einsum("mki,mk->mi", T, f_local)
+        out = np.zeros(6 * self.n_all)
+        np.add.at(out, self.dofs.ravel(), f_global.ravel())
+        return out, (R, length, K_local, f_local, T)
+
+    def tangent(self, cache) -> sp.csc_matrix:
+        R, length, K_local, f_local, T = cache
+        N = f_local[:, 6]
+        K_elements = K_local + _geometric_stiffness(length, N, self.el)
+        # the axial force also stiffens (tension) or softens the transverse chord rotation
+        return _assemble(np.einsum("mki,mkl,mlj->mij", T, K_elements, T), self.dofs, 6 * self.n_all)
+
+
+def _update(x: np.ndarray, triads: np.ndarray, du: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    step = du.reshape(-1, 6)
+    return x + step[:, :3], _rotation_matrices(step[:, 3:]) @ triads
+
+
+def _negative_pivots(K_free: sp.csc_matrix) -> tuple[object, int]:
+    lu = spla.splu(K_free, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    diagonal = lu.U.diagonal()
+    return lu, int(np.sum(diagonal < 0))
+
+
+def nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *, control: tuple[int, int],
+                     max_load_factor: float = 10.0, max_steps: int = 80, initial_loads: np.ndarray | None = None,
+                     tolerance: float = 1e-6, steps_past_limit: int = 3) -> NonlinearResult:
+    """Geometrically non-linear static analysis with arc-length control.
+
+    loads: reference load (n,6) scaled by the load factor; initial_loads: a dead load held
+    constant (applied first, in load steps); control: (node, dof 0..5) whose displacement the
+    path reports. The path stops a few steps past the first limit point, at
+    ``max_load_factor`` or after ``max_steps``.
+    """
+    n = model.nodes.shape[0]
+    loads = _check_loads(loads, n)
+    node, dof = control
+    if not (0 <= node < n and 0 <= dof < 6):
+        raise InputError(f"frame: control ({node}, {dof}) must be a node 0..{n - 1} and a DOF 0..5")
+    cr = _Corotational(model, supports)
+    free = cr.free
+    F_ref = np.zeros(6 * cr.n_all)
+    F_ref[:6 * n] = loads.ravel()
+    F_dead = np.zeros(6 * cr.n_all)
+    if initial_loads is not None:
+        F_dead[:6 * n] = _check_loads(initial_loads, n).ravel()
+    scale = max(np.linalg.norm(F_ref[free]), np.linalg.norm(F_dead[free]), 1e-300)
+    x = cr.X.copy()
+    triads = np.tile(np.eye(3), (cr.n_all, 1, 1))
+    control_dof = 6 * node + dof
+
+    def residual(x, triads, lam):
+        f_int, cache = cr.internal_forces(x, triads)
+        return F_dead + lam * F_ref - f_int, cache
+
+    def displacement_of(x, triads):
+        if dof < 3:
+            return float(x[node, dof] - cr.X[node, dof])
+        return float(_rotation_vectors(triads[node:node + 1])[0, dof - 3])
+
+    def load_controlled(x, triads, target):
+        for _ in range(40):
+            f_int, cache = cr.internal_forces(x, triads)
+            r = target - f_int
+            if np.linalg.norm(r[free]) < tolerance * scale:
+                return x, triads
+            lu = _factor_or_none(cr.tangent(cache)[free][:, free].tocsc())
+            if lu is None:
+                return None
+            du = np.zeros(6 * cr.n_all)
+            du[free] = lu.solve(r[free])
+            x, triads = _update(x, triads, du)
+        return None
+
+    # dead load first (load control)
+    if initial_loads is not None and np.any(F_dead):
+        for fraction in np.linspace(0.25, 1.0, 4):
+            state = load_controlled(x, triads, fraction * F_dead)
+            if state is None:
+                raise ConvergenceError("the dead load alone exceeds the structure's capacity (no equilibrium)")
+            x, triads = state
+    # first step size from a linear prediction reaching about max_load_factor / 20
+    _, cache = residual(x, triads, 0.0)
+    lu = _factor(cr.tangent(cache)[free][:, free].tocsc())
+    u_ref = np.zeros(6 * cr.n_all)
+    u_ref[free] = lu.solve(F_ref[free])
+    arc = np.linalg.norm(u_ref[free]) * min(max_load_factor, 10.0) / 20.0
+    lam = 0.0
+    path = [[0.0, displacement_of(x, triads)]]
+    pivots = [0]
+    factors = [0.0]
+    previous = None
+    limit = None
+    limit_state = None
+    past = 0
+    converged_all = True
+    for _step in range(max_steps):
+        accepted = False
+        for _attempt in range(8):
+            x_try, t_try, lam_try = x.copy(), triads.copy(), lam
+            _, cache = residual(x_try, t_try, lam_try)
+            K_free = cr.tangent(cache)[free][:, free].tocsc()
+            try:
+                lu, negatives = _negative_pivots(K_free)
+            except RuntimeError:
+                arc *= 0.5
+                continue
+            du_f = np.zeros(6 * cr.n_all)
+            du_f[free] = lu.solve(F_ref[free])
+            d_lam = arc / max(np.linalg.norm(du_f[free]), 1e-300)
+            if previous is not None and np.dot(previous[free], du_f[free]) < 0:
+                d_lam = -d_lam
+            elif previous is None and negatives > 0:
+                d_lam = -d_lam
+            total = d_lam * du_f
+            x_try, t_try = _update(x_try, t_try, total)
+            lam_try += d_lam
+            ok = False
+            for _iteration in range(25):
+                r, cache = residual(x_try, t_try, lam_try)
+                if np.linalg.norm(r[free]) < tolerance * scale:
+                    ok = True
+                    break
+                lu_i = _factor_or_none(cr.tangent(cache)[free][:, free].tocsc())
+                if lu_i is None:
+                    break
+                dr = np.zeros(6 * cr.n_all)
+                df = np.zeros(6 * cr.n_all)
+                dr[free] = lu_i.solve(r[free])
+                df[free] = lu_i.solve(F_ref[free])
+                # cylindrical constraint |total + dr + dl df| = arc
+                a = df[free] @ df[free]
+                b = 2 * df[free] @ (total[free] + dr[free])
+                c = (total[free] + dr[free]) @ (total[free] + dr[free]) - arc**2
+                disc = b * b - 4 * a * c
+                if disc < 0:
+                    dl = -b / (2 * a)
+                else:
+                    roots = ((-b + np.sqrt(disc)) / (2 * a), (-b - np.sqrt(disc)) / (2 * a))
+                    dl = max(roots, key=lambda root: (total[free] + dr[free] + root * df[free]) @ total[free])
+                correction = dr + dl * df
+                x_try, t_try = _update(x_try, t_try, correction)
+                total = total + correction
+                lam_try += dl
+            if ok:
+                accepted = True
+                break
+            arc *= 0.5
+        if not accepted:
+            converged_all = False
+            break
+        if lam_try > max_load_factor >= lam and limit is None:
+            # land exactly on the largest load factor asked for
+            state = load_controlled(x, triads, F_dead + max_load_factor * F_ref)
+            if state is not None:
+                x_try, t_try = state
+                lam_try = max_load_factor
+        previous = total
+        if limit is None and lam_try < lam and lam > 0:
+            limit = lam
+            limit_state = (x.copy(), triads.copy())
+        x, triads, lam = x_try, t_try, lam_try
+        path.append([lam, displacement_of(x, triads)])
+        pivots.append(negatives)
+        factors.append(lam)
+        if limit is not None:
+            past += 1
+            if past >= steps_past_limit:
+                break
+        if lam >= max_load_factor:
+            break
+        if _iteration < 4:
+            arc *= 1.5
+        elif _iteration > 10:
+            arc *= 0.7
+    if limit_state is None:
+        limit_state = (x, triads)
+    lx, lt = limit_state
+    displacements = np.zeros((cr.n_all, 6))
+    displacements[:, :3] = lx - cr.X
+    displacements[:, 3:] = _rotation_vectors(lt)
+    return NonlinearResult(path=np.array(path), limit_load_factor=limit, negative_pivots=np.array(pivots),
+                           displacements=displacements[:n], converged=converged_all, load_factors=np.array(factors))
+
+
+def _factor_or_none(K_free: sp.csc_matrix):
+    try:
+        return spla.splu(K_free, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    except RuntimeError:
+        return None
+
+
+# ----------------------------------------------------------------------------- JSON interface
+
+def _require(data: dict, key: str, where: str = "frame model"):
+    if key not in data:
+        raise InputError(f"{where}: missing key '{key}'", hint="see docs/formats.md")
+    return data[key]
+
+
+def _node_table(table, name: str, n: int) -> tuple[np.ndarray, np.ndarray]:
+    if not isinstance(table, dict):
+        raise InputError(f"frame model: '{name}' must be an object keyed by node index")
+    nodes, values = [], []
+    for key, value in table.items():
+        try:
+            node = int(key)
+        except ValueError:
+            raise InputError(f"frame model: '{name}' key {key!r} is not a node index") from None
+        if not 0 <= node < n:
+            raise InputError(f"frame model: '{name}' node {node} is out of range 0..{n - 1}")
+        if not isinstance(value, (list, tuple)) or len(value) != 6:
+            raise InputError(f"frame model: '{name}' of node {node} must be a list of 6 values")
+        nodes.append(node)
+        values.append(value)
+    return np.array(nodes, dtype=np.int64), np.array(values, dtype=float).reshape(len(nodes), 6)
+
+
+def model_from_json(data: dict) -> tuple[FrameModel, Supports, np.ndarray]:
+    """(FrameModel, Supports, loads (n,6)) from the solver-level JSON object (docs/formats.md)."""
+    try:
+        nodes = np.array(_require(data, "nodes"), dtype=float)
+    except (TypeError, ValueError):
+        raise InputError("frame model: nodes must be [[x, y, z], ...]") from None
+    beams = _require(data, "beams")
+    if not isinstance(beams, list) or not beams:
+        raise InputError("frame model: beams must be a non-empty list")
+    fields = {k: [] for k in ("nodes", "E", "G", "A", "Iy", "Iz", "J", "up")}
+    for i, beam in enumerate(beams):
+        for key in fields:
+            if key == "up" and key not in beam:
+                fields[key].append([0.0, 0.0, 1.0])
+                continue
+            fields[key].append(_require(beam, key, f"frame model: beam {i}"))
+    n = len(nodes)
+    model = FrameModel(nodes=nodes, beams=np.array(fields["nodes"]), E=fields["E"], G=fields["G"], A=fields["A"],
+                       Iy=fields["Iy"], Iz=fields["Iz"], J=fields["J"], up=np.array(fields["up"], dtype=float),
+                       elements_per_beam=int(data.get("elements_per_beam", 1)))
+    support_nodes, flags = _node_table(_require(data, "supports"), "supports", n)
+    supports = Supports(nodes=support_nodes, restraints=flags.astype(bool))
+    load_nodes, forces = _node_table(data.get("loads", {}), "loads", n)
+    loads = np.zeros((n, 6))
+    np.add.at(loads, load_nodes, forces)
+    return model, supports, loads
+
+
+def solve_frame_json(data: dict, *, analysis: str = "linear", modes: int = 6,
+                     control: tuple[int, str] | None = None, max_load_factor: float | None = None) -> dict:
+    """Solve a frame model given as a JSON object; return the result object (docs/formats.md)."""
+    if analysis not in ("linear", "buckling", "nonlinear"):
+        raise InputError(f"frame: analysis must be linear, buckling or nonlinear, got {analysis!r}")
+    model, supports, loads = model_from_json(data)
+    linear = linear_static(model, supports, loads)
+    result = {"displacements": linear.displacements.tolist(),
+              "reactions": {str(int(n)): linear.reactions[n].tolist() for n in supports.nodes},
+              "buckling_factors": [], "path": [], "limit_load_factor": None,
+              "equilibrium_error": linear.equilibrium_error}
+    if analysis == "buckling":
+        result["buckling_factors"] = linear_buckling(model, supports, loads, n_modes=modes).factors.tolist()
+    if analysis == "nonlinear":
+        if control is None:
+            node = int(np.argmax(np.linalg.norm(linear.displacements[:, :3], axis=1)))
+            dof = int(np.argmax(np.abs(linear.displacements[node, :3])))
+        else:
+            node, name = control
+            if name not in DOF_NAMES:
+                raise InputError(f"frame: control DOF must be one of {', '.join(DOF_NAMES)}, got {name!r}")
+            dof = DOF_NAMES.index(name)
+        run = nonlinear_static(model, supports, loads, control=(int(node), dof),
+                               max_load_factor=max_load_factor if max_load_factor is not None else 10.0,
+                               max_steps=200)
+        result["path"] = run.path.tolist()
+        result["limit_load_factor"] = run.limit_load_factor
+        result["displacements"] = run.displacements.tolist()
+    return result

@@ -1,0 +1,204 @@
+"""Frame elements against closed-form and published answers."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from engine.errors import InputError, MechanismError
+from engine.frame import FrameModel, linear_buckling, linear_static, nonlinear_static, solve_frame_json
+from engine.supports import Supports
+
+E, G = 2.0e11, 8.0e10
+A, IY, IZ, J = 1e-3, 2e-6, 1e-6, 3e-6
+FIXED = np.ones(6, bool)
+
+
+def _line(direction, length: float, n: int, up, **properties) -> FrameModel:
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    nodes = np.outer(np.linspace(0.0, length, n + 1), d)
+    beams = np.c_[np.arange(n), np.arange(1, n + 1)]
+    values = dict(E=E, G=G, A=A, Iy=IY, Iz=IZ, J=J)
+    values.update(properties)
+    return FrameModel(nodes=nodes, beams=beams, up=np.asarray(up, float), **values)
+
+
+@pytest.mark.parametrize("direction, up", [((1, 0, 0), (0, 0, 1)), ((0, 1, 0), (1, 0, 0)), ((1, 1, 1), (0, 0, 1))])
+def test_cantilever_tip_under_force_moment_and_torque(direction, up):
+    length, n = 2.0, 6
+    model = _line(direction, length, n, up)
+    supports = Supports(nodes=np.array([0]), restraints=FIXED[None])
+    x = model.nodes[1] - model.nodes[0]
+    x /= np.linalg.norm(x)
+    z = np.asarray(up, float) - np.dot(up, x) * x
+    z /= np.linalg.norm(z)
+    y = np.cross(z, x)
+    P, M, T = 1000.0, 300.0, 200.0
+    loads = np.zeros((n + 1, 6))
+    loads[-1, :3] = P * z                      # bending about local y (Iy)
+    result = linear_static(model, supports, loads)
+    tip = result.displacements[-1]
+    assert tip[:3] @ z == pytest.approx(P * length**3 / (3 * E * IY), rel=1e-9)
+    assert tip[3:] @ y == pytest.approx(-P * length**2 / (2 * E * IY), rel=1e-9)
+    loads[:] = 0
+    loads[-1, 3:] = M * z                      # moment about local z (Iz)
+    tip = linear_static(model, supports, loads).displacements[-1]
+    assert tip[:3] @ y == pytest.approx(M * length**2 / (2 * E * IZ), rel=1e-9)
+    assert tip[3:] @ z == pytest.approx(M * length / (E * IZ), rel=1e-9)
+    loads[:] = 0
+    loads[-1, 3:] = T * x
+    result = linear_static(model, supports, loads)
+    assert result.displacements[-1, 3:] @ x == pytest.approx(T * length / (G * J), rel=1e-9)
+    assert result.beam_end_forces[:, :, 3] == pytest.approx(T)
+    assert result.equilibrium_error < 1e-9
+
+
+def test_section_forces_of_a_cantilever():
+    length, n, P = 2.0, 4, 500.0
+    model = _line((1, 0, 0), length, n, (0, 0, 1))
+    loads = np.zeros((n + 1, 6))
+    loads[-1, 0] = P          # tension
+    loads[-1, 2] = -P         # downward tip load
+    result = linear_static(model, Supports(nodes=np.array([0]), restraints=FIXED[None]), loads)
+    assert np.allclose(result.beam_end_forces[:, :, 0], P)
+    # the hogging moment at the root is P L
+    assert abs(result.beam_end_forces[0, 0, 4]) == pytest.approx(P * length)
+    assert abs(result.beam_end_forces[-1, 1, 4]) < 1e-9 * P * length
+    assert result.reactions[0, 2] == pytest.approx(P)
+
+
+@pytest.mark.parametrize("ends, factor", [
+    (("pinned", "pinned"), 1.0),
+    (("fixed", "free"), 0.25),
+    (("fixed", "pinned"), 2.0457),   # (4.4934 / pi)^2
+    (("fixed", "fixed"), 4.0),
+])
+def test_euler_buckling_of_columns(ends, factor):
+    length, n = 3.0, 16
+    model = _line((0, 0, 1), length, n, (1, 0, 0), Iy=1e-6, Iz=1e-6)
+    flags = {"pinned": np.array([1, 1, 1, 0, 0, 1], bool), "fixed": FIXED,
+             "free": np.zeros(6, bool)}
+    bottom, top = flags[ends[0]], flags[ends[1]].copy()
+    top[2] = False  # the top carries the load
+    supports = Supports.merge([(np.array([0]), bottom), (np.array([n]), top)])
+    loads = np.zeros((n + 1, 6))
+    loads[n, 2] = -1.0
+    result = linear_buckling(model, supports, loads, n_modes=2)
+    assert result.factors[0] == pytest.approx(factor * np.pi**2 * E * 1e-6 / length**2, rel=0.01)
+
+
+def test_cantilever_rolls_into_a_circle():
+    """End moment 2 pi EI / L bends a cantilever into a full circle: the tip returns to the root."""
+    n, length = 32, 1.0
+    model = _line((1, 0, 0), length, n, (0, 0, 1), E=1.0, G=1.0, A=1e4, Iy=1.0, Iz=1.0, J=1.0)
+    loads = np.zeros((n + 1, 6))
+    loads[n, 5] = 2 * np.pi / length
+    run = nonlinear_static(model, Supports(nodes=np.array([0]), restraints=FIXED[None]), loads, control=(n, 5),
+                           max_load_factor=1.0, max_steps=200)
+    assert run.path[-1, 0] == pytest.approx(1.0)
+    tip = model.nodes[n] + run.displacements[n, :3]
+    assert np.linalg.norm(tip) < 0.01 * length
+
+
+def _lee_frame(n: int = 10):
+    column = np.c_[np.zeros(n + 1), np.zeros(n + 1), np.linspace(0, 120.0, n + 1)]
+    beam = np.c_[np.linspace(0, 120.0, n + 1)[1:], np.zeros(n), np.full(n, 120.0)]
+    nodes = np.vstack([column, beam])
+    beams = np.r_[np.c_[np.arange(n), np.arange(1, n + 1)], np.c_[np.r_[n, np.arange(n + 1, 2 * n)], np.arange(n + 1, 2 * n + 1)]]
+    model = FrameModel(nodes=nodes, beams=beams, E=720.0, G=720.0 / 2.6, A=6.0, Iy=2.0, Iz=2.0, J=4.0,
+                       up=np.array([0.0, 1.0, 0.0]))
+    pin = np.array([1, 1, 1, 1, 0, 1], bool)
+    supports = Supports.merge([(np.array([0]), pin), (np.array([2 * n]), pin)])
+    loaded = int(np.argmin(np.abs(nodes[:, 0] - 24.0) + np.abs(nodes[:, 2] - 120.0)))
+    return model, supports, loaded
+
+
+def test_lee_frame_limit_load():
+    """Lee's frame (L 120, EI 1440, load 24 from the knee): P_max L^2 / EI = 18.5 (Schweizerhof &
+    Wriggers 1986; Battini 2002 finds 18.55)."""
+    model, supports, loaded = _lee_frame()
+    loads = np.zeros((len(model.nodes), 6))
+    loads[loaded, 2] = -1.0
+    run = nonlinear_static(model, supports, loads, control=(loaded, 2), max_load_factor=40, max_steps=150)
+    assert run.limit_load_factor is not None
+    normalised = run.limit_load_factor * 120.0**2 / (720.0 * 2.0)
+    assert normalised == pytest.approx(18.5, rel=0.02)
+    assert run.path[:, 0].max() == pytest.approx(run.limit_load_factor)
+    assert run.path[-1, 0] < run.limit_load_factor, "the path goes past the limit point"
+
+
+def test_imperfect_column_approaches_the_euler_load():
+    length, n = 3.0, 12
+    z = np.linspace(0, length, n + 1)
+    model = FrameModel(nodes=np.c_[0.001 * length * np.sin(np.pi * z / length), np.zeros(n + 1), z],
+                       beams=np.c_[np.arange(n), np.arange(1, n + 1)], E=E, G=G, A=A, Iy=1e-6, Iz=1e-6, J=J,
+                       up=np.array([1.0, 0, 0]))
+    supports = Supports.merge([(np.array([0]), np.array([1, 1, 1, 0, 0, 1], bool)),
+                               (np.array([n]), np.array([1, 1, 0, 0, 0, 0], bool))])
+    loads = np.zeros((n + 1, 6))
+    loads[n, 2] = -1.0
+    euler = np.pi**2 * E * 1e-6 / length**2
+    linear = linear_buckling(model, supports, loads, n_modes=1).factors[0]
+    run = nonlinear_static(model, supports, loads, control=(n // 2, 0), max_load_factor=1.05 * euler, max_steps=80)
+    lateral = np.abs(run.path[:, 1])
+    # the lateral deflection grows without bound as the load approaches the buckling load
+    near = run.path[:, 0] > 0.97 * linear
+    assert near.any() and lateral[near].max() > 0.05 * length
+    assert linear == pytest.approx(euler, rel=0.01)
+
+
+def test_mechanisms_are_reported():
+    model = _line((1, 0, 0), 2.0, 4, (0, 0, 1))
+    loads = np.zeros((5, 6))
+    loads[-1, 2] = -1.0
+    with pytest.raises(MechanismError) as info:
+        linear_static(model, Supports(nodes=np.array([0]), restraints=np.array([[1, 1, 1, 0, 0, 0]], bool)), loads)
+    assert info.value.n_modes == 3
+    with pytest.raises(MechanismError) as info:
+        linear_static(model, Supports(nodes=np.zeros(0, int), restraints=np.zeros((0, 6), bool)), loads)
+    assert info.value.n_modes == 6
+
+
+def _json_model() -> dict:
+    n = 8
+    nodes = np.c_[np.linspace(0, 4.0, n + 1), np.zeros(n + 1), 0.5 * np.sin(np.linspace(0, np.pi, n + 1))]
+    beams = [{"nodes": [i, i + 1], "E": E, "G": G, "A": A, "Iy": IY, "Iz": IZ, "J": J, "up": [0, 1, 0]} for i in range(n)]
+    return {"nodes": nodes.tolist(), "beams": beams, "elements_per_beam": 2,
+            "supports": {"0": [1, 1, 1, 1, 0, 1], str(n): [1, 1, 1, 1, 0, 1]},
+            "loads": {str(n // 2): [0, 0, -1000.0, 0, 0, 0]}}
+
+
+@pytest.mark.parametrize("analysis", ["linear", "buckling", "nonlinear"])
+def test_json_interface(tmp_path, analysis):
+    from workflow.cli import main
+
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(_json_model()))
+    out = tmp_path / "result.json"
+    args = ["frame", str(path), "--analysis", analysis, "--out", str(out), "--modes", "3"]
+    if analysis == "nonlinear":
+        args += ["--control", "4", "uz", "--max-load-factor", "2000"]
+    assert main(args) == 0
+    result = json.loads(out.read_text())
+    assert len(result["displacements"]) == 9
+    assert sum(r[2] for r in result["reactions"].values()) == pytest.approx(1000.0, rel=1e-9)
+    if analysis == "buckling":
+        assert len(result["buckling_factors"]) == 3 and result["buckling_factors"][0] > 0
+    if analysis == "nonlinear":
+        assert result["path"][0] == [0.0, 0.0] and len(result["path"]) > 3
+        factors = [p[0] for p in result["path"]]
+        if result["limit_load_factor"] is not None:
+            assert result["limit_load_factor"] == pytest.approx(max(factors))
+        else:
+            assert max(factors) == pytest.approx(2000.0)
+
+
+def test_json_errors_name_the_problem():
+    model = _json_model()
+    del model["beams"][0]["Iy"]
+    with pytest.raises(InputError, match="Iy"):
+        solve_frame_json(model)
+    with pytest.raises(InputError, match="analysis"):
+        solve_frame_json(_json_model(), analysis="dynamic")
