@@ -130,8 +130,7 @@ def run(ctx):
         value = worst.limit_load_factor if worst.limit_load_factor is not None else config.max_load_factor
         verdicts.append({"check": f"worst non-linear limit factor lambda_NL ({worst.name})", "value": float(value),
                          "limit": config.required_load_factor, "pass": bool(value >= config.required_load_factor)})
-    axial = 0.5 * (result.uls_beam_end_forces[:, 0, 0] - result.uls_beam_end_forces[:, 1, 0]) \
-        if result.uls_beam_end_forces.ndim == 3 else np.zeros(len(lengths))
+    axial = np.asarray(checks.axial_force)
     figures = {
         "nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
         "supported_nodes": int(len(supports.nodes)), "total_beam_length_m": float(lengths.sum()),
@@ -185,7 +184,7 @@ def _draw(ctx, polymesh, result, utilisation, axial, project: Project) -> None:
     curves = {c.name: np.asarray(c.path) for c in ([result.perfect] if result.perfect else []) + list(result.imperfect)}
     if curves:
         worst = result.worst.name if result.worst else None
-        plot_response(curves, ctx.folder / "response.png", worst=worst,
+        plot_response(curves, ctx.folder / "response.png", worst=worst, required=project.analysis.required_load_factor,
                       title=f"{name}: load factor against control-node deflection")
 
 

@@ -1,0 +1,123 @@
+"""Pictures of the beam analysis: utilisation, axial forces, buckling modes, response diagrams."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ._common import pyplot, save_png
+
+__all__ = ["plot_utilisation", "plot_axial_forces", "plot_buckling_modes", "plot_response"]
+
+
+def _segments(nodes: np.ndarray, beams: np.ndarray) -> np.ndarray:
+    return np.stack([nodes[beams[:, 0], :2], nodes[beams[:, 1], :2]], axis=1)
+
+
+def _frame(ax, nodes: np.ndarray) -> None:
+    lo, hi = nodes[:, :2].min(axis=0), nodes[:, :2].max(axis=0)
+    pad = 0.04 * (hi - lo).max()
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
+
+
+def plot_utilisation(nodes: np.ndarray, beams: np.ndarray, utilisation: np.ndarray, path: Path, *,
+                     title: str = "") -> Path:
+    """Plan with beams coloured by utilisation (0 to 1, above 1 in dark red), the largest labelled."""
+    plt = pyplot()
+    from matplotlib.collections import LineCollection
+
+    fig, ax = plt.subplots(figsize=(9, 8))
+    utilisation = np.asarray(utilisation, dtype=float)
+    cmap = plt.get_cmap("RdYlGn_r")
+    cmap.set_over("#5b0000")
+    lines = LineCollection(_segments(nodes, beams), cmap=cmap, norm=plt.Normalize(0.0, 1.0),
+                           linewidths=1.5 + 2.5 * np.clip(utilisation, 0, 1.2))
+    lines.set_array(utilisation)
+    ax.add_collection(lines)
+    fig.colorbar(lines, ax=ax, shrink=0.8, extend="max", label="utilisation")
+    worst = int(np.argmax(utilisation))
+    middle = nodes[beams[worst]].mean(axis=0)
+    ax.annotate(f"B{worst + 1:04d}: {utilisation[worst]:.2f}", middle[:2], xytext=(10, 10), textcoords="offset points",
+                fontsize=9, arrowprops={"arrowstyle": "->"})
+    _frame(ax, nodes)
+    ax.set_title(title or "member utilisation")
+    fig.tight_layout()
+    return save_png(fig, path)
+
+
+def plot_axial_forces(nodes: np.ndarray, beams: np.ndarray, axial_forces: np.ndarray, path: Path, *,
+                      title: str = "") -> Path:
+    """Plan with beams coloured by axial force (compression red, tension blue), width ~ |N|."""
+    plt = pyplot()
+    from matplotlib.collections import LineCollection
+
+    axial_kN = np.asarray(axial_forces, dtype=float) / 1e3
+    peak = max(float(np.abs(axial_kN).max()), 1e-9)
+    fig, ax = plt.subplots(figsize=(9, 8))
+    lines = LineCollection(_segments(nodes, beams), cmap="coolwarm_r", norm=plt.Normalize(-peak, peak),
+                           linewidths=0.8 + 4.0 * np.abs(axial_kN) / peak)
+    lines.set_array(axial_kN)
+    ax.add_collection(lines)
+    fig.colorbar(lines, ax=ax, shrink=0.8, label="axial force N (kN): compression < 0 < tension")
+    _frame(ax, nodes)
+    ax.set_title(title or "axial forces")
+    fig.tight_layout()
+    return save_png(fig, path)
+
+
+def plot_buckling_modes(nodes: np.ndarray, beams: np.ndarray, modes: np.ndarray, factors: np.ndarray, path: Path, *,
+                        title: str = "") -> Path:
+    """One axonometric panel per mode: the mode (scaled to 8 % of the span) over the undeformed grid."""
+    plt = pyplot()
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+    count = len(modes)
+    fig = plt.figure(figsize=(4.6 * max(count, 1), 4.6))
+    span = float(np.ptp(nodes, axis=0).max())
+    for k in range(count):
+        ax = fig.add_subplot(1, count, k + 1, projection="3d")
+        shape = modes[k][:, :3]
+        peak = max(float(np.linalg.norm(shape, axis=1).max()), 1e-300)
+        moved = nodes + shape * (0.08 * span / peak)
+        ax.add_collection3d(Line3DCollection(np.stack([nodes[beams[:, 0]], nodes[beams[:, 1]]], axis=1),
+                                             colors=(0.6, 0.6, 0.6, 0.5), linewidths=0.5))
+        ax.add_collection3d(Line3DCollection(np.stack([moved[beams[:, 0]], moved[beams[:, 1]]], axis=1),
+                                             colors="#c0392b", linewidths=1.0))
+        both = np.vstack([nodes, moved])
+        lo, extent = both.min(axis=0), np.ptp(both, axis=0)
+        ax.set_xlim(lo[0], lo[0] + extent[0]), ax.set_ylim(lo[1], lo[1] + extent[1])
+        ax.set_zlim(lo[2], lo[2] + max(extent[2], 1e-6))
+        ax.set_box_aspect((extent[0], extent[1], max(extent[2], 0.05 * extent.max())))
+        ax.set_axis_off()
+        ax.set_title(f"mode {k + 1}: lambda = {factors[k]:.3g}")
+    fig.suptitle(title or "linear buckling modes")
+    fig.tight_layout()
+    return save_png(fig, path)
+
+
+def plot_response(curves: dict[str, np.ndarray], path: Path, *, worst: str | None = None,
+                  required: float | None = None, title: str = "") -> Path:
+    """Load factor against control-node displacement (mm) per curve; the worst bold; the required
+    load factor as a dashed line."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(9, 6))
+    for name, curve in curves.items():
+        curve = np.asarray(curve, dtype=float)
+        if len(curve) == 0:
+            continue
+        bold = name == worst
+        ax.plot(np.abs(1000 * curve[:, 1]), curve[:, 0], label=name, linewidth=2.6 if bold else 1.1,
+                color="#c0392b" if bold else None, zorder=3 if bold else 2)
+    if required is not None:
+        ax.axhline(required, color="k", linestyle="--", linewidth=1.0, label=f"required factor {required:g}")
+    ax.set_xlabel("control-node displacement (mm)")
+    ax.set_ylabel("load factor")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, ncol=2)
+    ax.set_title(title or "load-deflection response")
+    fig.tight_layout()
+    return save_png(fig, path)
