@@ -8,6 +8,7 @@ gridshell.step, gridshell.3dm and fabrication.json (counts and checks). Lengths 
 
 from __future__ import annotations
 
+import importlib
 import json
 from pathlib import Path
 
@@ -60,23 +61,29 @@ def run(ctx):
     BeamSettings, cut_list, write_cut_list, write_beams_step = beams
     nest_bars = require("fabrication", "fabrication.nesting_bars", "nest_bars")
     b = config.beams
+    from .analysis import beam_properties
+
+    props, section, _ = beam_properties(project)
     beam_settings = BeamSettings(profile_name=_profile_name(project), material_name=project.material.name,
-                                 density=_density(project), stock_length_mm=MM * b.stock_length, kerf_mm=MM * b.kerf)
+                                 density=_density(project), stock_length_mm=MM * b.stock_length, kerf_mm=MM * b.kerf,
+                                 area_m2=section.A, outer_size_mm=size_mm)
     table = cut_list(polymesh, normals, beam_settings, joint_settings)
     write_cut_list(table, folder / "beams")
-    nesting = nest_bars(table["cut_length_mm"].to_numpy(), table["label"].tolist(), MM * b.stock_length, MM * b.kerf)
+    nesting = nest_bars(table["cut_length_mm"].to_numpy(), table["id"].tolist(), MM * b.stock_length, MM * b.kerf)
     _write_bars(nesting, folder / "beams" / "bars.csv")
-    write_beams_step(polymesh, table, folder / "beams" / "beams.step")
-    summary["bars_used"] = int(getattr(nesting, "bars_used", 0))
-    summary["bars_lower_bound"] = int(getattr(nesting, "lower_bound", 0))
+    write_beams_step(polymesh, table, folder / "beams" / "beams.step", outer_size_mm=size_mm)
+    summary.update({"bars_used": int(nesting.bars_used), "bars_lower_bound": int(nesting.lower_bound),
+                    "bar_nesting_method": getattr(nesting, "method", ""), "bar_waste_mm": float(nesting.waste_mm),
+                    "total_cut_length_m": float(table["cut_length_mm"].sum() / MM),
+                    "beam_mass_kg": float(table["mass_kg"].sum())})
 
-    panels_summary = {}
+    panels = []
     if config.panels.enabled:
         ctx.step("panels")
-        (PanelSettings, SheetSettings, flatten_panels, write_panel_dxfs, nest_sheets, write_sheet_dxfs,
-         write_panels_csv) = require("fabrication", "fabrication.panels", "PanelSettings", "SheetSettings",
-                                     "flatten_panels", "write_panel_dxfs", "nest_sheets", "write_sheet_dxfs",
-                                     "write_panels_csv")
+        (PanelSettings, flatten_panels, write_panel_dxfs, write_panels_csv) = require(
+            "fabrication", "fabrication.panels", "PanelSettings", "flatten_panels", "write_panel_dxfs", "write_panels_csv")
+        SheetSettings, nest_sheets, write_sheet_dxfs = require("fabrication", "fabrication.nesting_sheets", "SheetSettings",
+                                                               "nest_sheets", "write_sheet_dxfs")
         p, s = config.panels, config.sheets
         panel_settings = PanelSettings(thickness_mm=MM * p.thickness, material_name=p.material, density=p.density,
                                        clearance_mm=MM * p.clearance, hole_diameter_mm=MM * p.hole_diameter,
@@ -88,16 +95,21 @@ def run(ctx):
                                                           spacing_mm=MM * s.spacing, margin_mm=MM * s.margin,
                                                           rotations=s.rotations))
         write_sheet_dxfs(sheet_nesting, panels, folder / "panels" / "sheets")
+        picture = getattr(importlib.import_module("fabrication.nesting_sheets"), "write_sheets_picture", None)
+        if picture is not None:
+            picture(sheet_nesting, panels, folder / "panels" / "sheets.png")
         write_panels_csv(panels, sheet_nesting, panel_settings, folder / "panels" / "panels.csv")
-        panels_summary = {"panels": len(panels), "sheets": int(len(getattr(sheet_nesting, "sheets", []))),
-                          "sheet_utilisation": float(getattr(sheet_nesting, "utilisation", 0.0))}
-    else:
-        panels = []
-    summary.update(panels_summary)
+        sheets = getattr(sheet_nesting, "n_sheets", None)
+        if sheets is None:
+            sheets = len(getattr(sheet_nesting, "sheets", []))
+        summary.update({"panels": len(panels), "sheets": int(sheets),
+                        "sheet_utilisation": float(getattr(sheet_nesting, "utilisation", 0.0)),
+                        "panels_over_planarity_tolerance": [getattr(x, "id", "") for x in panels if getattr(x, "nonplanar", False)]})
 
     ctx.step("drawings and model")
     write_plan_drawings = require("fabrication", "fabrication.drawings", "write_plan_drawings")
-    write_plan_drawings(polymesh, folder / "drawings", project_name=project.project.name)
+    write_plan_drawings(polymesh, folder / "drawings", project_name=project.project.name,
+                        support_nodes=np.flatnonzero(polymesh.supports))
     write_gridshell_step, write_gridshell_3dm = require("fabrication", "fabrication.model3d", "write_gridshell_step",
                                                         "write_gridshell_3dm")
     joint_radius_mm = getattr(joint_settings, "hub_radius_mm", None) or 1.5 * size_mm
@@ -105,12 +117,13 @@ def run(ctx):
     write_gridshell_3dm(polymesh, panels, size_mm / 2, joint_radius_mm, folder / "gridshell.3dm")
 
     ctx.step("assembly sequence")
-    try:
-        plan_assembly = require("fabrication", "fabrication.assembly", "plan_assembly")
-    except Exception:
-        plan_assembly = None
-    if plan_assembly is not None:
-        summary["assembly"] = plan_assembly(polymesh, surface, project, folder / "assembly")
+    plan_assembly, write_assembly = require("fabrication", "fabrication.assembly", "plan_assembly", "write_assembly")
+    beam = {"E": props.E, "G": props.G, "A": props.A, "Iy": props.Iy, "Iz": props.Iz, "J": props.J,
+            "mass_per_length": props.mass_per_length}
+    sequence = plan_assembly(polymesh, np.flatnonzero(polymesh.supports), beam,
+                             deflection_limit_m=config.assembly.deflection_limit)
+    written = write_assembly(sequence, polymesh, folder / "assembly")
+    summary["assembly"] = written if isinstance(written, dict) else {"steps": len(getattr(sequence, "steps", []))}
     write_text_atomic(folder / "fabrication.json", json.dumps(summary, indent=1, default=_jsonable))
     return summary
 

@@ -1,0 +1,428 @@
+"""Assembly sequence of the grid-shell: which beams and panels go up in which order, and
+where temporary props are needed.
+
+Greedy, from the supports inward: the structure grows one cell at a time (a step adds the
+missing beams of one cell). At each step the candidate cells are those sharing a node with
+what is built (at the start: with a support); a handful, ranked by how few beams they miss
+and how close they are (along the beams) to a support, are analysed as partial frames under
+their own weight (and the weight of the panels placed) with ``engine.frame.linear_static``,
+and the one needing fewest new props, then deflecting least, is built. A partial structure
+that is a mechanism gets a temporary prop (a fully restrained support) at its dangling end
+(the built node farthest, along the beams, from any support or prop); one deflecting more
+than the limit gets a prop at the node of largest displacement. Props are removed as soon
+as the structure stands within the limit without them. A panel follows in the step that
+completes its ring of beams.
+"""
+
+from __future__ import annotations
+
+import csv
+import heapq
+import io
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from engine.errors import InputError, MechanismError
+from engine.mesh import PolyMesh
+from fabrication.drawings import beam_id, node_id, panel_id
+from fabrication.files import atomic_path, write_text_atomic
+
+__all__ = ["AssemblyStep", "AssemblySequence", "plan_assembly", "write_assembly", "partial_frame_deflection"]
+
+GRAVITY = 9.81  # m/s^2
+CANDIDATES_PER_STEP = 4
+_PINNED = np.array([1, 1, 1, 0, 0, 0], dtype=bool)
+_FIXED = np.ones(6, dtype=bool)
+_BEAM_KEYS = ("E", "G", "A", "Iy", "Iz", "J", "mass_per_length")
+
+
+@dataclass(frozen=True, kw_only=True)
+class AssemblyStep:
+    """One step: beams (row indices of ``PolyMesh.edges``) and panels (face indices) added,
+    props (node indices) standing after the step, props_added (the new ones), the largest
+    displacement of the partial structure (m) and the nodes first joined in this step."""
+
+    step: int
+    beams: list[int]
+    panels: list[int]
+    props: list[int]
+    largest_deflection_m: float
+    nodes_built: list[int] = field(default_factory=list)
+    props_added: list[int] = field(default_factory=list)
+
+
+@dataclass(frozen=True, kw_only=True)
+class AssemblySequence:
+    """The steps in order, the deflection limit used (m), the support nodes and the number
+    of frame analyses run."""
+
+    steps: list[AssemblyStep]
+    deflection_limit_m: float
+    support_nodes: np.ndarray
+    n_analyses: int
+
+    @property
+    def largest_deflection_m(self) -> float:
+        return max((s.largest_deflection_m for s in self.steps), default=0.0)
+
+    @property
+    def props_used(self) -> list[int]:
+        """Every node that carried a prop at some step, in order of first use."""
+        seen: list[int] = []
+        for s in self.steps:
+            seen += [p for p in s.props_added if p not in seen]
+        return seen
+
+    @property
+    def props(self) -> list[int]:
+        """Every node that carried a prop at some step, sorted."""
+        return sorted(self.props_used)
+
+
+# ----------------------------------------------------------------------------- analysis
+
+def _beam_up_vectors(polymesh: PolyMesh) -> np.ndarray:
+    """(b, 3) local z for each beam: the mean normal of the cells it borders (global z where
+    none; global x for a beam along that normal)."""
+    edges = polymesh.edges
+    lookup = {(int(a), int(b)): k for k, (a, b) in enumerate(edges)}
+    up = np.zeros((len(edges), 3))
+    nodes = polymesh.nodes
+    for loop in polymesh.faces:
+        p = nodes[loop]
+        normal = np.cross(p - p.mean(0), np.roll(p, -1, axis=0) - p.mean(0)).sum(0)
+        normal /= max(np.linalg.norm(normal), 1e-300)
+        for a, b in zip(loop, np.roll(loop, -1)):
+            up[lookup[(min(a, b), max(a, b))]] += normal
+    up[np.linalg.norm(up, axis=1) < 1e-9] = [0.0, 0.0, 1.0]
+    up /= np.linalg.norm(up, axis=1, keepdims=True)
+    direction = nodes[edges[:, 1]] - nodes[edges[:, 0]]
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    up[np.abs(np.einsum("ij,ij->i", up, direction)) > 0.999] = [1.0, 0.0, 0.0]
+    return up
+
+
+@dataclass
+class _Model:
+    """Everything fixed over the sequence, for fast partial analyses."""
+
+    polymesh: PolyMesh
+    beam: dict
+    up: np.ndarray  # (b, 3)
+    beam_weight: np.ndarray  # (b,) N
+    face_load: np.ndarray  # (f,) N per panel (area load x cell area)
+    supports: np.ndarray  # (k,) int
+    support_flags: np.ndarray  # (6,) bool
+    n_analyses: int = 0
+
+
+def _build_model(polymesh: PolyMesh, support_nodes: np.ndarray, beam: dict, panel_area_load: float,
+                 support_restraint: str, up: np.ndarray | None = None) -> _Model:
+    n_beams = len(polymesh.edges)
+    mass = np.broadcast_to(np.asarray(beam["mass_per_length"], float), (n_beams,))
+    up = _beam_up_vectors(polymesh) if up is None else np.broadcast_to(np.asarray(up, float), (n_beams, 3))
+    return _Model(polymesh=polymesh, beam=dict(beam), up=up, beam_weight=mass * GRAVITY * polymesh.beam_lengths,
+                  face_load=panel_area_load * polymesh.face_areas(), supports=np.asarray(support_nodes, np.int64),
+                  support_flags=_PINNED if support_restraint == "pinned" else _FIXED)
+
+
+def _per_beam(value, beams: np.ndarray):
+    value = np.asarray(value, float)
+    return value if value.ndim == 0 else value[beams]
+
+
+def partial_frame_deflection(model: _Model, beams: np.ndarray, panels: np.ndarray,
+                             props: list[int]) -> tuple[float, np.ndarray]:
+    """Largest translation (m) of the partial frame made of ``beams`` (indices into
+    ``polymesh.edges``) under its own weight and the weight of ``panels`` (face indices),
+    held by the supports it touches (``support_flags``) and fully fixed ``props``; and the
+    (n_nodes,) translation magnitude per grid-shell node (0 where not built). Beam weight is
+    lumped half to each end. Raises ``engine.errors.MechanismError`` for a mechanism."""
+    from engine.frame import FrameModel, linear_static
+    from engine.supports import Supports
+
+    pm = model.polymesh
+    beams = np.asarray(beams, dtype=np.int64)
+    used, local = np.unique(pm.edges[beams], return_inverse=True)
+    local = local.reshape(-1, 2)
+    index = -np.ones(pm.n_nodes, dtype=np.int64)
+    index[used] = np.arange(len(used))
+    loads = np.zeros((len(used), 6))
+    np.add.at(loads[:, 2], local[:, 0], -0.5 * model.beam_weight[beams])
+    np.add.at(loads[:, 2], local[:, 1], -0.5 * model.beam_weight[beams])
+    for f in panels:
+        loop = pm.faces[f]
+        np.add.at(loads[:, 2], index[loop], -model.face_load[f] / len(loop))
+    held = [(index[model.supports[np.isin(model.supports, used)]], model.support_flags)]
+    prop_nodes = [p for p in props if index[p] >= 0]
+    if prop_nodes:
+        held.append((index[np.array(prop_nodes)], _FIXED))
+    supports = Supports.merge(held)
+    if len(supports.nodes) == 0:
+        raise MechanismError("the partial structure touches no support", n_modes=6)
+    b = model.beam
+    frame = FrameModel(nodes=pm.nodes[used], beams=local, E=_per_beam(b["E"], beams), G=_per_beam(b["G"], beams),
+                       A=_per_beam(b["A"], beams), Iy=_per_beam(b["Iy"], beams), Iz=_per_beam(b["Iz"], beams),
+                       J=_per_beam(b["J"], beams), up=model.up[beams], elements_per_beam=1)
+    model.n_analyses += 1
+    result = linear_static(frame, supports, loads)
+    translation = np.linalg.norm(result.displacements[:, :3], axis=1)
+    full = np.zeros(pm.n_nodes)
+    full[used] = translation
+    return float(translation.max()), full
+
+
+def _dangling_end(model: _Model, beams: np.ndarray, props: list[int]) -> int:
+    """The built node farthest along the built beams from every support and prop."""
+    pm = model.polymesh
+    adjacency: dict[int, list[tuple[int, float]]] = {}
+    for (a, b), length in zip(pm.edges[beams], pm.beam_lengths[beams]):
+        adjacency.setdefault(int(a), []).append((int(b), float(length)))
+        adjacency.setdefault(int(b), []).append((int(a), float(length)))
+    sources = [int(s) for s in model.supports if int(s) in adjacency] + [p for p in props if p in adjacency]
+    distance = {s: 0.0 for s in sources}
+    heap = [(0.0, s) for s in sources]
+    while heap:
+        d, u = heapq.heappop(heap)
+        if d > distance.get(u, np.inf):
+            continue
+        for v, length in adjacency[u]:
+            if d + length < distance.get(v, np.inf):
+                distance[v] = d + length
+                heapq.heappush(heap, (d + length, v))
+    candidates = [n for n in adjacency if n not in sources]
+    if not candidates:  # pragma: no cover - everything is held
+        return int(pm.edges[beams[0], 0])
+    return int(max(candidates, key=lambda n: distance.get(n, np.inf)))
+
+
+def _analyse_with_props(model: _Model, beams: np.ndarray, panels: np.ndarray, props: list[int],
+                        limit: float, max_new_props: int = 3) -> tuple[float, list[int]]:
+    """Deflection of a partial state, adding props (dangling end for a mechanism, largest
+    displacement over the limit) until it stands within the limit or ``max_new_props``."""
+    props = list(props)
+    added: list[int] = []
+    supported = set(model.supports.tolist())
+    while True:
+        try:
+            deflection, movement = partial_frame_deflection(model, beams, panels, props)
+        except MechanismError:
+            if len(added) >= max_new_props:
+                return np.inf, added
+            node = _dangling_end(model, beams, props)
+            props.append(node)
+            added.append(node)
+            continue
+        if deflection <= limit or len(added) >= max_new_props:
+            return deflection, added
+        node = int(np.argmax(movement))
+        if node in props or node in supported:  # pragma: no cover - cannot help
+            return deflection, added
+        props.append(node)
+        added.append(node)
+
+
+def plan_assembly(polymesh: PolyMesh, support_nodes: np.ndarray, beam: dict, *, panel_area_load: float = 0.0,
+                  deflection_limit_m: float | None = None, candidates_per_step: int = CANDIDATES_PER_STEP,
+                  support_restraint: str = "pinned", up: np.ndarray | None = None,
+                  progress: Callable[[str, float], None] | None = None) -> AssemblySequence:
+    """Greedy assembly sequence from the supports inward (see the module docstring).
+
+    support_nodes (k,) int: supported node indices. beam: dict with E, G (Pa), A (m^2), Iy, Iz,
+    J (m^4), mass_per_length (kg/m), each a scalar or (n_beams,) per beam. panel_area_load:
+    weight of the cladding, N/m^2 of cell area, applied once a panel is placed.
+    deflection_limit_m: largest allowed displacement of a partial structure before a prop is
+    added (default: span / 500, span = the larger plan dimension). support_restraint:
+    "pinned" (translations held) or "fixed" for the permanent supports; props are fixed.
+    up (b, 3): each beam's local z (default: mean normal of the adjacent cells).
+    progress(message, fraction): optional callback after each step.
+    """
+    support_nodes = np.unique(np.asarray(support_nodes, dtype=np.int64).ravel())
+    if support_nodes.size == 0:
+        raise InputError("plan_assembly needs at least one support node", hint="pass the grid-shell's supports")
+    if support_nodes.min() < 0 or support_nodes.max() >= polymesh.n_nodes:
+        raise InputError(f"support node index out of range 0..{polymesh.n_nodes - 1}")
+    missing = [k for k in _BEAM_KEYS if k not in beam]
+    if missing:
+        raise InputError(f"beam properties missing: {', '.join(missing)}",
+                         hint="beam = dict(E=, G=, A=, Iy=, Iz=, J=, mass_per_length=) in SI units")
+    if support_restraint not in ("pinned", "fixed"):
+        raise InputError(f"support_restraint {support_restraint!r} must be 'pinned' or 'fixed'")
+    edges = polymesh.edges
+    span = float(np.ptp(polymesh.nodes[:, :2], axis=0).max())
+    limit = span / 500 if deflection_limit_m is None else float(deflection_limit_m)
+    model = _build_model(polymesh, support_nodes, beam, panel_area_load, support_restraint, up)
+
+    lookup = {(int(a), int(b)): k for k, (a, b) in enumerate(edges)}
+    face_beams = [np.array(sorted({lookup[(min(a, b), max(a, b))] for a, b in zip(loop, np.roll(loop, -1))}))
+                  for loop in polymesh.faces]
+    face_nodes = [np.asarray(loop) for loop in polymesh.faces]
+    # distance along the beams from the nearest support, to rank candidates "from the supports inward"
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    lengths = polymesh.beam_lengths
+    graph = coo_matrix((np.r_[lengths, lengths], (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
+                       shape=(polymesh.n_nodes,) * 2).tocsr()
+    from_support = dijkstra(graph, indices=support_nodes, min_only=True)
+    face_distance = np.array([from_support[loop].mean() for loop in face_nodes])
+
+    built_beam = np.zeros(len(edges), dtype=bool)
+    built_node = np.zeros(polymesh.n_nodes, dtype=bool)
+    panelled = np.zeros(polymesh.n_faces, dtype=bool)
+    supported = np.zeros(polymesh.n_nodes, dtype=bool)
+    supported[support_nodes] = True
+    props: list[int] = []
+    steps: list[AssemblyStep] = []
+
+    while not built_beam.all():
+        touching = built_node if built_node.any() else supported
+        options = []
+        for f in range(polymesh.n_faces):
+            todo = face_beams[f][~built_beam[face_beams[f]]]
+            if todo.size and touching[face_nodes[f]].any():
+                options.append((todo.size, face_distance[f], f, todo))
+        if not options:  # a part not reachable through cells from what is built: start it nearest a support
+            rest = [f for f in range(polymesh.n_faces) if not built_beam[face_beams[f]].all()]
+            f = min(rest, key=lambda f: face_distance[f])
+            options = [(0, 0.0, f, face_beams[f][~built_beam[face_beams[f]]])]
+        options.sort(key=lambda o: (o[0], o[1]))
+        best = None
+        for _, _, f, todo in options[:candidates_per_step]:
+            beams_after = np.concatenate([np.flatnonzero(built_beam), todo])
+            done = built_beam.copy()
+            done[todo] = True
+            new_panels = [g for g in range(polymesh.n_faces) if not panelled[g] and done[face_beams[g]].all()]
+            panels_after = np.concatenate([np.flatnonzero(panelled), new_panels]).astype(np.int64)
+            deflection, added = _analyse_with_props(model, beams_after, panels_after, props, limit)
+            key = (len(added), deflection)
+            if best is None or key < best[0]:
+                best = (key, todo, new_panels, deflection, added)
+        _, todo, new_panels, deflection, added = best
+        new_nodes = sorted(set(np.unique(edges[todo]).tolist()) - set(np.flatnonzero(built_node).tolist()))
+        built_beam[todo] = True
+        built_node[edges[todo].ravel()] = True
+        panelled[new_panels] = True
+        props = props + added
+        # remove props the structure no longer needs (all together, else one at a time, oldest first)
+        if props and not added:
+            beams_now, panels_now = np.flatnonzero(built_beam), np.flatnonzero(panelled)
+            for trial in [[]] + [[p for p in props if p != q] for q in props[:3]]:
+                try:
+                    value, _ = partial_frame_deflection(model, beams_now, panels_now, trial)
+                except MechanismError:
+                    continue
+                if value <= limit:
+                    props, deflection = trial, value
+                    break
+        steps.append(AssemblyStep(step=len(steps) + 1, beams=[int(k) for k in todo],
+                                  panels=[int(g) for g in new_panels], props=list(props),
+                                  largest_deflection_m=float(deflection), nodes_built=new_nodes,
+                                  props_added=list(added)))
+        if progress is not None:
+            progress(f"assembly step {len(steps)}", float(built_beam.mean()))
+    return AssemblySequence(steps=steps, deflection_limit_m=limit, support_nodes=support_nodes,
+                            n_analyses=model.n_analyses)
+
+
+# ----------------------------------------------------------------------------- files
+
+def write_assembly(sequence: AssemblySequence, polymesh: PolyMesh, folder: str | os.PathLike, *,
+                   max_step_images: int | None = None) -> dict:
+    """Write ``folder/sequence.csv`` (step, parts, props, largest_deflection_mm),
+    ``folder/steps/step_001.png``... (plan: built dark, new red, props as markers) and
+    ``folder/steps_strip.png`` (up to 8 thumbnails). ``max_step_images``: draw only that many
+    evenly spread step images (None: all). Returns a summary dict: csv (path), steps,
+    props (N... ids of every node propped at some step), largest_deflection_mm."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["step", "parts", "props", "largest_deflection_mm"])
+    for s in sequence.steps:
+        parts = [beam_id(k) for k in s.beams] + [panel_id(f) for f in s.panels]
+        writer.writerow([s.step, " ".join(parts), " ".join(node_id(p) for p in s.props),
+                         f"{s.largest_deflection_m * 1e3:.3f}"])
+    csv_path = write_text_atomic(folder / "sequence.csv", buffer.getvalue())
+
+    n = len(sequence.steps)
+    chosen = range(n) if max_step_images is None or max_step_images >= n else \
+        np.unique(np.linspace(0, n - 1, max_step_images).round().astype(int))
+    (folder / "steps").mkdir(exist_ok=True)
+    for k in chosen:
+        _step_image(sequence, polymesh, int(k), folder / "steps" / f"step_{k + 1:03d}.png")
+    _strip(sequence, polymesh, folder / "steps_strip.png")
+    finite = [s.largest_deflection_m for s in sequence.steps if np.isfinite(s.largest_deflection_m)]
+    return {"csv": str(csv_path), "steps": n, "props": [node_id(p) for p in sequence.props_used],
+            "largest_deflection_mm": 1e3 * max(finite, default=0.0),
+            "deflection_limit_mm": 1e3 * sequence.deflection_limit_m, "analyses": sequence.n_analyses}
+
+
+def _draw_state(ax, sequence: AssemblySequence, polymesh: PolyMesh, k: int, thumbnail: bool = False) -> None:
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    plan = polymesh.nodes[:, :2]
+    edges = polymesh.edges
+    before_beams = [b for s in sequence.steps[:k] for b in s.beams]
+    before_panels = [f for s in sequence.steps[:k] for f in s.panels]
+    step = sequence.steps[k]
+    ax.set_aspect("equal")
+    ax.axis("off")
+    if before_panels:
+        ax.add_collection(PolyCollection([plan[polymesh.faces[f]] for f in before_panels], facecolors="0.8",
+                                         edgecolors="none"))
+    if step.panels:
+        ax.add_collection(PolyCollection([plan[polymesh.faces[f]] for f in step.panels], facecolors="#f4a6a6",
+                                         edgecolors="none"))
+    ax.add_collection(LineCollection(plan[edges], colors="0.88", linewidths=0.5))
+    if before_beams:
+        ax.add_collection(LineCollection(plan[edges[before_beams]], colors="0.15",
+                                         linewidths=1.0 if thumbnail else 1.4))
+    ax.add_collection(LineCollection(plan[edges[step.beams]], colors="red", linewidths=1.6 if thumbnail else 2.4))
+    s = sequence.support_nodes
+    ax.plot(plan[s, 0], plan[s, 1], "^", color="tab:blue", markersize=3 if thumbnail else 6, linestyle="none")
+    if step.props:
+        ax.plot(plan[step.props, 0], plan[step.props, 1], "X", color="darkorange",
+                markersize=5 if thumbnail else 10, linestyle="none")
+    lo, hi = plan.min(0), plan.max(0)
+    pad = 0.04 * (hi - lo).max()
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    if thumbnail:
+        ax.set_title(f"step {step.step}", fontsize=8)
+    else:
+        parts = [beam_id(b) for b in step.beams] + [panel_id(f) for f in step.panels]
+        text = ", ".join(parts[:12]) + (" ..." if len(parts) > 12 else "")
+        props = ", ".join(node_id(p) for p in step.props) or "none"
+        ax.set_title(f"Step {step.step} of {len(sequence.steps)}: {text}\nprops: {props} | "
+                     f"largest deflection {step.largest_deflection_m * 1e3:.2f} mm", fontsize=9)
+
+
+def _step_image(sequence: AssemblySequence, polymesh: PolyMesh, k: int, target: Path) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(6, 6))
+    FigureCanvasAgg(fig)
+    _draw_state(fig.add_axes((0.02, 0.02, 0.96, 0.86)), sequence, polymesh, k)
+    with atomic_path(target) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+
+
+def _strip(sequence: AssemblySequence, polymesh: PolyMesh, target: Path) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    n = len(sequence.steps)
+    picks = np.unique(np.linspace(0, n - 1, min(8, n)).round().astype(int)) if n else []
+    fig = Figure(figsize=(2.2 * max(len(picks), 1), 2.6))
+    FigureCanvasAgg(fig)
+    for j, k in enumerate(picks):
+        _draw_state(fig.add_subplot(1, len(picks), j + 1), sequence, polymesh, int(k), thumbnail=True)
+    fig.suptitle("built (dark), added in the step (red), supports (blue), temporary props (orange)", fontsize=8)
+    with atomic_path(target) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")

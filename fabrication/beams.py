@@ -1,0 +1,124 @@
+"""Beam cut list (CSV and a fabricator's XLSX schedule) and the beams as named solids (STEP).
+
+A beam's cut length is its node-to-node length less what the joint at each end takes (the
+joint's set-back, see fabrication.joints). Socket joints take square cuts (end angles 0).
+The roll angle turns the section about the beam axis from the vertical plane through the beam
+to the plane of the beam and the mean of its end nodes' axes (surface normals). Lengths in mm.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from engine.errors import InputError
+from engine.mesh import PolyMesh
+
+from .files import atomic_path
+from .joints import JointSettings, joint_geometry, joint_setback_mm, _smallest_angle
+
+__all__ = ["BeamSettings", "cut_list", "write_cut_list", "write_beams_step", "roll_angles_deg"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class BeamSettings:
+    """Profile and material names, density (kg/m^3), stock bar length and saw kerf (mm), section
+    area (m^2) for the mass, and the outer size (mm) for the solids and set-backs."""
+
+    profile_name: str
+    material_name: str
+    density: float
+    stock_length_mm: float = 6000.0
+    kerf_mm: float = 3.0
+    area_m2: float = 0.0
+    outer_size_mm: float = 0.0
+
+
+def roll_angles_deg(polymesh: PolyMesh, normals: np.ndarray) -> np.ndarray:
+    """(b,) signed angle (degrees) about each beam from the vertical plane to the beam's normal plane."""
+    e = polymesh.edges
+    axis = polymesh.nodes[e[:, 1]] - polymesh.nodes[e[:, 0]]
+    axis /= np.linalg.norm(axis, axis=1)[:, None]
+    normal = normals[e[:, 0]] + normals[e[:, 1]]
+    normal -= np.einsum("bi,bi->b", normal, axis)[:, None] * axis
+    reference = np.tile([0.0, 0.0, 1.0], (len(e), 1))
+    vertical = np.abs(axis[:, 2]) > 0.99
+    reference[vertical] = [0.0, 1.0, 0.0]
+    reference -= np.einsum("bi,bi->b", reference, axis)[:, None] * axis
+    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+    reference /= np.linalg.norm(reference, axis=1)[:, None]
+    sine = np.einsum("bi,bi->b", np.cross(reference, normal), axis)
+    cosine = np.einsum("bi,bi->b", reference, normal)
+    return np.degrees(np.arctan2(sine, cosine))
+
+
+def cut_list(polymesh: PolyMesh, normals: np.ndarray, settings: BeamSettings, joint_settings: JointSettings) -> pd.DataFrame:
+    """One row per beam: ids, profile, material, node and cut lengths, end angles, roll, mass, label."""
+    e = polymesh.edges
+    node_length = 1000 * polymesh.beam_lengths
+    setback = np.zeros(polymesh.n_nodes)
+    for geometry in joint_geometry(polymesh, normals, settings.outer_size_mm):
+        setback[geometry.node] = joint_setback_mm(joint_settings, settings.outer_size_mm,
+                                                  _smallest_angle(geometry.directions))
+    cut = node_length - setback[e[:, 0]] - setback[e[:, 1]]
+    bad = np.flatnonzero(cut <= 0)
+    if len(bad):
+        b = int(bad[0])
+        raise InputError(f"beam B{b + 1:04d} ({node_length[b]:.0f} mm) is shorter than its two joints take",
+                         hint="use smaller joints, a thinner section or longer beams (fewer cells)")
+    ids = [f"B{i + 1:04d}" for i in range(len(e))]
+    return pd.DataFrame({
+        "id": ids, "start_node": [f"N{a + 1:04d}" for a in e[:, 0]], "end_node": [f"N{b + 1:04d}" for b in e[:, 1]],
+        "profile": settings.profile_name, "material": settings.material_name,
+        "node_length_mm": np.round(node_length, 1), "setback_start_mm": np.round(setback[e[:, 0]], 1),
+        "setback_end_mm": np.round(setback[e[:, 1]], 1), "cut_length_mm": np.round(cut, 1),
+        "end_angle_start_deg": 0.0, "end_angle_end_deg": 0.0,
+        "roll_deg": np.round(roll_angles_deg(polymesh, normals), 2),
+        "mass_kg": np.round(cut / 1000 * settings.area_m2 * settings.density, 4),
+        "label": [f"{i} {a}-{b}" for i, a, b in zip(ids, e[:, 0] + 1, e[:, 1] + 1)],
+    })
+
+
+def write_cut_list(table: pd.DataFrame, folder: Path) -> tuple[Path, Path]:
+    """cutlist.csv and cutlist.xlsx (one sheet per profile with a totals row, and a summary sheet)."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    with atomic_path(folder / "cutlist.csv") as tmp:
+        table.to_csv(tmp, index=False)
+    summary = table.groupby("profile").agg(beams=("id", "count"), cut_length_m=("cut_length_mm", lambda s: s.sum() / 1000),
+                                           mass_kg=("mass_kg", "sum")).reset_index()
+    with atomic_path(folder / "cutlist.xlsx") as tmp:
+        with pd.ExcelWriter(tmp, engine="openpyxl") as writer:
+            summary.to_excel(writer, sheet_name="summary", index=False)
+            for number, (profile, rows) in enumerate(table.groupby("profile"), start=1):
+                totals = {c: "" for c in rows.columns}
+                totals.update({"id": "TOTAL", "cut_length_mm": rows["cut_length_mm"].sum(), "mass_kg": rows["mass_kg"].sum(),
+                               "label": f"{len(rows)} beams"})
+                sheet = pd.concat([rows, pd.DataFrame([totals])], ignore_index=True)
+                name = "".join(ch for ch in str(profile) if ch not in "[]:*?/\\")[:28] or f"profile {number}"
+                sheet.to_excel(writer, sheet_name=name, index=False)
+    return folder / "cutlist.csv", folder / "cutlist.xlsx"
+
+
+def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, outer_size_mm: float) -> Path:
+    """Every beam as a named cylinder of its cut length, placed between its joints (mm)."""
+    from build123d import Align, Compound, Cylinder, Location, Plane, export_step
+
+    e = polymesh.edges
+    solids = []
+    for row, (a, b) in zip(table.itertuples(index=False), e):
+        start, end = 1000 * polymesh.nodes[a], 1000 * polymesh.nodes[b]
+        direction = (end - start) / np.linalg.norm(end - start)
+        origin = start + direction * row.setback_start_mm
+        solid = Cylinder(0.5 * outer_size_mm, row.cut_length_mm, align=(Align.CENTER, Align.CENTER, Align.MIN))
+        solid = solid.moved(Location(Plane(origin=tuple(map(float, origin)), z_dir=tuple(map(float, direction)))))
+        solid.label = row.id
+        solids.append(solid)
+    compound = Compound(children=solids)
+    compound.label = "beams"
+    with atomic_path(path) as tmp:
+        export_step(compound, str(tmp))
+    return Path(path)

@@ -1,0 +1,166 @@
+"""Plan drawings of the grid-shell: DXF (mm) and an A3 landscape PDF with the same content.
+
+Content: beams (plan projection), node ids N0001 at nodes, beam ids B0001 at mid-beam,
+panel ids P0001 at cell centres, support symbols, overall plan dimensions and a title
+block. Ids (shared by every fabrication file): node i -> N{i+1:04d}, beam k (row k of
+``PolyMesh.edges``) -> B{k+1:04d}, face f -> P{f+1:04d}, joint of node i -> J{i+1:04d}.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+from pathlib import Path
+
+import numpy as np
+
+from engine.errors import InputError
+from engine.mesh import PolyMesh
+from fabrication.files import atomic_path
+
+__all__ = ["write_plan_drawings", "node_id", "beam_id", "panel_id", "joint_id", "PLAN_LAYERS"]
+
+#: DXF layers of the plan: name -> ACI colour
+PLAN_LAYERS = {"BEAMS": 7, "LABELS_NODES": 3, "LABELS_BEAMS": 4, "LABELS_PANELS": 6, "SUPPORTS": 1,
+               "DIMENSIONS": 2, "TITLE": 7}
+_A3_LANDSCAPE_IN = (420 / 25.4, 297 / 25.4)
+
+
+def node_id(i: int) -> str:
+    return f"N{i + 1:04d}"
+
+
+def beam_id(k: int) -> str:
+    return f"B{k + 1:04d}"
+
+
+def panel_id(f: int) -> str:
+    return f"P{f + 1:04d}"
+
+
+def joint_id(i: int) -> str:
+    return f"J{i + 1:04d}"
+
+
+def _support_nodes(polymesh: PolyMesh, support_nodes: np.ndarray | None) -> np.ndarray:
+    if support_nodes is None:
+        return np.flatnonzero(polymesh.supports)
+    nodes = np.asarray(support_nodes, dtype=np.int64).ravel()
+    if nodes.size and (nodes.min() < 0 or nodes.max() >= polymesh.n_nodes):
+        raise InputError(f"support node index out of range 0..{polymesh.n_nodes - 1}",
+                         hint="support_nodes are 0-based node indices of the grid-shell")
+    return nodes
+
+
+def write_plan_drawings(polymesh: PolyMesh, folder: str | os.PathLike, *, project_name: str,
+                        support_nodes: np.ndarray | None = None) -> tuple[Path, Path]:
+    """Write ``folder/plan.dxf`` and ``folder/plan.pdf`` (plan view, mm); returns both paths.
+
+    ``support_nodes`` (k,) int: supported node indices; default ``polymesh.supports``.
+    """
+    if polymesh.n_nodes == 0 or len(polymesh.edges) == 0:
+        raise InputError("the grid-shell has no beams to draw")
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    supports = _support_nodes(polymesh, support_nodes)
+    plan = polymesh.nodes[:, :2] * 1e3
+    beams = polymesh.edges
+    height = float(max(np.median(polymesh.beam_lengths) * 1e3 * 0.08, 1.0))
+    centres = np.array([plan[f].mean(axis=0) for f in polymesh.faces]).reshape(-1, 2)
+    title = [project_name, f"Plan view - {polymesh.n_nodes} nodes, {len(beams)} beams, {polymesh.n_faces} cells",
+             f"Total beam length {polymesh.total_length:.2f} m - supports {len(supports)}",
+             f"Units: mm - date {_dt.date.today().isoformat()}"]
+    dxf_path = _write_dxf(folder / "plan.dxf", plan, beams, centres, supports, height, title)
+    pdf_path = _write_pdf(folder / "plan.pdf", plan, beams, centres, supports, title)
+    return dxf_path, pdf_path
+
+
+def _write_dxf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, supports: np.ndarray,
+               height: float, title: list[str]) -> Path:
+    import ezdxf
+    from ezdxf.enums import TextEntityAlignment
+
+    doc = ezdxf.new("R2010", setup=True)
+    doc.header["$INSUNITS"] = 4
+    doc.header["$MEASUREMENT"] = 1
+    for name, colour in PLAN_LAYERS.items():
+        doc.layers.add(name, color=colour)
+    msp = doc.modelspace()
+    for a, b in beams:
+        msp.add_line(tuple(plan[a]), tuple(plan[b]), dxfattribs={"layer": "BEAMS"})
+    for i, p in enumerate(plan):
+        t = msp.add_text(node_id(i), height=height, dxfattribs={"layer": "LABELS_NODES"})
+        t.set_placement((float(p[0] + 0.3 * height), float(p[1] + 0.3 * height)),
+                        align=TextEntityAlignment.BOTTOM_LEFT)
+    mid = 0.5 * (plan[beams[:, 0]] + plan[beams[:, 1]])
+    direction = plan[beams[:, 1]] - plan[beams[:, 0]]
+    angle = np.degrees(np.arctan2(direction[:, 1], direction[:, 0]))
+    angle = np.where(angle > 90, angle - 180, np.where(angle < -90, angle + 180, angle))  # readable
+    for k, (p, a) in enumerate(zip(mid, angle)):
+        t = msp.add_text(beam_id(k), height=0.8 * height, rotation=float(a), dxfattribs={"layer": "LABELS_BEAMS"})
+        t.set_placement((float(p[0]), float(p[1])), align=TextEntityAlignment.BOTTOM_CENTER)
+    for f, p in enumerate(centres):
+        t = msp.add_text(panel_id(f), height=1.2 * height, dxfattribs={"layer": "LABELS_PANELS"})
+        t.set_placement((float(p[0]), float(p[1])), align=TextEntityAlignment.MIDDLE_CENTER)
+    size = 2.0 * height
+    for i in supports:
+        x, y = plan[i]
+        msp.add_lwpolyline([(x, y), (x - size / 2, y - size), (x + size / 2, y - size)], close=True,
+                           dxfattribs={"layer": "SUPPORTS"})
+    lo, hi = plan.min(axis=0), plan.max(axis=0)
+    gap = 6 * height
+    override = {"dimtxt": height * 1.5, "dimasz": height, "dimexe": height * 0.5, "dimexo": height * 0.5,
+                "dimdec": 0}
+    msp.add_linear_dim(base=(lo[0], lo[1] - gap), p1=(lo[0], lo[1]), p2=(hi[0], lo[1]), angle=0,
+                       override=override, dxfattribs={"layer": "DIMENSIONS"}).render()
+    msp.add_linear_dim(base=(lo[0] - gap, lo[1]), p1=(lo[0], lo[1]), p2=(lo[0], hi[1]), angle=90,
+                       override=override, dxfattribs={"layer": "DIMENSIONS"}).render()
+    # title block: a frame with the text lines, under the plan, right-aligned with it
+    line_h = 2.5 * height
+    width = max(hi[0] - lo[0], 40 * height) * 0.5
+    x0, y0 = hi[0] - width, lo[1] - gap - 3 * line_h - len(title) * line_h
+    top = y0 + (len(title) + 1) * line_h
+    msp.add_lwpolyline([(x0, y0), (hi[0], y0), (hi[0], top), (x0, top)], close=True, dxfattribs={"layer": "TITLE"})
+    for j, text in enumerate(title):
+        msp.add_text(text, height=1.6 * height if j == 0 else height,
+                     dxfattribs={"layer": "TITLE", "insert": (x0 + 0.5 * line_h, y0 + (len(title) - j) * line_h)})
+    with atomic_path(target) as tmp:
+        doc.saveas(tmp)
+    return target
+
+
+def _write_pdf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, supports: np.ndarray,
+               title: list[str]) -> Path:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=_A3_LANDSCAPE_IN)
+    FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.04, 0.12, 0.92, 0.84))
+    ax.set_aspect("equal")
+    ax.axis("off")
+    ax.add_collection(LineCollection(plan[beams], colors="k", linewidths=0.6))
+    font = float(np.clip(240 / np.sqrt(max(len(plan), 1)), 1.0, 7.0))
+    for i, p in enumerate(plan):
+        ax.text(p[0], p[1], " " + node_id(i), fontsize=font, color="tab:green", ha="left", va="bottom")
+    for k, p in enumerate(0.5 * (plan[beams[:, 0]] + plan[beams[:, 1]])):
+        ax.text(p[0], p[1], beam_id(k), fontsize=0.8 * font, color="tab:blue", ha="center", va="center")
+    for f, p in enumerate(centres):
+        ax.text(p[0], p[1], panel_id(f), fontsize=font, color="tab:purple", ha="center", va="center")
+    if len(supports):
+        ax.plot(plan[supports, 0], plan[supports, 1], "^", color="tab:red", markersize=6, linestyle="none")
+    lo, hi = plan.min(axis=0), plan.max(axis=0)
+    span = hi - lo
+    gap = 0.06 * span.max()
+    ax.annotate("", xy=(lo[0], lo[1] - gap), xytext=(hi[0], lo[1] - gap), arrowprops={"arrowstyle": "<->", "lw": 0.8})
+    ax.text(0.5 * (lo[0] + hi[0]), lo[1] - gap, f"{span[0]:.0f}", ha="center", va="bottom", fontsize=8)
+    ax.annotate("", xy=(lo[0] - gap, lo[1]), xytext=(lo[0] - gap, hi[1]), arrowprops={"arrowstyle": "<->", "lw": 0.8})
+    ax.text(lo[0] - gap, 0.5 * (lo[1] + hi[1]), f"{span[1]:.0f}", ha="right", va="center", rotation=90, fontsize=8)
+    ax.set_xlim(lo[0] - 2 * gap, hi[0] + gap)
+    ax.set_ylim(lo[1] - 2 * gap, hi[1] + gap)
+    fig.text(0.96, 0.03, "\n".join(title), ha="right", va="bottom", fontsize=9,
+             bbox={"boxstyle": "square", "facecolor": "white", "edgecolor": "black"})
+    with atomic_path(target) as tmp:
+        fig.savefig(tmp, format="pdf")
+    return target

@@ -1,0 +1,85 @@
+"""The whole structure as one model: gridshell.step (a named, coloured cadquery Assembly of joints,
+beams and panels) and gridshell.3dm (rhino3dm, one layer per part kind). Millimetres."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from engine.mesh import PolyMesh
+
+from .files import atomic_path
+
+__all__ = ["write_gridshell_step", "write_gridshell_3dm"]
+
+
+def write_gridshell_step(polymesh: PolyMesh, panels, beam_radius_mm: float, joint_radius_mm: float, path: Path) -> Path:
+    """Joints as spheres J0001..., beams as cylinders B0001..., panels as 3 mm plates P0001... ."""
+    import cadquery as cq
+
+    nodes = 1000 * polymesh.nodes
+    assembly = cq.Assembly(name="gridshell")
+    grey, blue, glass = cq.Color(0.6, 0.6, 0.6), cq.Color(0.27, 0.51, 0.71), cq.Color(0.7, 0.85, 0.95, 0.5)
+    for i, p in enumerate(nodes):
+        assembly.add(cq.Workplane().sphere(joint_radius_mm), name=f"J{i + 1:04d}", loc=cq.Location(cq.Vector(*p)),
+                     color=grey)
+    for k, (a, b) in enumerate(polymesh.edges):
+        direction = nodes[b] - nodes[a]
+        length = float(np.linalg.norm(direction))
+        solid = cq.Solid.makeCylinder(beam_radius_mm, length, cq.Vector(*nodes[a]), cq.Vector(*(direction / length)))
+        assembly.add(cq.Workplane().add(solid), name=f"B{k + 1:04d}", color=blue)
+    for panel in panels:
+        outline = 1000 * np.asarray(panel.outline_3d_m)
+        normal = np.cross(panel.axes[0], panel.axes[1])
+        wire = cq.Wire.makePolygon([cq.Vector(*p) for p in outline], close=True)
+        face = cq.Face.makeFromWires(wire)
+        solid = cq.Solid.extrudeLinear(face, cq.Vector(*(3.0 * normal)))
+        assembly.add(cq.Workplane().add(solid), name=panel.id, color=glass)
+    with atomic_path(path) as tmp:
+        assembly.export(str(tmp), "STEP")
+    return Path(path)
+
+
+def write_gridshell_3dm(polymesh: PolyMesh, panels, beam_radius_mm: float, joint_radius_mm: float, path: Path) -> Path:
+    """Layers joints (spheres), beams (centre lines), panels (meshes); object names are the ids."""
+    import rhino3dm
+
+    model = rhino3dm.File3dm()
+    model.Settings.ModelUnitSystem = rhino3dm.UnitSystem.Millimeters
+    layers = {}
+    for name, colour in (("joints", (150, 150, 150, 255)), ("beams", (70, 130, 180, 255)), ("panels", (180, 215, 240, 255))):
+        layer = rhino3dm.Layer()
+        layer.Name = name
+        layer.Color = colour
+        layers[name] = model.Layers.Add(layer)
+    nodes = 1000 * polymesh.nodes
+
+    def attributes(layer: str, name: str):
+        a = rhino3dm.ObjectAttributes()
+        a.LayerIndex = layers[layer]
+        a.Name = name
+        return a
+
+    for i, p in enumerate(nodes):
+        sphere = rhino3dm.Sphere(rhino3dm.Point3d(*p), joint_radius_mm)
+        model.Objects.AddSphere(sphere, attributes("joints", f"J{i + 1:04d}"))
+    for k, (a, b) in enumerate(polymesh.edges):
+        start, end = rhino3dm.Point3d(*nodes[a]), rhino3dm.Point3d(*nodes[b])
+        model.Objects.AddLine(start, end, attributes("beams", f"B{k + 1:04d}"))
+    for panel in panels:
+        outline = 1000 * np.asarray(panel.outline_3d_m)
+        mesh = rhino3dm.Mesh()
+        for p in outline:
+            mesh.Vertices.Add(*map(float, p))
+        centre = outline.mean(axis=0)
+        mesh.Vertices.Add(*map(float, centre))
+        c = len(outline)
+        for j in range(c):
+            mesh.Faces.AddFace(j, (j + 1) % c, c)
+        mesh.Normals.ComputeNormals()
+        model.Objects.AddMesh(mesh, attributes("panels", panel.id))
+    with atomic_path(path) as tmp:
+        if not model.Write(str(tmp), 7):
+            raise OSError(f"rhino3dm could not write {path}")
+    return Path(path)

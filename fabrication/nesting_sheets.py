@@ -1,0 +1,330 @@
+"""Nesting flat panels on rectangular sheets (irregular 2D bottom-left fill, lengths in mm).
+
+Method: panels are taken by decreasing area. For each panel and each candidate rotation
+(0, 90, 180, 270 degrees and the two orientations of its minimum-area rectangle) the set of
+feasible positions on a sheet is computed exactly with no-fit polygons: for every part
+already on the sheet, the positions where the new part would come closer than the spacing
+form the Minkowski sum  B + (-A) + disc(spacing)  of the convex hulls (convex panels are
+nested exactly; a non-convex panel is nested by its hull, which is conservative). The
+inner-fit rectangle (sheet less margin less part size) minus the union of those regions is
+the feasible region, and its left-most, then lowest, vertex is the bottom-left position.
+The rotation whose placement reaches least far to the right (then least high) wins. Sheets
+are tried first-fit; a new sheet is opened when none takes the panel.
+
+Placement convention: a panel's sheet outline is  outline_mm @ R(angle).T + (dx, dy),
+with R the counter-clockwise rotation by ``angle_deg``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import shapely
+from shapely.geometry import MultiPoint, box
+
+from engine.errors import InputError
+from fabrication.files import atomic_path
+
+if TYPE_CHECKING:  # pragma: no cover
+    from fabrication.panels import Panel, PanelSettings
+
+__all__ = ["SheetSettings", "Placement", "SheetNesting", "nest_sheets", "write_sheet_dxfs", "write_sheets_picture",
+           "placed_outline", "rotation"]
+
+#: buffer arcs are drawn with this many segments per quarter circle
+_QUAD_SEGS = 4
+
+
+@dataclass(frozen=True, kw_only=True)
+class SheetSettings:
+    """Sheet size, gap between parts, border margin (mm) and whether parts may rotate."""
+
+    width_mm: float = 1200.0
+    height_mm: float = 600.0
+    spacing_mm: float = 4.0
+    margin_mm: float = 10.0
+    rotations: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("width_mm", "height_mm"):
+            if not getattr(self, name) > 0:
+                raise InputError(f"sheet setting {name} = {getattr(self, name)!r} must be positive")
+        for name in ("spacing_mm", "margin_mm"):
+            if not getattr(self, name) >= 0:
+                raise InputError(f"sheet setting {name} = {getattr(self, name)!r} must be zero or positive")
+        if 2 * self.margin_mm >= min(self.width_mm, self.height_mm):
+            raise InputError(f"sheet margin {self.margin_mm} mm leaves no room on a "
+                             f"{self.width_mm} x {self.height_mm} mm sheet")
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Panel ``panel`` (index into the panel list) on sheet ``sheet`` (0-based), rotated by
+    ``angle_deg`` about the panel's 2D origin, then moved by (dx, dy) mm."""
+
+    panel: int
+    sheet: int
+    angle_deg: float
+    dx: float
+    dy: float
+
+    @property
+    def offset(self) -> tuple[float, float]:
+        return (self.dx, self.dy)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SheetNesting:
+    """Result of ``nest_sheets``: one placement per panel (in panel order), the panel
+    indices on each sheet, overall and per-sheet utilisation (panel area / sheet area),
+    and sheet_of: panel id -> sheet name (S01...)."""
+
+    placements: list[Placement]
+    sheets: list[list[int]]
+    utilisation: float
+    sheet_utilisation: list[float]
+    settings: SheetSettings = field(default_factory=SheetSettings)
+    sheet_of: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def n_sheets(self) -> int:
+        return len(self.sheets)
+
+    def placed_outline(self, panel_index: int, outline_mm: np.ndarray) -> np.ndarray:
+        """(k, 2) outline of panel ``panel_index`` in its sheet's coordinates, mm."""
+        p = self.placements[panel_index]
+        return np.asarray(outline_mm) @ rotation(p.angle_deg).T + (p.dx, p.dy)
+
+
+def rotation(angle_deg: float) -> np.ndarray:
+    """2x2 counter-clockwise rotation matrix."""
+    a = math.radians(angle_deg)
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s], [s, c]])
+
+
+def placed_outline(panel: "Panel", placement: Placement) -> np.ndarray:
+    """(k, 2) cut outline of ``panel`` where ``placement`` puts it on its sheet, mm."""
+    return np.asarray(panel.outline_mm) @ rotation(placement.angle_deg).T + (placement.dx, placement.dy)
+
+
+@dataclass
+class _Orientation:
+    angle: float
+    hull: np.ndarray  # (k, 2) rotated convex hull, shifted so the outline's bbox starts at 0
+    shift: np.ndarray  # (2,) added to R @ outline to reach that normalised frame
+    width: float
+    height: float
+
+
+@dataclass
+class _Sheet:
+    hulls: list[np.ndarray] = field(default_factory=list)
+    bounds: list[np.ndarray] = field(default_factory=list)  # (4,) xmin, ymin, xmax, ymax per part
+    area: float = 0.0
+    failed_area: float = math.inf  # smallest panel area that did not fit since the last change
+
+
+def _angles(outline: np.ndarray, rotations: bool) -> list[float]:
+    if not rotations:
+        return [0.0]
+    angles = [0.0, 90.0, 180.0, 270.0]
+    rect = np.asarray(MultiPoint(outline).minimum_rotated_rectangle.exterior.coords)[:4]
+    sides = np.diff(np.vstack([rect, rect[:1]]), axis=0)
+    longest = sides[np.argmax(np.linalg.norm(sides, axis=1))]
+    theta = -math.degrees(math.atan2(longest[1], longest[0]))  # turn the long side onto x
+    for extra in (theta, theta + 90.0):
+        a = extra % 360.0
+        if all(min(abs(a - b) % 360.0, 360.0 - abs(a - b) % 360.0) > 0.01 for b in angles):
+            angles.append(a)
+    return angles
+
+
+def _orientations(outline: np.ndarray, rotations: bool) -> list[_Orientation]:
+    hull = np.asarray(MultiPoint(outline).convex_hull.exterior.coords)[:-1]
+    result = []
+    for angle in _angles(outline, rotations):
+        R = rotation(angle)
+        rotated = outline @ R.T
+        lo, hi = rotated.min(axis=0), rotated.max(axis=0)
+        result.append(_Orientation(angle=angle, hull=hull @ R.T - lo, shift=-lo,
+                                   width=float(hi[0] - lo[0]), height=float(hi[1] - lo[1])))
+    return result
+
+
+def _best_position(sheet: _Sheet, o: _Orientation, settings: SheetSettings,
+                   reach: float) -> tuple[float, float] | None:
+    """Bottom-left feasible reference point (x, y) of orientation ``o`` on ``sheet``, or None
+    (no room, or no position whose right edge stays within ``reach``)."""
+    m, s = settings.margin_mm, settings.spacing_mm
+    x0, y0 = m, m
+    x1, y1 = settings.width_mm - m - o.width, settings.height_mm - m - o.height
+    if x1 < x0 - 1e-9 or y1 < y0 - 1e-9:
+        return None
+    x1, y1 = max(x1, x0), max(y1, y0)
+    if not sheet.hulls:
+        return x0, y0
+    # GEOS draws buffer arcs with chords of up to pi / (2 quad_segs): grow the radius so the
+    # polygonal buffer contains the true rounded one (checked against exact distances in tests)
+    radius = s / math.cos(math.pi / (2 * _QUAD_SEGS)) + 1e-6 if s > 0 else 0.0
+    a_lo, a_hi = o.hull.min(axis=0), o.hull.max(axis=0)
+    bounds = np.array(sheet.bounds)
+    near = ((bounds[:, 0] - a_hi[0] - radius <= x1) & (bounds[:, 2] - a_lo[0] + radius >= x0)
+            & (bounds[:, 1] - a_hi[1] - radius <= y1) & (bounds[:, 3] - a_lo[1] + radius >= y0))
+    inner = box(x0, y0, x1, y1) if (x1 > x0 and y1 > y0) else shapely.Point(x0, y0).buffer(1e-9)
+    if near.any():
+        # no-fit region of each nearby part B for reference points t: hull(B - A) grown by the spacing
+        sums = [(sheet.hulls[j][:, None, :] - o.hull[None, :, :]).reshape(-1, 2) for j in np.flatnonzero(near)]
+        counts = [len(c) for c in sums]
+        points = shapely.multipoints(np.vstack(sums), indices=np.repeat(np.arange(len(sums)), counts))
+        regions = shapely.convex_hull(points)
+        if radius > 0:
+            regions = shapely.buffer(regions, radius, quad_segs=_QUAD_SEGS)
+        feasible = inner.difference(shapely.union_all(regions))
+    else:
+        feasible = inner
+    if feasible.is_empty:
+        return None
+    xy = shapely.get_coordinates(feasible)
+    best = xy[np.argmin(xy[:, 0] + 1e-3 * xy[:, 1])]  # left-most, then lowest
+    if best[0] + o.width > reach:
+        return None
+    return float(best[0]), float(best[1])
+
+
+def _place(sheet: _Sheet, k: int, i: int, options: list[_Orientation], settings: SheetSettings,
+           placements: list) -> bool:
+    best = None
+    reach = math.inf
+    for o in options:
+        position = _best_position(sheet, o, settings, reach)
+        if position is None:
+            continue
+        key = (position[0] + o.width) + 1e-3 * (position[1] + o.height)
+        if best is None or key < best[0]:
+            best = (key, o, position)
+            reach = position[0] + o.width  # later orientations must not reach further right
+    if best is None:
+        return False
+    _, o, (x, y) = best
+    hull = o.hull + (x, y)
+    sheet.hulls.append(hull)
+    sheet.bounds.append(np.concatenate([hull.min(axis=0), hull.max(axis=0)]))
+    dx, dy = o.shift + (x, y)
+    placements[i] = Placement(panel=int(i), sheet=k, angle_deg=float(o.angle), dx=float(dx), dy=float(dy))
+    return True
+
+
+def nest_sheets(panels: list["Panel"], settings: SheetSettings | None = None) -> SheetNesting:
+    """Place every panel's cut outline (``Panel.outline_mm``) once on as few sheets as the
+    bottom-left fill finds, parts at least ``spacing_mm`` apart and ``margin_mm`` inside the
+    sheet edge. Raises ``InputError`` naming a panel that fits no sheet in any rotation."""
+    settings = settings or SheetSettings()
+    n = len(panels)
+    orientations = [_orientations(np.asarray(p.outline_mm, float), settings.rotations) for p in panels]
+    usable_w = settings.width_mm - 2 * settings.margin_mm
+    usable_h = settings.height_mm - 2 * settings.margin_mm
+    for p, options in zip(panels, orientations):
+        if not any(o.width <= usable_w + 1e-9 and o.height <= usable_h + 1e-9 for o in options):
+            o = min(options, key=lambda o: max(o.width / usable_w, o.height / usable_h))
+            raise InputError(
+                f"panel {p.id} ({o.width:.0f} x {o.height:.0f} mm) does not fit on a "
+                f"{settings.width_mm:g} x {settings.height_mm:g} mm sheet with {settings.margin_mm:g} mm margin",
+                hint="use larger sheets (SheetSettings), allow rotations, or split the cell")
+    areas = np.array([float(p.area_mm2) for p in panels])
+    order = np.argsort(-areas, kind="stable")
+    sheets: list[_Sheet] = []
+    members: list[list[int]] = []
+    placements: list[Placement | None] = [None] * n
+    sheet_area = settings.width_mm * settings.height_mm
+    for i in order:
+        placed = False
+        for k, sheet in enumerate(sheets):
+            # skip sheets that just refused a panel of (about) this size or have no area left
+            if areas[i] >= 0.98 * sheet.failed_area or sheet.area + areas[i] > sheet_area:
+                continue
+            if _place(sheet, k, i, orientations[i], settings, placements):
+                members[k].append(int(i))
+                sheet.area += areas[i]
+                sheet.failed_area = math.inf
+                placed = True
+                break
+            sheet.failed_area = min(sheet.failed_area, areas[i])
+        if not placed:
+            sheets.append(_Sheet())
+            members.append([int(i)])
+            k = len(sheets) - 1
+            if not _place(sheets[k], k, i, orientations[i], settings, placements):  # pragma: no cover
+                raise InputError(f"panel {panels[i].id} does not fit on an empty sheet")
+            sheets[k].area += areas[i]
+    per_sheet = [sheet.area / sheet_area for sheet in sheets]
+    utilisation = float(areas.sum() / (len(sheets) * sheet_area)) if sheets else 0.0
+    sheet_of = {panels[p.panel].id: f"S{p.sheet + 1:02d}" for p in placements}
+    return SheetNesting(placements=list(placements), sheets=members, utilisation=utilisation,
+                        sheet_utilisation=per_sheet, settings=settings, sheet_of=sheet_of)
+
+
+def write_sheet_dxfs(nesting: SheetNesting, panels: list["Panel"], folder: str | os.PathLike,
+                     settings: "PanelSettings | None" = None) -> list[Path]:
+    """Write ``folder/S01.dxf``... : sheet outline on NOTES, parts on CUT, panel ids on
+    ENGRAVE, drill holes on DRILL (mm, $INSUNITS 4). ``settings``: PanelSettings for the
+    hole diameter (default: PanelSettings())."""
+    from fabrication.panels import PanelSettings, add_panel, new_dxf
+
+    settings = settings or PanelSettings()
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    sheet = nesting.settings
+    paths = []
+    for k, members in enumerate(nesting.sheets):
+        doc = new_dxf()
+        msp = doc.modelspace()
+        msp.add_lwpolyline([(0, 0), (sheet.width_mm, 0), (sheet.width_mm, sheet.height_mm), (0, sheet.height_mm)],
+                           close=True, dxfattribs={"layer": "NOTES"})
+        msp.add_text(f"S{k + 1:02d}  {len(members)} parts  utilisation {100 * nesting.sheet_utilisation[k]:.1f} %",
+                     height=5.0, dxfattribs={"layer": "NOTES", "insert": (0.0, -10.0)})
+        for i in members:
+            p = nesting.placements[i]
+            add_panel(msp, panels[i], offset=(p.dx, p.dy), angle_deg=p.angle_deg, settings=settings)
+        target = folder / f"S{k + 1:02d}.dxf"
+        with atomic_path(target) as tmp:
+            doc.saveas(tmp)
+        paths.append(target)
+    return paths
+
+
+def write_sheets_picture(nesting: SheetNesting, panels: list["Panel"], path: str | os.PathLike,
+                         max_sheets: int = 6) -> Path:
+    """A PNG of the first ``max_sheets`` sheets with their parts and ids."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
+
+    count = max(1, min(nesting.n_sheets, max_sheets))
+    s = nesting.settings
+    fig = Figure(figsize=(10, 5.2 * count * s.height_mm / s.width_mm + 0.6))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(count, 1, squeeze=False)[:, 0]
+    for k, ax in enumerate(axes):
+        ax.add_patch(Rectangle((0, 0), s.width_mm, s.height_mm, fill=False, color="k"))
+        for i in (nesting.sheets[k] if k < nesting.n_sheets else []):
+            outline = nesting.placed_outline(i, panels[i].outline_mm)
+            ax.fill(outline[:, 0], outline[:, 1], color="#9ecae1", ec="#08519c", lw=0.6)
+            centre = outline.mean(axis=0)
+            ax.text(centre[0], centre[1], panels[i].id, fontsize=5, ha="center", va="center")
+        ax.set_xlim(-10, s.width_mm + 10)
+        ax.set_ylim(-10, s.height_mm + 10)
+        ax.set_aspect("equal")
+        ax.set_axis_off()
+        if k < nesting.n_sheets:
+            ax.set_title(f"S{k + 1:02d}: {len(nesting.sheets[k])} parts, "
+                         f"{100 * nesting.sheet_utilisation[k]:.0f} % used", fontsize=9)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    return Path(path)

@@ -1,0 +1,340 @@
+"""Flat cladding panels: one per grid-shell cell, flattened, inset and written as DXF.
+
+Each cell (a node loop of ``engine.mesh.PolyMesh``) is projected onto its least-squares
+plane; the outline in that plane (mm) is inset by the clearance (mitred corners) to give
+the cut outline. Cells whose nodes lie further than the planarity tolerance from that
+plane are flagged ``nonplanar``; with ``split_nonplanar`` they are cut into triangles by
+ear clipping (each triangle of three nodes is exactly planar), ids ``P0001a``, ``P0001b``...
+
+Files (lengths in mm, DXF R2010, ``$INSUNITS`` = 4): one DXF per panel with the cut
+outline on CUT, the panel id on ENGRAVE (single-stroke text style), hole centres on DRILL
+and a note (thickness, material, planarity) on NOTES; a CSV schedule of all panels.
+The sheet nesting lives in ``fabrication.nesting_sheets``; its public names are re-exported
+here for callers that take the whole panel workflow from one module.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import shapely
+import shapely.ops
+from shapely.geometry import Polygon
+
+from engine.errors import InputError
+from engine.mesh import PolyMesh
+from fabrication.files import atomic_path, write_text_atomic
+
+if TYPE_CHECKING:  # pragma: no cover
+    from fabrication.nesting_sheets import SheetNesting
+
+__all__ = ["PanelSettings", "Panel", "flatten_panels", "write_panel_dxfs", "write_panels_csv",
+           "new_dxf", "add_panel", "panel_label", "LAYERS",
+           "SheetSettings", "SheetNesting", "nest_sheets", "write_sheet_dxfs", "write_sheets_picture"]
+
+#: DXF layers used by every fabrication drawing: name -> ACI colour.
+LAYERS = {"CUT": 1, "ENGRAVE": 5, "DRILL": 3, "NOTES": 8}
+#: Text style for engraving: a single-stroke SHX font, as laser and CNC software expect.
+ENGRAVE_STYLE = "SINGLESTROKE"
+
+
+@dataclass(frozen=True, kw_only=True)
+class PanelSettings:
+    """Panel material and cutting settings (lengths in mm, density in kg/m^3)."""
+
+    thickness_mm: float = 3.0
+    material_name: str = "acrylic"
+    density: float = 1190.0
+    clearance_mm: float = 2.0
+    hole_diameter_mm: float = 0.0
+    hole_inset_mm: float = 10.0
+    planarity_tolerance_mm: float = 2.0
+    split_nonplanar: bool = False
+
+    def __post_init__(self) -> None:
+        for name in ("thickness_mm", "density"):
+            if not getattr(self, name) > 0:
+                raise InputError(f"panel setting {name} = {getattr(self, name)!r} must be positive")
+        for name in ("clearance_mm", "hole_diameter_mm", "hole_inset_mm", "planarity_tolerance_mm"):
+            if not getattr(self, name) >= 0:
+                raise InputError(f"panel setting {name} = {getattr(self, name)!r} must be zero or positive")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Panel:
+    """One flat panel.
+
+    outline_mm (k, 2): cut outline (inset), counter-clockwise, in the panel plane, mm;
+    face_outline_mm (j, 2): the cell outline before inset; origin_m (3,) and axes (2, 3):
+    the plane (point in m, orthonormal in-plane basis) so that a 2D point p (mm) sits at
+    origin_m + 1e-3 * p @ axes; planarity_mm: largest distance of the cell's nodes to the
+    plane; holes_mm (h, 2): drill centres; outline_3d_m (k, 3): the cut outline in 3D.
+    """
+
+    id: str
+    face: int
+    outline_mm: np.ndarray
+    face_outline_mm: np.ndarray
+    origin_m: np.ndarray
+    axes: np.ndarray
+    planarity_mm: float
+    holes_mm: np.ndarray
+    area_mm2: float
+    perimeter_mm: float
+    outline_3d_m: np.ndarray
+    nonplanar: bool
+
+    @property
+    def vertex_count(self) -> int:
+        return len(self.outline_mm)
+
+
+# ---------------------------------------------------------------------------- geometry
+
+def _plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Best-fit plane of a (k, 3) loop: centroid, normal along the loop's own (Newell)
+    normal, and an in-plane basis (2, 3) with the first axis along the longest side."""
+    centroid = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - centroid, full_matrices=False)
+    normal = vt[-1]
+    rolled = np.roll(points, -1, axis=0)
+    newell = np.cross(points - centroid, rolled - centroid).sum(axis=0)
+    if normal @ newell < 0:
+        normal = -normal
+    sides = rolled - points
+    side = sides[np.argmax(np.einsum("ij,ij->i", sides, sides))]
+    u = side - (side @ normal) * normal
+    norm = np.linalg.norm(u)
+    u = vt[0] if norm < 1e-12 else u / norm
+    v = np.cross(normal, u)
+    return centroid, normal, np.stack([u, v])
+
+
+def _ear_clip(points2d: np.ndarray) -> list[tuple[int, int, int]]:
+    """Triangulate a simple counter-clockwise polygon (k, 2) by ear clipping (k - 2
+    triangles), cutting at each step the best-shaped ear."""
+    index = list(range(len(points2d)))
+    triangles: list[tuple[int, int, int]] = []
+
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    while len(index) > 3:
+        n = len(index)
+        best, best_quality = None, -1.0
+        for k in range(n):
+            i0, i1, i2 = index[k - 1], index[k], index[(k + 1) % n]
+            a, b, c = points2d[i0], points2d[i1], points2d[i2]
+            area2 = cross(a, b, c)
+            if area2 <= 1e-12:
+                continue
+            inside = any(cross(a, b, points2d[j]) >= 0 and cross(b, c, points2d[j]) >= 0
+                         and cross(c, a, points2d[j]) >= 0 for j in index if j not in (i0, i1, i2))
+            if inside:
+                continue
+            perimeter2 = ((a - b) ** 2).sum() + ((b - c) ** 2).sum() + ((c - a) ** 2).sum()
+            quality = area2 / perimeter2
+            if quality > best_quality:
+                best, best_quality = k, quality
+        if best is None:  # degenerate polygon: fall back to a fan
+            return [(0, i, i + 1) for i in range(1, len(points2d) - 1)]
+        triangles.append((index[best - 1], index[best], index[(best + 1) % n]))
+        del index[best]
+    triangles.append((index[0], index[1], index[2]))
+    return triangles
+
+
+def _suffix(k: int) -> str:
+    """0 -> a, 25 -> z, 26 -> aa."""
+    letters = ""
+    k += 1
+    while k > 0:
+        k, r = divmod(k - 1, 26)
+        letters = chr(ord("a") + r) + letters
+    return letters
+
+
+def _hole_centres(outline: np.ndarray, polygon: Polygon, settings: PanelSettings) -> np.ndarray:
+    """One drill centre per convex corner of the cut outline, on the corner bisector, at
+    ``hole_inset_mm`` from both adjacent edges; corners where the hole would not fit
+    (hole edge closer than its radius to the outline) are skipped."""
+    if settings.hole_diameter_mm <= 0:
+        return np.zeros((0, 2))
+    e1 = np.roll(outline, 1, axis=0) - outline
+    e2 = np.roll(outline, -1, axis=0) - outline
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 /= np.linalg.norm(e2, axis=1, keepdims=True)
+    bisector = e1 + e2
+    half = 0.5 * np.arccos(np.clip(np.einsum("ij,ij->i", e1, e2), -1.0, 1.0))
+    convex = (e2[:, 0] * e1[:, 1] - e2[:, 1] * e1[:, 0]) > 0  # CCW outline: e2 x e1 > 0 at convex corners
+    ok = convex & (np.linalg.norm(bisector, axis=1) > 1e-9) & (np.sin(half) > 1e-3)
+    radius = 0.5 * settings.hole_diameter_mm
+    boundary = polygon.exterior
+    centres = []
+    for i in np.flatnonzero(ok):
+        direction = bisector[i] / np.linalg.norm(bisector[i])
+        c = outline[i] + direction * settings.hole_inset_mm / np.sin(half[i])
+        point = shapely.Point(c)
+        if polygon.contains(point) and boundary.distance(point) >= radius + 1e-6:
+            centres.append(c)
+    return np.array(centres).reshape(-1, 2)
+
+
+def _make_panel(panel_id: str, face: int, loop_m: np.ndarray, settings: PanelSettings) -> Panel:
+    centroid, normal, axes = _plane(loop_m)
+    planarity_mm = float(np.abs((loop_m - centroid) @ normal).max() * 1e3)
+    face_2d = (loop_m - centroid) @ axes.T * 1e3
+    face_polygon = Polygon(face_2d)
+    if not face_polygon.is_valid or face_polygon.area <= 0:
+        raise InputError(f"panel {panel_id}: cell {face} flattens to a self-intersecting or empty outline",
+                         hint="check the grid-shell for folded or degenerate cells")
+    cut = face_polygon
+    if settings.clearance_mm > 0:
+        cut = face_polygon.buffer(-settings.clearance_mm, join_style="mitre", mitre_limit=10.0)
+    if cut.is_empty:
+        raise InputError(f"panel {panel_id}: the clearance {settings.clearance_mm} mm removes the whole panel",
+                         hint="lower PanelSettings.clearance_mm")
+    if cut.geom_type == "MultiPolygon":
+        cut = max(cut.geoms, key=lambda g: g.area)
+    cut = shapely.geometry.polygon.orient(cut, 1.0)
+    outline = np.asarray(cut.exterior.coords)[:-1]
+    holes = _hole_centres(outline, cut, settings)
+    return Panel(id=panel_id, face=face, outline_mm=outline, face_outline_mm=face_2d,
+                 origin_m=centroid, axes=axes, planarity_mm=planarity_mm, holes_mm=holes,
+                 area_mm2=float(cut.area), perimeter_mm=float(cut.length),
+                 outline_3d_m=centroid + 1e-3 * outline @ axes,
+                 nonplanar=planarity_mm > settings.planarity_tolerance_mm)
+
+
+def flatten_panels(polymesh: PolyMesh, settings: PanelSettings | None = None) -> list[Panel]:
+    """One flat panel per cell of ``polymesh`` (node loops, m), in face order, id P{f+1:04d}.
+
+    Cells further from planar than ``settings.planarity_tolerance_mm`` are flagged
+    ``nonplanar``; with ``settings.split_nonplanar`` they are replaced by their ear-clipped
+    triangles (ids with a letter suffix), which are exactly planar. Raises ``InputError``
+    naming the panel when a cell is degenerate or the clearance leaves nothing.
+    """
+    settings = settings or PanelSettings()
+    panels: list[Panel] = []
+    nodes = polymesh.nodes
+    for f, loop in enumerate(polymesh.faces):
+        panel_id = f"P{f + 1:04d}"
+        if len(loop) < 3:
+            raise InputError(f"cell {f} ({panel_id}) has {len(loop)} nodes; a panel needs at least 3")
+        loop_m = nodes[loop]
+        panel = _make_panel(panel_id, f, loop_m, settings)
+        if not (panel.nonplanar and settings.split_nonplanar):
+            panels.append(panel)
+            continue
+        centroid, _, axes = _plane(loop_m)
+        for k, tri in enumerate(_ear_clip((loop_m - centroid) @ axes.T)):
+            panels.append(_make_panel(f"{panel_id}{_suffix(k)}", f, loop_m[list(tri)], settings))
+    return panels
+
+
+# ---------------------------------------------------------------------------- DXF
+
+def new_dxf():
+    """A new ezdxf R2010 document in mm with the fabrication layers and engraving style."""
+    import ezdxf
+
+    doc = ezdxf.new("R2010", setup=False)
+    doc.header["$INSUNITS"] = 4  # mm
+    doc.header["$MEASUREMENT"] = 1  # metric
+    for name, colour in LAYERS.items():
+        if name not in doc.layers:
+            doc.layers.add(name, color=colour)
+    if ENGRAVE_STYLE not in doc.styles:
+        doc.styles.add(ENGRAVE_STYLE, font="romans.shx")
+    return doc
+
+
+def panel_label(outline_mm: np.ndarray) -> tuple[np.ndarray, float]:
+    """Label anchor (2,) at the pole of inaccessibility and a text height (mm) that fits."""
+    polygon = Polygon(outline_mm)
+    pole = shapely.ops.polylabel(polygon, tolerance=1.0) if polygon.area > 0 else polygon.centroid
+    radius = polygon.exterior.distance(pole)
+    return np.array([pole.x, pole.y]), float(np.clip(0.3 * radius, 1.0, 10.0))
+
+
+def add_panel(msp, panel: Panel, offset=(0.0, 0.0), angle_deg: float = 0.0,
+              settings: PanelSettings | None = None, note: bool = False) -> None:
+    """Draw one panel into an ezdxf modelspace, rotated by ``angle_deg`` about its 2D origin
+    then moved by ``offset`` (mm): outline on CUT, id on ENGRAVE, holes on DRILL (with
+    ``settings``), optionally the note on NOTES."""
+    from ezdxf.enums import TextEntityAlignment
+
+    a = math.radians(angle_deg)
+    R = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    shift = np.asarray(offset, float)
+
+    def place(points):
+        return np.asarray(points, float).reshape(-1, 2) @ R.T + shift
+
+    outline = place(panel.outline_mm)
+    msp.add_lwpolyline([tuple(map(float, p)) for p in outline], close=True, dxfattribs={"layer": "CUT"})
+    anchor, height = panel_label(panel.outline_mm)
+    at = place(anchor)[0]
+    text = msp.add_text(panel.id, height=height, rotation=float(angle_deg),
+                        dxfattribs={"layer": "ENGRAVE", "style": ENGRAVE_STYLE})
+    text.set_placement((float(at[0]), float(at[1])), align=TextEntityAlignment.MIDDLE_CENTER)
+    if settings is not None and settings.hole_diameter_mm > 0:
+        for c in place(panel.holes_mm):
+            msp.add_circle((float(c[0]), float(c[1])), 0.5 * settings.hole_diameter_mm, dxfattribs={"layer": "DRILL"})
+    if note and settings is not None:
+        lo = outline.min(axis=0)
+        line = (f"{panel.id}  t={settings.thickness_mm:g} mm  {settings.material_name}  "
+                f"planarity {panel.planarity_mm:.2f} mm" + ("  NON-PLANAR" if panel.nonplanar else ""))
+        msp.add_text(line, height=3.0, dxfattribs={"layer": "NOTES", "insert": (float(lo[0]), float(lo[1]) - 8.0)})
+
+
+def write_panel_dxfs(panels: list[Panel], folder: str | os.PathLike,
+                     settings: PanelSettings | None = None) -> list[Path]:
+    """Write ``folder/<panel id>.dxf`` for every panel (atomic); returns the paths."""
+    settings = settings or PanelSettings()
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for panel in panels:
+        doc = new_dxf()
+        add_panel(doc.modelspace(), panel, settings=settings, note=True)
+        target = folder / f"{panel.id}.dxf"
+        with atomic_path(target) as tmp:
+            doc.saveas(tmp)
+        paths.append(target)
+    return paths
+
+
+def write_panels_csv(panels: list[Panel], nesting: "SheetNesting | None", settings: PanelSettings | None,
+                     path: str | os.PathLike) -> Path:
+    """Panel schedule: id, area_mm2, perimeter_mm, vertex_count, planarity_mm, thickness_mm,
+    mass_kg (cut area less drill holes x thickness x density), sheet (S01... or empty)."""
+    settings = settings or PanelSettings()
+    sheet_of: dict[int, str] = {}
+    if nesting is not None:
+        for placement in nesting.placements:
+            sheet_of[placement.panel] = f"S{placement.sheet + 1:02d}"
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["id", "area_mm2", "perimeter_mm", "vertex_count", "planarity_mm", "thickness_mm",
+                     "mass_kg", "sheet"])
+    hole_area = math.pi * (0.5 * settings.hole_diameter_mm) ** 2
+    for i, panel in enumerate(panels):
+        net_area = panel.area_mm2 - hole_area * len(panel.holes_mm)
+        mass = net_area * 1e-6 * settings.thickness_mm * 1e-3 * settings.density
+        writer.writerow([panel.id, f"{panel.area_mm2:.2f}", f"{panel.perimeter_mm:.2f}", panel.vertex_count,
+                         f"{panel.planarity_mm:.3f}", f"{settings.thickness_mm:g}", f"{mass:.4f}",
+                         sheet_of.get(i, "")])
+    return write_text_atomic(path, buffer.getvalue())
+
+
+# re-exported so the whole panel workflow can be taken from this module
+from fabrication.nesting_sheets import (  # noqa: E402
+    SheetNesting, SheetSettings, nest_sheets, write_sheet_dxfs, write_sheets_picture)
