@@ -425,4 +425,4 @@ def _strip(sequence: AssemblySequence, polymesh: PolyMesh, target: Path) -> None
         _draw_state(fig.add_subplot(1, len(picks), j + 1), sequence, polymesh, int(k), thumbnail=True)
     fig.suptitle("built (dark), added in the step (red), supports (blue), temporary props (orange)", fontsize=8)
     with atomic_path(target) as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
+        fig.savefig(tmp, dpi=100, format="png", bbox_inches="tight")

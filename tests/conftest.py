@@ -29,3 +29,34 @@ def square_grid():
     x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1), indexing="ij")
     vertices = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
     return vertices, grid_triangles(n, n)
+
+
+def small_project():
+    """The mock-up template scaled down for tests: 14 cells, two imperfection shapes."""
+    from importlib import resources
+
+    from workflow.config import load_project
+
+    project = load_project(resources.files("templates") / "mockup.toml")
+    return project.model_copy(update={
+        "surface": project.surface.model_copy(update={"parameters": {**project.surface.parameters, "divisions": 12}}),
+        "remesh": project.remesh.model_copy(update={"n_cells": 14, "lloyd_iterations": 30}),
+        "analysis": project.analysis.model_copy(update={"n_modes": 3, "imperfection_shapes": ["linear", "mode1"],
+                                                        "elements_per_beam": 2}),
+        "fabrication": project.fabrication.model_copy(update={
+            "sheets": project.fabrication.sheets.model_copy(update={"width": 2.0, "height": 1.25})}),
+    })
+
+
+@pytest.fixture(scope="session")
+def small_run(tmp_path_factory):
+    """The whole workflow on the small mock-up, once per test session: (project, output folder)."""
+    from workflow.progress import Progress
+    from workflow.runner import run_project
+    from workflow.stages import STAGES
+
+    project = small_project()
+    out = tmp_path_factory.mktemp("small") / "out"
+    summary = run_project(project, out, STAGES, progress=Progress(enabled=False))
+    assert summary.message is None, summary.message
+    return project, out

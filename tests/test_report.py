@@ -93,3 +93,22 @@ def test_synthetic_report_in_chromium(tmp_path: Path):
     width, height, ink = state["canvas"]
     assert width > 100 and height > 100
     assert ink > 200, "the 3D view drew its beams and panels"
+
+
+@pytest.mark.slow
+@pytest.mark.browser
+def test_report_of_a_small_project_in_chromium(small_run):
+    _, out = small_run
+    page = out / "report.html"
+    assert page.is_file()
+    assert (out / "report" / "figures").is_dir() and list((out / "report" / "figures").glob("*.png"))
+    assert list((out / "report" / "tables").glob("*.csv"))
+    driver = chromium_driver()
+    try:
+        state = check_page(driver, page, ARTIFACTS / "report_small_project.png")
+    finally:
+        driver.quit()
+    assert state["errors"] == []
+    assert len(state["images"]) >= 8
+    assert all(complete and width > 0 for _, complete, width in state["images"])
+    assert state["canvas"][2] > 500

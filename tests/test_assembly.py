@@ -1,0 +1,139 @@
+"""Assembly sequence: every part once, every step connected, panels after their ring,
+props where the partial structure is a mechanism; the partial-frame analysis against a
+closed-form cantilever; files re-read."""
+
+from __future__ import annotations
+
+import networkx as nx
+import numpy as np
+import pandas as pd
+import pytest
+
+from engine.errors import InputError
+from engine.mesh import PolyMesh
+from fabrication.assembly import _build_model, partial_frame_deflection, plan_assembly, write_assembly
+from fabrication.drawings import beam_id, node_id, panel_id
+from tests.test_panels import hex_polymesh
+
+# timber 40 x 20 mm (C24-like: E = 11 GPa, G = 0.69 GPa, 420 kg/m^3)
+B, H = 0.02, 0.04
+TIMBER = dict(E=11e9, G=0.69e9, A=B * H, Iy=B * H**3 / 12, Iz=H * B**3 / 12, J=0.229 * H * B**3,
+              mass_per_length=420 * B * H)
+
+
+def _ring_beams(mesh: PolyMesh) -> list[set[int]]:
+    lookup = {tuple(e): k for k, e in enumerate(mesh.edges.tolist())}
+    return [{lookup[tuple(sorted((int(a), int(b))))] for a, b in zip(f, np.roll(f, -1))} for f in mesh.faces]
+
+
+def check_sequence(sequence, mesh: PolyMesh) -> None:
+    beams = [b for s in sequence.steps for b in s.beams]
+    panels = [f for s in sequence.steps for f in s.panels]
+    assert sorted(beams) == list(range(len(mesh.edges)))  # every beam exactly once
+    assert sorted(panels) == list(range(mesh.n_faces))  # every panel exactly once
+    rings = _ring_beams(mesh)
+    built: set[int] = set()
+    supports = set(sequence.support_nodes.tolist())
+    joined: set[int] = set()
+    for s in sequence.steps:
+        built |= set(s.beams)
+        graph = nx.Graph([tuple(mesh.edges[k]) for k in built])
+        assert nx.is_connected(graph), f"step {s.step}: the built structure falls apart"
+        assert graph.nodes & (supports | set(s.props)), f"step {s.step}: nothing holds the structure"
+        for f in s.panels:
+            assert rings[f] <= built, f"step {s.step}: panel {f} before its ring of beams"
+        new = set(graph.nodes) - joined
+        assert set(s.nodes_built) == new
+        joined |= new
+        assert all(p in graph.nodes for p in s.props)
+        assert np.isfinite(s.largest_deflection_m) and s.largest_deflection_m >= 0
+        # no props: the pinned supports reached must hold all rigid-body motions of a frame
+        # with rigid joints, i.e. at least three of them not on one line
+        if not s.props:
+            held = mesh.nodes[sorted(supports & set(graph.nodes))]
+            assert len(held) >= 3
+            assert np.linalg.matrix_rank(held[1:] - held[0], tol=1e-9) >= 2
+
+
+def test_cantilever_closed_form():
+    # one beam of the cell, fully fixed at node 0 by a prop: the lumped half-weight at the
+    # free end P = m g L / 2 gives the tip deflection P L^3 / (3 E Iy) (Euler-Bernoulli)
+    nodes = np.array([[0.0, 0.0, 0.0], [0.8, 0.0, 0.0], [0.0, 0.6, 0.0]])
+    mesh = PolyMesh(nodes=nodes, faces=(np.array([0, 1, 2]),))
+    model = _build_model(mesh, np.array([2]), TIMBER, 0.0, "pinned")
+    k = int(np.flatnonzero((mesh.edges == [0, 1]).all(axis=1))[0])
+    deflection, field = partial_frame_deflection(model, np.array([k]), np.zeros(0, np.int64), [0])
+    L = 0.8
+    P = 0.5 * TIMBER["mass_per_length"] * 9.81 * L
+    assert deflection == pytest.approx(P * L**3 / (3 * TIMBER["E"] * TIMBER["Iy"]), rel=1e-6)
+    assert field[0] == 0.0 and field[2] == 0.0 and field[1] == pytest.approx(deflection)
+    # a panel load on the triangle adds (q A / 3) at each node: the whole cell on three pinned nodes
+    # moves nothing, so the closed cell held at all three nodes does not deflect
+    model = _build_model(mesh, np.array([0, 1, 2]), TIMBER, 100.0, "pinned")
+    deflection, _ = partial_frame_deflection(model, np.arange(3), np.array([0]), [])
+    assert deflection == pytest.approx(0.0, abs=1e-15)
+
+
+def test_hex_sequence_valid():
+    mesh = hex_polymesh(3, 4)
+    supports = np.flatnonzero(mesh.supports)
+    sequence = plan_assembly(mesh, supports, TIMBER, panel_area_load=35.0)
+    check_sequence(sequence, mesh)
+    assert sequence.deflection_limit_m == pytest.approx(np.ptp(mesh.nodes[:, :2], axis=0).max() / 500)
+    # props stay only while needed: if the finished shell stands within the limit on its
+    # supports alone, no prop is left after the last step
+    model = _build_model(mesh, supports, TIMBER, 35.0, "pinned")
+    final, _ = partial_frame_deflection(model, np.arange(len(mesh.edges)), np.arange(mesh.n_faces), [])
+    if final <= sequence.deflection_limit_m:
+        assert sequence.steps[-1].props == []
+    else:
+        assert sequence.steps[-1].props
+
+
+def test_single_support_needs_prop_at_dangling_end():
+    # one hexagon held at one pinned node: a mechanism; the prop goes to the opposite node
+    mesh = hex_polymesh(1, 1, lift=False)
+    loop = mesh.faces[0]
+    sequence = plan_assembly(mesh, np.array([loop[0]]), TIMBER)
+    (step,) = sequence.steps
+    assert step.props_added == [int(loop[3])] and step.props == [int(loop[3])]
+    check_sequence(sequence, mesh)
+
+
+def test_tight_limit_adds_props_loose_limit_not():
+    mesh = hex_polymesh(2, 3)
+    supports = np.flatnonzero(mesh.supports)
+    loose = plan_assembly(mesh, supports, TIMBER, deflection_limit_m=1.0)
+    tight = plan_assembly(mesh, supports, TIMBER, deflection_limit_m=1e-6)
+    check_sequence(loose, mesh)
+    check_sequence(tight, mesh)
+    assert len(tight.props_used) > len(loose.props_used)
+
+
+def test_bad_input():
+    mesh = hex_polymesh(1, 2)
+    with pytest.raises(InputError, match="mass_per_length"):
+        plan_assembly(mesh, np.array([0]), {k: v for k, v in TIMBER.items() if k != "mass_per_length"})
+    with pytest.raises(InputError):
+        plan_assembly(mesh, np.array([], dtype=int), TIMBER)
+
+
+def test_write_assembly_files(tmp_path):
+    mesh = hex_polymesh(2, 2)
+    sequence = plan_assembly(mesh, np.flatnonzero(mesh.supports), TIMBER, panel_area_load=35.0)
+    summary = write_assembly(sequence, mesh, tmp_path / "assembly")
+    csv_path = summary["csv"]
+    assert summary["steps"] == len(sequence.steps)
+    table = pd.read_csv(csv_path, keep_default_na=False)
+    assert list(table.columns) == ["step", "parts", "props", "largest_deflection_mm"]
+    assert list(table["step"]) == list(range(1, len(sequence.steps) + 1))
+    parts = " ".join(table["parts"]).split()
+    expected = [beam_id(k) for k in range(len(mesh.edges))] + [panel_id(f) for f in range(mesh.n_faces)]
+    assert sorted(parts) == sorted(expected)
+    for row, step in zip(table.itertuples(), sequence.steps):
+        assert row.props.split() == [node_id(p) for p in step.props]
+        assert row.largest_deflection_mm == pytest.approx(step.largest_deflection_m * 1e3, abs=1e-3)
+    images = sorted((tmp_path / "assembly" / "steps").iterdir())
+    assert [p.name for p in images] == [f"step_{k:03d}.png" for k in range(1, len(sequence.steps) + 1)]
+    for p in images + [tmp_path / "assembly" / "steps_strip.png"]:
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

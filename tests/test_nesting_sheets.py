@@ -1,0 +1,146 @@
+"""Sheet nesting: every panel once, no overlaps, spacing and margin kept; sheet DXFs re-read."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+from shapely.geometry import Polygon, box
+
+from engine.errors import InputError
+from engine.mesh import PolyMesh
+from fabrication.nesting_sheets import SheetSettings, nest_sheets, write_sheet_dxfs
+from fabrication.panels import PanelSettings, flatten_panels
+from tests.test_panels import hex_polymesh
+
+ezdxf = pytest.importorskip("ezdxf")
+
+
+def _rectangles(sizes_mm: list[tuple[float, float]]) -> PolyMesh:
+    """Flat rectangular cells side by side (no shared nodes), sizes in mm."""
+    nodes, faces, x = [], [], 0.0
+    for w, h in sizes_mm:
+        base = len(nodes)
+        nodes += [[x, 0, 0], [x + w * 1e-3, 0, 0], [x + w * 1e-3, h * 1e-3, 0], [x, h * 1e-3, 0]]
+        faces.append(np.arange(base, base + 4))
+        x += w * 1e-3 + 1.0
+    return PolyMesh(nodes=np.array(nodes), faces=tuple(faces))
+
+
+def check_nesting(nesting, panels, settings: SheetSettings, tol: float = 1e-6) -> None:
+    """Independent checks with shapely: each panel once, inside the margin, >= spacing apart."""
+    assert len(nesting.placements) == len(panels)
+    assert [p.panel for p in nesting.placements] == list(range(len(panels)))
+    on_sheets = sorted(i for members in nesting.sheets for i in members)
+    assert on_sheets == list(range(len(panels)))
+    inner = box(settings.margin_mm - tol, settings.margin_mm - tol,
+                settings.width_mm - settings.margin_mm + tol, settings.height_mm - settings.margin_mm + tol)
+    sheet_area = settings.width_mm * settings.height_mm
+    total = 0.0
+    for k, members in enumerate(nesting.sheets):
+        polygons = []
+        for i in members:
+            assert nesting.placements[i].sheet == k
+            placed = Polygon(nesting.placed_outline(i, panels[i].outline_mm))
+            # a rigid motion keeps the area
+            assert placed.area == pytest.approx(Polygon(panels[i].outline_mm).area, rel=1e-9)
+            assert inner.contains(placed)
+            polygons.append(placed)
+        tree = shapely.STRtree(polygons)
+        pairs = tree.query(polygons, predicate="dwithin", distance=settings.spacing_mm - tol)
+        pairs = pairs[:, pairs[0] < pairs[1]]
+        assert pairs.shape[1] == 0, f"sheet {k}: parts closer than the spacing: {pairs.T.tolist()}"
+        area = sum(p.area for p in polygons)
+        assert nesting.sheet_utilisation[k] == pytest.approx(area / sheet_area, rel=1e-9)
+        total += area
+    assert nesting.utilisation == pytest.approx(total / (len(nesting.sheets) * sheet_area), rel=1e-9)
+
+
+def test_hex_grid_nesting_valid():
+    mesh = hex_polymesh(5, 6, radius=0.1)
+    panels = flatten_panels(mesh, PanelSettings(clearance_mm=2))
+    settings = SheetSettings()
+    nesting = nest_sheets(panels, settings)
+    check_nesting(nesting, panels, settings)
+    # lower bound on sheets from area; a workshop-usable nesting stays within 2x of it
+    lower = np.ceil(sum(p.area_mm2 for p in panels) / (settings.width_mm * settings.height_mm))
+    assert lower <= nesting.n_sheets <= 2 * lower
+
+
+def test_identical_rectangles_fill_a_sheet():
+    # 16 rectangles 280 x 135 mm fit a 1200 x 600 sheet as a 4 x 4 grid:
+    # 4 * 280 + 3 * 4 = 1132 <= 1180 and 4 * 135 + 3 * 4 = 552 <= 580 (spacing 4, margin 10)
+    panels = flatten_panels(_rectangles([(280, 135)] * 16), PanelSettings(clearance_mm=0))
+    settings = SheetSettings(spacing_mm=4, margin_mm=10)
+    nesting = nest_sheets(panels, settings)
+    check_nesting(nesting, panels, settings)
+    assert nesting.n_sheets == 1
+    assert nesting.utilisation == pytest.approx(16 * 280 * 135 / (1200 * 600), rel=1e-9)
+
+
+def test_rotation_needed_and_oversize_panel():
+    # a 1000 x 100 panel fits a portrait 600 x 1200 sheet only turned by 90 degrees
+    panels = flatten_panels(_rectangles([(1000, 100), (200, 150)]), PanelSettings(clearance_mm=0))
+    settings = SheetSettings(width_mm=600, height_mm=1200)
+    nesting = nest_sheets(panels, settings)
+    check_nesting(nesting, panels, settings)
+    assert nesting.placements[0].angle_deg % 180 == pytest.approx(90)
+    with pytest.raises(InputError, match="P0001"):
+        nest_sheets(panels, SheetSettings(width_mm=600, height_mm=1200, rotations=False))
+    with pytest.raises(InputError, match="P0001"):
+        nest_sheets(panels, SheetSettings(width_mm=500, height_mm=500))
+
+
+def test_sheet_dxfs_reread(tmp_path):
+    mesh = hex_polymesh(3, 4, radius=0.12)
+    psettings = PanelSettings(hole_diameter_mm=4)
+    panels = flatten_panels(mesh, psettings)
+    settings = SheetSettings(width_mm=800, height_mm=500)
+    nesting = nest_sheets(panels, settings)
+    paths = write_sheet_dxfs(nesting, panels, tmp_path / "sheets", psettings)
+    assert [p.name for p in paths] == [f"S{k + 1:02d}.dxf" for k in range(nesting.n_sheets)]
+    seen = []
+    for k, path in enumerate(paths):
+        doc = ezdxf.readfile(path)
+        assert not doc.audit().has_errors
+        assert doc.header["$INSUNITS"] == 4
+        msp = doc.modelspace()
+        frame = msp.query('LWPOLYLINE[layer=="NOTES"]')
+        assert len(frame) == 1
+        xy = np.array([p[:2] for p in frame[0].get_points()])
+        assert np.allclose(xy.max(0) - xy.min(0), [800, 500])
+        cuts = msp.query('LWPOLYLINE[layer=="CUT"]')
+        labels = [t.dxf.text for t in msp.query('TEXT[layer=="ENGRAVE"]')]
+        assert len(cuts) == len(nesting.sheets[k]) == len(labels)
+        polygons = [Polygon([p[:2] for p in c.get_points()]) for c in cuts]
+        assert all(c.closed for c in cuts)
+        for a in range(len(polygons)):
+            for b in range(a + 1, len(polygons)):
+                assert polygons[a].intersection(polygons[b]).area == 0.0
+                assert polygons[a].distance(polygons[b]) >= settings.spacing_mm - 1e-3
+        # each label lies inside its own part; drill circles inside parts
+        for label, polygon in zip(labels, polygons):
+            assert label in {panels[i].id for i in nesting.sheets[k]}
+        holes = msp.query('CIRCLE[layer=="DRILL"]')
+        assert len(holes) == sum(len(panels[i].holes_mm) for i in nesting.sheets[k])
+        union = shapely.union_all(polygons)
+        assert all(union.contains(shapely.Point(h.dxf.center.x, h.dxf.center.y)) for h in holes)
+        seen += labels
+    assert sorted(seen) == sorted(p.id for p in panels)
+
+
+def test_nonconvex_panels_and_picture(tmp_path):
+    # L-shaped cells are nested by their convex hull: still no overlap, spacing kept
+    from fabrication.nesting_sheets import write_sheets_picture
+
+    L = np.array([[0, 0, 0], [0.3, 0, 0], [0.3, 0.1, 0], [0.1, 0.1, 0], [0.1, 0.25, 0], [0, 0.25, 0]])
+    nodes = np.vstack([L + [k * 0.5, 0, 0] for k in range(10)])
+    mesh = PolyMesh(nodes=nodes, faces=tuple(np.arange(6) + 6 * k for k in range(10)))
+    panels = flatten_panels(mesh, PanelSettings(clearance_mm=1))
+    assert all(Polygon(p.outline_mm).convex_hull.area > Polygon(p.outline_mm).area for p in panels)
+    settings = SheetSettings(width_mm=700, height_mm=500, spacing_mm=6)
+    nesting = nest_sheets(panels, settings)
+    check_nesting(nesting, panels, settings)
+    assert nesting.sheet_of == {panels[p.panel].id: f"S{p.sheet + 1:02d}" for p in nesting.placements}
+    path = write_sheets_picture(nesting, panels, tmp_path / "sheets.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -1,0 +1,190 @@
+"""Flat panels: flattening, inset, splitting, DXF and CSV files re-read with other readers."""
+
+from __future__ import annotations
+
+import csv
+from functools import lru_cache
+
+import numpy as np
+import pytest
+import shapely
+from shapely.geometry import Point, Polygon
+
+from engine.errors import InputError
+from engine.mesh import PolyMesh, best_fit_plane
+from fabrication.panels import Panel, PanelSettings, flatten_panels, write_panel_dxfs, write_panels_csv
+
+ezdxf = pytest.importorskip("ezdxf")
+
+
+@lru_cache(maxsize=None)
+def _mockup_heights():
+    from engine.parametric import mockup
+    from scipy.interpolate import LinearNDInterpolator
+
+    mesh = mockup(divisions=12).mesh
+    return LinearNDInterpolator(mesh.vertices[:, :2], mesh.vertices[:, 2], fill_value=0.0)
+
+
+def hex_polymesh(rows: int = 4, cols: int = 4, radius: float = 0.18, lift: bool = True,
+                 span: float = 2.4) -> PolyMesh:
+    """A pointy-top hexagonal grid (rows x cols cells, circumradius ``radius`` m) centred on the
+    origin, lifted onto the mock-up funicular (2.4 m square) heights; supports on boundary nodes
+    in the lowest quarter of the height range or, when flat, all boundary nodes."""
+    w = np.sqrt(3.0) * radius
+    corners = np.array([[np.cos(a), np.sin(a)] for a in np.pi / 6 + np.arange(6) * np.pi / 3]) * radius
+    centres = np.array([[c * w + (r % 2) * w / 2, r * 1.5 * radius] for r in range(rows) for c in range(cols)])
+    centres -= centres.mean(axis=0)
+    points = (centres[:, None, :] + corners[None, :, :]).reshape(-1, 2)
+    key = np.round(points / (radius * 1e-3)).astype(np.int64)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    plan = points[first]
+    faces = tuple(inverse.reshape(-1, 6)[k] for k in range(len(centres)))
+    scale = 0.95 * span / 2 / np.abs(plan).max()
+    z = _mockup_heights()(plan * scale) if lift else np.zeros(len(plan))
+    nodes = np.column_stack([plan, z])
+    counts = np.bincount(np.concatenate(faces), minlength=len(plan))
+    boundary = counts < 3
+    supports = boundary & (z <= z.min() + 0.25 * max(np.ptp(z), 1e-9)) if lift else boundary
+    return PolyMesh(nodes=nodes, faces=faces, boundary=boundary, supports=supports)
+
+
+def _twisted_quad(twist_mm: float) -> PolyMesh:
+    nodes = np.array([[0, 0, 0], [0.4, 0, 0], [0.4, 0.3, twist_mm * 1e-3], [0, 0.3, 0]], float)
+    return PolyMesh(nodes=nodes, faces=(np.arange(4),))
+
+
+def test_flat_square_panel_inset_is_exact():
+    # a 300 mm x 200 mm rectangle inset by c has area (300-2c)(200-2c) and mitred corners
+    nodes = np.array([[0, 0, 1.0], [0.3, 0, 1.0], [0.3, 0.2, 1.0], [0, 0.2, 1.0]])
+    mesh = PolyMesh(nodes=nodes, faces=(np.arange(4),))
+    (panel,) = flatten_panels(mesh, PanelSettings(clearance_mm=5))
+    assert panel.id == "P0001" and panel.face == 0
+    assert panel.area_mm2 == pytest.approx(290 * 190, rel=1e-9)
+    assert panel.perimeter_mm == pytest.approx(2 * (290 + 190), rel=1e-9)
+    assert len(panel.outline_mm) == 4 and not panel.nonplanar
+    assert panel.planarity_mm == pytest.approx(0.0, abs=1e-9)
+    # the 3D outline lies in z = 1 and is the inset rectangle
+    assert np.allclose(panel.outline_3d_m[:, 2], 1.0)
+    lo, hi = panel.outline_3d_m[:, :2].min(0), panel.outline_3d_m[:, :2].max(0)
+    assert np.allclose(lo, [0.005, 0.005]) and np.allclose(hi, [0.295, 0.195])
+
+
+def test_hex_grid_panels_planarity_and_3d_mapping():
+    mesh = hex_polymesh(3, 3)
+    panels = flatten_panels(mesh, PanelSettings(clearance_mm=2))
+    assert [p.id for p in panels] == [f"P{f + 1:04d}" for f in range(mesh.n_faces)]
+    planarity = mesh.face_planarity() * 1e3
+    for p, expected in zip(panels, planarity):
+        # independent planarity: PolyMesh.face_planarity (SVD best-fit plane)
+        assert p.planarity_mm == pytest.approx(expected, rel=1e-6, abs=1e-9)
+        assert p.nonplanar == (expected > 2.0)
+        # the unprojected face outline maps back onto the projection of the nodes
+        loop = mesh.nodes[mesh.faces[p.face]]
+        centroid, normal = best_fit_plane(loop)
+        projected = loop - np.outer((loop - centroid) @ normal, normal)
+        back = p.origin_m + 1e-3 * p.face_outline_mm @ p.axes
+        assert np.allclose(back, projected, atol=1e-9)
+        # the inset outline is counter-clockwise, inside the face outline and 2 mm from it
+        cut, face = Polygon(p.outline_mm), Polygon(p.face_outline_mm)
+        assert cut.exterior.is_ccw and face.contains(cut)
+        assert face.exterior.distance(cut) == pytest.approx(2.0, abs=1e-6)
+
+
+def test_holes_at_inset_from_both_edges():
+    nodes = np.array([[0, 0, 0], [0.3, 0, 0], [0.3, 0.2, 0], [0, 0.2, 0]], float)
+    mesh = PolyMesh(nodes=nodes, faces=(np.arange(4),))
+    (panel,) = flatten_panels(mesh, PanelSettings(clearance_mm=0, hole_diameter_mm=5, hole_inset_mm=12))
+    assert len(panel.holes_mm) == 4
+    cut = Polygon(panel.outline_mm)
+    for c in panel.holes_mm:
+        # distance to the nearest edge is exactly the inset (corner bisector of a right angle)
+        assert cut.exterior.distance(Point(c)) == pytest.approx(12.0, abs=1e-9)
+    # hexagon (120 degree corners): the centre sits 12 / sin(60 deg) from the corner
+    (hex_panel, *_) = flatten_panels(hex_polymesh(1, 1, lift=False),
+                                     PanelSettings(clearance_mm=0, hole_diameter_mm=5, hole_inset_mm=12))
+    dist = np.linalg.norm(hex_panel.holes_mm[:, None] - hex_panel.outline_mm[None], axis=2).min(1)
+    assert np.allclose(dist, 12 / np.sin(np.pi / 3))
+
+
+def test_split_nonplanar_gives_planar_triangles():
+    mesh = _twisted_quad(30.0)
+    (whole,) = flatten_panels(mesh, PanelSettings(planarity_tolerance_mm=2))
+    assert whole.nonplanar and whole.planarity_mm == pytest.approx(7.5, rel=0.05)  # twist / 4 for a square-ish quad
+    parts = flatten_panels(mesh, PanelSettings(planarity_tolerance_mm=2, split_nonplanar=True))
+    assert [p.id for p in parts] == ["P0001a", "P0001b"]
+    for p in parts:
+        assert not p.nonplanar and p.planarity_mm < 1e-9 and p.face == 0
+    # the two un-inset triangles tile the face: their flat areas equal the 3D areas of one of
+    # the quad's two diagonal triangulations (cross-product areas)
+    total = sum(Polygon(p.face_outline_mm).area for p in parts)
+    n = mesh.nodes * 1e3
+
+    def area3d(t):
+        return 0.5 * np.linalg.norm(np.cross(n[t[1]] - n[t[0]], n[t[2]] - n[t[0]]))
+
+    options = [area3d([0, 1, 2]) + area3d([0, 2, 3]), area3d([0, 1, 3]) + area3d([1, 2, 3])]
+    assert min(abs(total - a) for a in options) < 1e-6
+
+
+def test_split_hex_grid_all_planar():
+    mesh = hex_polymesh(3, 3, radius=0.3)
+    parts = flatten_panels(mesh, PanelSettings(planarity_tolerance_mm=0.5, split_nonplanar=True))
+    assert any(p.id.endswith("d") for p in parts)  # a hexagon makes 4 triangles
+    assert all(p.planarity_mm <= 0.5 for p in parts)
+    assert {p.face for p in parts} == set(range(mesh.n_faces))
+
+
+def test_clearance_too_large_is_a_user_error():
+    mesh = hex_polymesh(1, 1, radius=0.01, lift=False)
+    with pytest.raises(InputError, match="P0001"):
+        flatten_panels(mesh, PanelSettings(clearance_mm=20))
+
+
+def test_panel_dxfs_reread(tmp_path):
+    mesh = hex_polymesh(2, 3)
+    settings = PanelSettings(clearance_mm=3, hole_diameter_mm=4, hole_inset_mm=10)
+    panels = flatten_panels(mesh, settings)
+    paths = write_panel_dxfs(panels, tmp_path / "panels", settings)
+    assert sorted(p.name for p in paths) == sorted(f"{p.id}.dxf" for p in panels)
+    assert not [p for p in (tmp_path / "panels").iterdir() if p.name.startswith(".")]  # no temp files left
+    for panel, path in zip(panels, paths):
+        doc = ezdxf.readfile(path)
+        auditor = doc.audit()
+        assert not auditor.has_errors
+        assert doc.header["$INSUNITS"] == 4
+        assert {"CUT", "ENGRAVE", "DRILL", "NOTES"} <= {layer.dxf.name for layer in doc.layers}
+        msp = doc.modelspace()
+        cuts = msp.query('LWPOLYLINE[layer=="CUT"]')
+        assert len(cuts) == 1 and cuts[0].closed
+        xy = np.array([p[:2] for p in cuts[0].get_points()])
+        # CUT area equals the inset face area computed independently with shapely
+        inset = Polygon(panel.face_outline_mm).buffer(-3, join_style="mitre")
+        assert shapely.area(Polygon(xy)) == pytest.approx(inset.area, rel=5e-3)
+        labels = [t.dxf.text for t in msp.query('TEXT[layer=="ENGRAVE"]')]
+        assert labels == [panel.id]
+        circles = msp.query('CIRCLE[layer=="DRILL"]')
+        assert len(circles) == len(panel.holes_mm) > 0
+        assert all(Polygon(xy).contains(Point(c.dxf.center.x, c.dxf.center.y).buffer(2.0)) for c in circles)
+        notes = " ".join(t.dxf.text for t in msp.query('TEXT[layer=="NOTES"]'))
+        assert "acrylic" in notes and "3 mm" in notes and "planarity" in notes
+
+
+def test_panels_csv(tmp_path):
+    mesh = hex_polymesh(2, 2)
+    settings = PanelSettings(thickness_mm=4, density=1000, hole_diameter_mm=0)
+    panels = flatten_panels(mesh, settings)
+    path = write_panels_csv(panels, None, settings, tmp_path / "panels.csv")
+    import pandas as pd
+
+    table = pd.read_csv(path)
+    assert list(table.columns) == ["id", "area_mm2", "perimeter_mm", "vertex_count", "planarity_mm",
+                                   "thickness_mm", "mass_kg", "sheet"]
+    assert list(table["id"]) == [p.id for p in panels]
+    # mass = area x thickness x density, area re-computed from the outline by the shoelace formula
+    for row, p in zip(table.itertuples(), panels):
+        x, y = p.outline_mm.T
+        area = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+        assert row.mass_kg == pytest.approx(area * 1e-6 * 4e-3 * 1000, rel=1e-3)
+        assert row.vertex_count == len(p.outline_mm)
+    assert table["sheet"].isna().all()
