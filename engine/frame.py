@@ -20,6 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .linalg import congruent
 from .errors import ConvergenceError, InputError, MechanismError
 from .supports import Supports
 
@@ -27,6 +28,7 @@ __all__ = ["FrameModel", "LinearResult", "BucklingResult", "NonlinearResult", "l
            "nonlinear_static", "solve_frame_json", "DOF_NAMES"]
 
 DOF_NAMES = ("ux", "uy", "uz", "rx", "ry", "rz")
+
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -318,7 +320,7 @@ def _solve_linear(model: FrameModel, supports: Supports, loads: np.ndarray) -> _
     T = _transformation(R)
     K_local = _local_stiffness(L, el)
     dofs = _dofs(el.connectivity)
-    K = _assemble(np.einsum("mki,mkl,mlj->mij", T, K_local, T), dofs, 6 * n_all)
+    K = _assemble(congruent(T, K_local), dofs, 6 * n_all)
     free = np.flatnonzero(~restrained)
     lu = _factor(K[free][:, free].tocsc())
     u = np.zeros(6 * n_all)
@@ -356,7 +358,7 @@ def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_
     state = _solve_linear(model, supports, loads)
     el = state.el
     N = state.local_forces[:, 6]
-    K_G = _assemble(np.einsum("mki,mkl,mlj->mij", state.T, _geometric_stiffness(state.L, N, el), state.T),
+    K_G = _assemble(congruent(state.T, _geometric_stiffness(state.L, N, el)),
                     _dofs(el.connectivity), len(state.u))
     free = state.free
     KG_free = (-K_G[free][:, free]).tocsc()
@@ -466,7 +468,7 @@ class _Corotational:
         N = f_local[:, 6]
         K_elements = K_local + _geometric_stiffness(length, N, self.el)
         # the axial force also stiffens (tension) or softens the transverse chord rotation
-        return _assemble(np.einsum("mki,mkl,mlj->mij", T, K_elements, T), self.dofs, 6 * self.n_all)
+        return _assemble(congruent(T, K_elements), self.dofs, 6 * self.n_all)
 
 
 def _update(x: np.ndarray, triads: np.ndarray, du: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -18,6 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .linalg import congruent
 from .errors import InputError, MechanismError
 from .loads import GRAVITY, LoadCase
 from .mesh import TriMesh
@@ -28,6 +29,7 @@ __all__ = ["ShellMaterial", "ShellResult", "shell_nodal_loads", "analyse_shell",
 
 #: Drilling penalty: k = DRILLING_FACTOR * G t A per node; small enough not to stiffen bending.
 DRILLING_FACTOR = 1e-3
+
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -200,7 +202,7 @@ def shell_stiffness(vertices: np.ndarray, triangles: np.ndarray, thickness: floa
     frames, local, area = _frames(vertices, triangles)
     T = _rotation(frames)
     K_local = _local_stiffness(local, area, thickness, material)
-    K_global = np.einsum("mki,mkl,mlj->mij", T, K_local, T)
+    K_global = congruent(T, K_local)
     dofs = _dof_indices(triangles)
     rows = np.repeat(dofs, 18, axis=1).ravel()
     cols = np.tile(dofs, (1, 18)).ravel()
