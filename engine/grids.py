@@ -1,0 +1,206 @@
+"""Reference grids for the same-length comparison (METHOD.md section 5): a regular triangular
+and a regular square grid over the surface's plan, clipped to its outline (holes too), lifted
+onto the surface, with the spacing found so that the total beam length matches a target within
+1 %. Surfaces must be height fields over their plan (a surface that folds over itself in plan
+is refused with a clear error)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import InputError
+from .mesh import PolyMesh, TriMesh
+
+__all__ = ["is_height_field", "triangular_grid", "quad_grid", "lattice_grid"]
+
+
+def is_height_field(mesh: TriMesh) -> bool:
+    """True when every facet faces up (so the plan projection is one-to-one)."""
+    return bool(np.all(mesh.face_normals[:, 2] > 1e-6))
+
+
+def _outline(mesh: TriMesh):
+    from shapely.geometry import Polygon
+
+    loops = [mesh.vertices[loop, :2] for loop in mesh.boundary_loops]
+    areas = [Polygon(loop).area for loop in loops]
+    outer = int(np.argmax(areas))
+    polygon = Polygon(loops[outer], [loop for i, loop in enumerate(loops) if i != outer])
+    return polygon if polygon.is_valid else polygon.buffer(0)
+
+
+def _tiles(kind: str, spacing: float, bounds, centre) -> list[np.ndarray]:
+    x0, y0, x1, y1 = bounds
+    tiles = []
+    if kind == "quad":
+        nx0, nx1 = int(np.floor((x0 - centre[0]) / spacing)) - 1, int(np.ceil((x1 - centre[0]) / spacing)) + 1
+        ny0, ny1 = int(np.floor((y0 - centre[1]) / spacing)) - 1, int(np.ceil((y1 - centre[1]) / spacing)) + 1
+        for i in range(nx0, nx1):
+            for j in range(ny0, ny1):
+                x, y = centre[0] + i * spacing, centre[1] + j * spacing
+                tiles.append(np.array([[x, y], [x + spacing, y], [x + spacing, y + spacing], [x, y + spacing]]))
+        return tiles
+    height = spacing * np.sqrt(3) / 2
+    ny0, ny1 = int(np.floor((y0 - centre[1]) / height)) - 1, int(np.ceil((y1 - centre[1]) / height)) + 1
+    nx0, nx1 = int(np.floor((x0 - centre[0]) / spacing)) - 2, int(np.ceil((x1 - centre[0]) / spacing)) + 2
+    for j in range(ny0, ny1):
+        y = centre[1] + j * height
+        shift = 0.5 * spacing * (j % 2)
+        for i in range(nx0, nx1):
+            x = centre[0] + i * spacing + shift
+            tiles.append(np.array([[x, y], [x + spacing, y], [x + 0.5 * spacing, y + height]]))
+            tiles.append(np.array([[x + spacing, y], [x + 1.5 * spacing, y + height], [x + 0.5 * spacing, y + height]]))
+    return tiles
+
+
+def _clipped(kind: str, spacing: float, polygon, centre) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Plan nodes (n,2) and faces (node loops) of the lattice clipped to the polygon."""
+    from shapely.geometry import Polygon
+    from shapely.geometry.polygon import orient
+
+    key_scale = 1e-7 * max(polygon.bounds[2] - polygon.bounds[0], polygon.bounds[3] - polygon.bounds[1])
+    index: dict[tuple[int, int], int] = {}
+    points: list[np.ndarray] = []
+    faces: list[np.ndarray] = []
+    prepared = polygon.buffer(0)
+    for tile in _tiles(kind, spacing, polygon.bounds, centre):
+        shape = Polygon(tile)
+        if not prepared.intersects(shape):
+            continue
+        cut = prepared.intersection(shape)
+        parts = [cut] if cut.geom_type == "Polygon" else [g for g in getattr(cut, "geoms", []) if g.geom_type == "Polygon"]
+        for part in parts:
+            if part.area < 1e-3 * shape.area:
+                continue
+            ring = np.array(orient(part, 1.0).exterior.coords)[:-1]
+            loop = []
+            for p in ring:
+                key = (int(round(p[0] / key_scale)), int(round(p[1] / key_scale)))
+                if key not in index:
+                    index[key] = len(points)
+                    points.append(p)
+                if not loop or loop[-1] != index[key]:
+                    loop.append(index[key])
+            if len(loop) >= 3 and loop[0] == loop[-1]:
+                loop.pop()
+            if len(loop) >= 3:
+                faces.append(np.array(loop))
+    return np.array(points), faces
+
+
+def _insert_hanging_nodes(points: np.ndarray, faces: list[np.ndarray]) -> list[np.ndarray]:
+    """Add nodes lying on a face's edge (from a neighbouring clipped tile) into that face's loop."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(points)
+    out = []
+    for face in faces:
+        loop = []
+        for a, b in zip(face, np.roll(face, -1)):
+            loop.append(int(a))
+            pa, pb = points[a], points[b]
+            length = np.linalg.norm(pb - pa)
+            candidates = tree.query_ball_point(0.5 * (pa + pb), 0.5 * length + 1e-12)
+            inside = []
+            for c in candidates:
+                if c in (a, b):
+                    continue
+                t = np.dot(points[c] - pa, pb - pa) / length**2
+                off = np.linalg.norm(points[c] - (pa + t * (pb - pa)))
+                if 1e-9 < t < 1 - 1e-9 and off < 1e-9 * max(length, 1e-300):
+                    inside.append((t, c))
+            loop.extend(c for _, c in sorted(inside))
+        out.append(np.array(loop))
+    return out
+
+
+def lattice_grid(mesh: TriMesh, kind: str, spacing: float, support_vertices: np.ndarray | None = None,
+                 angle_deg: float = 0.0) -> PolyMesh:
+    """The ``kind`` ("triangle" or "quad") lattice of ``spacing`` (m), turned by ``angle_deg`` in
+    plan, clipped to the plan and lifted."""
+    from matplotlib.tri import LinearTriInterpolator, Triangulation
+    from scipy.spatial import cKDTree
+
+    if not is_height_field(mesh):
+        raise InputError("the reference grids need a surface that is a height field over its plan",
+                         hint="compare on a surface without overhangs or vertical parts")
+    # collinear boundary vertices would become nodes of the clipped cells: simplify them away
+    from shapely import affinity
+
+    polygon = _outline(mesh).simplify(0.01 * spacing, preserve_topology=True)
+    centre = np.array(polygon.centroid.coords[0])
+    turned = affinity.rotate(polygon, -angle_deg, origin=tuple(centre))
+    plan, faces = _clipped(kind, spacing, turned, centre)
+    if angle_deg:
+        c, s = np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg))
+        plan = (plan - centre) @ np.array([[c, s], [-s, c]]) + centre
+    faces = _insert_hanging_nodes(plan, faces)
+    interpolate = LinearTriInterpolator(Triangulation(mesh.vertices[:, 0], mesh.vertices[:, 1], mesh.faces), mesh.vertices[:, 2])
+    z = np.asarray(interpolate(plan[:, 0], plan[:, 1]).filled(np.nan))
+    if np.any(np.isnan(z)):
+        _, nearest = cKDTree(mesh.vertices[:, :2]).query(plan[np.isnan(z)])
+        z[np.isnan(z)] = mesh.vertices[nearest, 2]
+    nodes = np.c_[plan, z]
+    boundary = polygon.boundary
+    from shapely.geometry import Point
+
+    on_boundary = np.array([boundary.distance(Point(p)) < 1e-6 * spacing for p in plan])
+    corner_points = np.concatenate([np.array(polygon.exterior.coords)[:-1]] +
+                                   [np.array(r.coords)[:-1] for r in polygon.interiors])
+    corners = np.zeros(len(plan), dtype=bool)
+    if len(corner_points):
+        distance, _ = cKDTree(corner_points).query(plan)
+        corners = distance < 1e-6 * spacing
+    from .voronoi import _support_nodes, surface_corners
+
+    kept = sorted(surface_corners(mesh).tolist())
+    if kept:
+        distance, _ = cKDTree(mesh.vertices[kept, :2]).query(plan)
+        corners &= distance < 1e-3 * spacing
+    else:
+        corners[:] = False
+    supports = _support_nodes(mesh, nodes, on_boundary, support_vertices)
+    return PolyMesh(nodes=nodes, faces=tuple(faces), boundary=on_boundary, supports=supports, corners=corners)
+
+
+def _matched(mesh: TriMesh, kind: str, total_length: float, support_vertices) -> PolyMesh:
+    if not total_length > 0:
+        raise InputError(f"grid: the total length must be positive, got {total_length}")
+    # an infinite lattice has length per area 3 / (sqrt3/2 s) (triangles) or 2 / s (squares)
+    per_area = (2 * np.sqrt(3), 2.0)[kind == "quad"]
+    plan_area = float(mesh.face_plan_areas.sum())
+    spacing = per_area * plan_area / total_length
+    best = None
+    # aligned with the plan first; a quad lattice aligned with straight edges changes its length in
+    # steps (whole rows), so a diagonal lattice is tried when the aligned one misses 1 %
+    for angle in (0.0, 45.0):
+        trial_spacing = spacing
+        for _ in range(12):
+            grid = lattice_grid(mesh, kind, trial_spacing, support_vertices, angle)
+            error = grid.total_length / total_length - 1
+            if best is None or abs(error) < abs(best[0]):
+                best = (error, grid, trial_spacing, angle)
+            if abs(error) < 0.005:
+                break
+            trial_spacing *= 1 + error
+        if abs(best[0]) >= 0.01:
+            for factor in np.linspace(0.9, 1.1, 41):
+                grid = lattice_grid(mesh, kind, best[2] * factor, support_vertices, best[3])
+                error = grid.total_length / total_length - 1
+                if abs(error) < abs(best[0]):
+                    best = (error, grid, best[2] * factor, best[3])
+                if abs(best[0]) < 0.01:
+                    break
+        if abs(best[0]) < 0.01 or kind != "quad":
+            break
+    return best[1]
+
+
+def triangular_grid(mesh: TriMesh, *, total_length: float, support_vertices: np.ndarray | None = None) -> PolyMesh:
+    """Equilateral triangles over the plan, lifted onto the surface, with L_tot matched within 1 %."""
+    return _matched(mesh, "triangle", total_length, support_vertices)
+
+
+def quad_grid(mesh: TriMesh, *, total_length: float, support_vertices: np.ndarray | None = None) -> PolyMesh:
+    """Squares over the plan, lifted onto the surface, with L_tot matched within 1 %."""
+    return _matched(mesh, "quad", total_length, support_vertices)
