@@ -160,26 +160,28 @@ def _local_stiffness(local: np.ndarray, area: np.ndarray, thickness: float, mate
     """(m,18,18) facet stiffness in local axes."""
     m = len(area)
     D = _elasticity(material.E, material.nu)
-    K = np.zeros((m, 18, 18))
     b, c, Bm = _membrane_b(local, area)
-    Km = thickness * area[:, None, None] * np.einsum("mki,kl,mlj->mij", Bm, D, Bm)
-    K[:, _MEMBRANE[:, None], _MEMBRANE[None, :]] += Km
-    Db = D * thickness**3 / 12.0
-    Kb = np.zeros((m, 9, 9))
-    for xi, eta in _GAUSS:
-        B = _dkt_b(local, xi, eta)
-        Kb += np.einsum("mki,kl,mlj->mij", B, Db, B) * (area / 3.0)[:, None, None]
-    K[:, _BENDING[:, None], _BENDING[None, :]] += Kb
+    # membrane and drilling act on (u, v) x 3 and rz x 3: one (m,9,9) block
+    in_plane = np.zeros((m, 9, 9))
+    in_plane[:, :6, :6] = thickness * area[:, None, None] * np.matmul(np.transpose(Bm, (0, 2, 1)), D @ Bm)
     # drilling: k * sum_i (rz_i - omega)^2 with omega = (dv/dx - du/dy) / 2 of the CST
     G = material.E / (2 * (1 + material.nu))
     k = DRILLING_FACTOR * G * thickness * area
-    omega = np.zeros((m, 18))
-    omega[:, _MEMBRANE[0::2]] = -0.5 * c
-    omega[:, _MEMBRANE[1::2]] = 0.5 * b
-    for corner in range(3):
-        g = -omega.copy()
-        g[:, _DRILL[corner]] += 1.0
-        K += k[:, None, None] * np.einsum("mi,mj->mij", g, g)
+    omega = np.zeros((m, 9))
+    omega[:, 0:6:2] = -0.5 * c
+    omega[:, 1:6:2] = 0.5 * b
+    g = np.repeat(-omega[:, None, :], 3, axis=1)
+    g[:, np.arange(3), 6 + np.arange(3)] += 1.0
+    in_plane += k[:, None, None] * np.matmul(np.transpose(g, (0, 2, 1)), g)
+    Db = D * thickness**3 / 12.0
+    bending = np.zeros((m, 9, 9))
+    for xi, eta in _GAUSS:
+        B = _dkt_b(local, xi, eta)
+        bending += np.matmul(np.transpose(B, (0, 2, 1)), Db @ B) * (area / 3.0)[:, None, None]
+    K = np.zeros((m, 18, 18))
+    plane_dofs = np.r_[_MEMBRANE, _DRILL]
+    K[:, plane_dofs[:, None], plane_dofs[None, :]] = in_plane
+    K[:, _BENDING[:, None], _BENDING[None, :]] = bending
     return K
 
 
