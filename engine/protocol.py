@@ -34,12 +34,25 @@ class ProtocolSettings:
 
 @dataclass(frozen=True, kw_only=True)
 class ImperfectionCase:
-    """One GNL run: its shape name and sign, limit load factor (None if not reached), path (s, 2)."""
+    """One GNL run: its shape name and sign, limit load factor (None if not reached), path (s, 2),
+    and whether the path ended normally (False: the solver stopped early)."""
 
     name: str
     limit_load_factor: float | None
     path: np.ndarray
     negative_pivots: np.ndarray | None = None
+    converged: bool = True
+
+    @property
+    def peak_load_factor(self) -> float:
+        """The highest load factor carried along the path."""
+        return float(np.max(self.path[:, 0])) if len(self.path) else 0.0
+
+    @property
+    def capacity(self) -> float:
+        """The limit load factor, or where no limit point was found the highest factor carried
+        (a lower bound, conservative when the path stopped early)."""
+        return self.limit_load_factor if self.limit_load_factor is not None else self.peak_load_factor
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -66,18 +79,16 @@ class ProtocolResult:
 
     @property
     def worst(self) -> ImperfectionCase | None:
-        reached = [c for c in self.imperfect if c.limit_load_factor is not None]
-        if reached:
-            return min(reached, key=lambda c: c.limit_load_factor)
-        return self.imperfect[0] if self.imperfect else None
+        """The imperfect case with the lowest capacity (limit load factor, or load factor carried)."""
+        return min(self.imperfect, key=lambda c: c.capacity) if self.imperfect else None
 
     @property
     def knock_down(self) -> float | None:
         """Worst imperfect over perfect limit load factor."""
         worst = self.worst
-        if not worst or not self.perfect or not worst.limit_load_factor or not self.perfect.limit_load_factor:
+        if not worst or not self.perfect or not self.perfect.capacity:
             return None
-        return worst.limit_load_factor / self.perfect.limit_load_factor
+        return worst.capacity / self.perfect.capacity
 
 
 def _scaled(shape: np.ndarray, amplitude: float) -> np.ndarray | None:
@@ -134,7 +145,8 @@ def run_protocol(model, supports: Supports, sls_loads: np.ndarray, uls_loads: np
             run = nonlinear_static(replace(model, nodes=nodes), supports, uls_loads, control=(control_node, 2),
                                    max_load_factor=settings.max_load_factor, max_steps=settings.max_steps)
             return (ImperfectionCase(name=name, limit_load_factor=run.limit_load_factor, path=np.asarray(run.path),
-                                     negative_pivots=getattr(run, "negative_pivots", None)), run.displacements)
+                                     negative_pivots=getattr(run, "negative_pivots", None),
+                                     converged=bool(getattr(run, "converged", True))), run.displacements)
 
         say("non-linear, perfect")
         perfect, gnl_shape = gnl(np.asarray(model.nodes), "perfect")

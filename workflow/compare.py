@@ -27,7 +27,7 @@ from .progress import Progress
 __all__ = ["GridRow", "compare_grids", "run_compare", "markdown_table"]
 
 COLUMNS = ["grid", "nodes", "beams", "L_tot_m", "weight_kg", "delta_L_mm", "lambda_LB", "lambda_NL_perfect",
-           "lambda_NL_worst", "worst_shape", "knock_down"]
+           "lambda_NL_worst", "worst_shape", "limit_point", "knock_down"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -62,8 +62,9 @@ def _protocol(polymesh: PolyMesh, surface, project: Project, progress) -> GridRo
     values = {"nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "L_tot_m": polymesh.total_length,
               "weight_kg": polymesh.total_length * props.mass_per_length, "delta_L_mm": 1000 * result.delta_L,
               "lambda_LB": result.lambda_LB,
-              "lambda_NL_perfect": None if result.perfect is None else result.perfect.limit_load_factor,
-              "lambda_NL_worst": None if worst is None else worst.limit_load_factor,
+              "lambda_NL_perfect": None if result.perfect is None else result.perfect.capacity,
+              "lambda_NL_worst": None if worst is None else worst.capacity,
+              "limit_point": None if worst is None else worst.limit_load_factor is not None,
               "worst_shape": None if worst is None else worst.name, "knock_down": result.knock_down}
     curves = {}
     if result.perfect is not None:

@@ -127,8 +127,9 @@ def run(ctx):
         verdicts.append({"check": "linear buckling factor lambda_LB", "value": result.lambda_LB,
                          "limit": config.required_load_factor, "pass": bool(result.lambda_LB >= config.required_load_factor)})
     if worst is not None:
-        value = worst.limit_load_factor if worst.limit_load_factor is not None else config.max_load_factor
-        verdicts.append({"check": f"worst non-linear limit factor lambda_NL ({worst.name})", "value": float(value),
+        value = worst.capacity
+        label = "limit factor" if worst.limit_load_factor is not None else "load factor carried (no limit point found)"
+        verdicts.append({"check": f"worst non-linear {label} lambda_NL ({worst.name})", "value": float(value),
                          "limit": config.required_load_factor, "pass": bool(value >= config.required_load_factor)})
     axial = np.asarray(checks.axial_force)
     figures = {
@@ -140,12 +141,14 @@ def run(ctx):
         "delta_L_m": result.delta_L, "max_vertical_sls_m": vertical_sls, "deflection_limit_m": deflection_limit,
         "max_utilisation": float(utilisation.max()), "governing_member": f"B{int(utilisation.argmax()) + 1:04d}",
         "lambda_LB": result.lambda_LB, "buckling_factors": [float(x) for x in result.buckling_factors],
-        "lambda_NL_perfect": None if result.perfect is None else result.perfect.limit_load_factor,
-        "lambda_NL_worst": None if worst is None else worst.limit_load_factor,
+        "lambda_NL_perfect": None if result.perfect is None else result.perfect.capacity,
+        "lambda_NL_worst": None if worst is None else worst.capacity,
+        "limit_point_reached": None if worst is None else worst.limit_load_factor is not None,
         "worst_imperfection": None if worst is None else worst.name, "knock_down": result.knock_down,
         "imperfection_amplitude_m": amplitude, "control_node": f"N{result.control_node + 1:04d}",
         "equilibrium_error": result.equilibrium_error,
-        "imperfections": [{"shape": c.name, "lambda_NL": c.limit_load_factor} for c in result.imperfect],
+        "imperfections": [{"shape": c.name, "lambda_NL": c.capacity, "limit_point": c.limit_load_factor is not None,
+                           "path_complete": c.converged} for c in result.imperfect],
         "verdicts": verdicts,
     }
     ctx.step("writing")
