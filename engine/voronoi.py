@@ -31,7 +31,7 @@ __all__ = ["RemeshSettings", "RemeshResult", "remesh", "polymesh_quality", "surf
 Progress = Callable[[str, "float | None"], None]
 
 #: Fine vertices per cell the refinement aims at.
-VERTICES_PER_CELL = 60
+VERTICES_PER_CELL = 45
 #: Largest refined mesh (vertices) the remesher builds.
 MAX_FINE_VERTICES = 400_000
 #: Boundary turning angle above which a surface vertex is a corner kept as a node, degrees.
@@ -176,15 +176,18 @@ def _metric_distance2(points: np.ndarray, point_metric: np.ndarray, seeds: np.nd
     return np.einsum("pki,pkij,pkj->pk", d, m, d)
 
 
-def _regions(fine: _Fine, seeds: np.ndarray, seed_metric: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Label (n,) of the metric-nearest seed of every fine vertex, each region made connected."""
+def _regions(fine: _Fine, seeds: np.ndarray, seed_metric: np.ndarray,
+             connected: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Label (n,) of the metric-nearest seed of every fine vertex, each region made connected
+    (skipped during Lloyd iterations, where stray vertices hardly move a centroid)."""
     k = min(CANDIDATE_SEEDS, len(seeds))
     _, candidates = cKDTree(seeds).query(fine.vertices, k=k)
     candidates = candidates.reshape(len(fine.vertices), k)
     distance2 = _metric_distance2(fine.vertices, fine.metric, seeds[candidates], seed_metric[candidates])
     best = np.argmin(distance2, axis=1)
     labels = candidates[np.arange(len(candidates)), best]
-    labels = _connected_regions(fine, labels)
+    if connected:
+        labels = _connected_regions(fine, labels)
     return labels, np.sqrt(distance2[np.arange(len(candidates)), best])
 
 
@@ -524,7 +527,7 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
     seeds = _initial_seeds(fine, n_cells, rng)
     typical = np.sqrt(fine.areas.sum() / n_cells)
     for iteration in range(settings.lloyd_iterations):
-        labels, _ = _regions(fine, seeds, _seed_metric(fine, seeds))
+        labels, _ = _regions(fine, seeds, _seed_metric(fine, seeds), connected=False)
         # over-relaxed Lloyd: converges several times faster; plain steps at the end settle it
         relaxation = LLOYD_RELAXATION if iteration < 0.8 * settings.lloyd_iterations else 1.0
         new_seeds = _lloyd_step(fine, labels, len(seeds), seeds, relaxation)
