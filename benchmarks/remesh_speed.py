@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from engine.field import GuidingField  # noqa: E402
 from engine.mesh import TriMesh  # noqa: E402
 from engine.parametric import mockup  # noqa: E402
-from engine.voronoi import RemeshSettings, _subdivide, remesh  # noqa: E402
+from engine.voronoi import RemeshSettings, remesh  # noqa: E402
 
 
 def surface(triangles: int) -> TriMesh:
@@ -71,7 +71,7 @@ def main() -> int:
     peer = time.perf_counter() - start
     print(f"pyacvd: {peer:8.2f} s  (isotropic clustering, same surface and cell count)")
     print(f"ratio ours / pyacvd: {ours / peer:.2f} (target <= 3)")
-    del _subdivide
+
     return 0
 
 

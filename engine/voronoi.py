@@ -168,12 +168,24 @@ CENTROID_DENSITY_POWER = 3.0
 CANDIDATE_SEEDS = 16
 
 
+_UPPER = (np.array([0, 1, 2, 0, 0, 1]), np.array([0, 1, 2, 1, 2, 2]))
+_TWICE = np.array([1.0, 1.0, 1.0, 2.0, 2.0, 2.0])
+
+
+def _quadratic(d: np.ndarray, components: np.ndarray) -> np.ndarray:
+    """d^T M d from the six upper components of symmetric M (broadcast over leading axes)."""
+    products = np.stack([d[..., 0] ** 2, d[..., 1] ** 2, d[..., 2] ** 2, d[..., 0] * d[..., 1],
+                         d[..., 0] * d[..., 2], d[..., 1] * d[..., 2]], axis=-1)
+    return np.einsum("...c,...c->...", products, components * _TWICE)
+
+
 def _metric_distance2(points: np.ndarray, point_metric: np.ndarray, seeds: np.ndarray,
                       seed_metric: np.ndarray) -> np.ndarray:
     """Squared metric distances of points (p,3) to seeds (p,k,3) under the mean of both metrics."""
     d = points[:, None, :] - seeds
-    m = 0.5 * (point_metric[:, None] + seed_metric)
-    return np.einsum("pki,pkij,pkj->pk", d, m, d)
+    point_components = point_metric[:, _UPPER[0], _UPPER[1]]
+    seed_components = seed_metric[..., _UPPER[0], _UPPER[1]]
+    return 0.5 * (_quadratic(d, point_components[:, None, :]) + _quadratic(d, seed_components))
 
 
 def _regions(fine: _Fine, seeds: np.ndarray, seed_metric: np.ndarray,
@@ -183,12 +195,20 @@ def _regions(fine: _Fine, seeds: np.ndarray, seed_metric: np.ndarray,
     k = min(CANDIDATE_SEEDS, len(seeds))
     _, candidates = cKDTree(seeds).query(fine.vertices, k=k)
     candidates = candidates.reshape(len(fine.vertices), k)
-    distance2 = _metric_distance2(fine.vertices, fine.metric, seeds[candidates], seed_metric[candidates])
-    best = np.argmin(distance2, axis=1)
-    labels = candidates[np.arange(len(candidates)), best]
+    labels = np.empty(len(candidates), dtype=np.int64)
+    nearest = np.empty(len(candidates))
+    chunk = 32768
+    for start in range(0, len(candidates), chunk):
+        part = slice(start, start + chunk)
+        distance2 = _metric_distance2(fine.vertices[part], fine.metric[part], seeds[candidates[part]],
+                                      seed_metric[candidates[part]])
+        best = np.argmin(distance2, axis=1)
+        rows = np.arange(len(best))
+        labels[part] = candidates[part][rows, best]
+        nearest[part] = distance2[rows, best]
     if connected:
         labels = _connected_regions(fine, labels)
-    return labels, np.sqrt(distance2[np.arange(len(candidates)), best])
+    return labels, np.sqrt(nearest)
 
 
 def _connected_regions(fine: _Fine, labels: np.ndarray) -> np.ndarray:
