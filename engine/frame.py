@@ -34,7 +34,9 @@ DOF_NAMES = ("ux", "uy", "uz", "rx", "ry", "rz")
 @dataclass(frozen=True, kw_only=True)
 class FrameModel:
     """nodes (n,3); beams (b,2) node ids; E, G, A, Iy, Iz, J (b,) per beam; up (b,3) the
-    direction of each beam's local z (strong axis normal); elements_per_beam."""
+    direction of each beam's local z (strong axis normal); elements_per_beam; releases (b,2,6)
+    bool or None: True where a beam end does not transmit that local force or moment (a pin:
+    the three rotations; a hinge about local y: ry only), condensed out of the element."""
 
     nodes: np.ndarray
     beams: np.ndarray
@@ -46,6 +48,7 @@ class FrameModel:
     J: np.ndarray
     up: np.ndarray
     elements_per_beam: int = 1
+    releases: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         nodes = np.asarray(self.nodes, dtype=float)
@@ -70,6 +73,13 @@ class FrameModel:
         if int(self.elements_per_beam) < 1:
             raise InputError("frame model: elements_per_beam must be at least 1")
         object.__setattr__(self, "elements_per_beam", int(self.elements_per_beam))
+        if self.releases is not None:
+            releases = np.asarray(self.releases, dtype=bool)
+            if releases.shape != (len(beams), 2, 6):
+                raise InputError(f"frame model: releases must be ({len(beams)}, 2, 6) flags, got {releases.shape}")
+            if np.any(releases[:, :, :3]):
+                raise InputError("frame model: only moments and torsion (rx, ry, rz) can be released at beam ends")
+            object.__setattr__(self, "releases", releases)
         lengths = np.linalg.norm(nodes[beams[:, 1]] - nodes[beams[:, 0]], axis=1)
         if np.any(lengths <= 1e-12 * max(np.ptp(nodes, axis=0).max(), 1e-300)):
             raise InputError(f"frame model: beam {int(np.argmin(lengths))} has zero length")
@@ -128,6 +138,7 @@ class _Elements:
     first: np.ndarray        # (b,) first element of each beam
     last: np.ndarray         # (b,) last element of each beam
     n_original: int
+    released: np.ndarray | None = None  # (m,12) released local DOFs per element
 
 
 def _elements(model: FrameModel, nodes: np.ndarray | None = None) -> _Elements:
@@ -148,9 +159,46 @@ def _elements(model: FrameModel, nodes: np.ndarray | None = None) -> _Elements:
         ids[:, 1:-1] = n + np.arange(b * (k - 1)).reshape(b, k - 1)
         connectivity = np.stack([ids[:, :-1], ids[:, 1:]], axis=2).reshape(-1, 2)
     beam = np.repeat(np.arange(b), k)
+    first, last = np.arange(b) * k, np.arange(b) * k + k - 1
+    released = None
+    if model.releases is not None and np.any(model.releases):
+        released = np.zeros((b * k, 12), dtype=bool)
+        released[first, :6] = model.releases[:, 0]
+        released[last, 6:] |= model.releases[:, 1]
     return _Elements(nodes=all_nodes, connectivity=connectivity, beam=beam, up=model.up[beam], E=model.E[beam],
                      G=model.G[beam], A=model.A[beam], Iy=model.Iy[beam], Iz=model.Iz[beam], J=model.J[beam],
-                     first=np.arange(b) * k, last=np.arange(b) * k + k - 1, n_original=n)
+                     first=first, last=last, n_original=n, released=released)
+
+
+def _released_zero(K: np.ndarray, released: np.ndarray | None) -> np.ndarray:
+    """Zero the rows and columns of released local DOFs."""
+    if released is None:
+        return K
+    keep = (~released).astype(float)
+    return K * keep[:, :, None] * keep[:, None, :]
+
+
+def _condense(K: np.ndarray, released: np.ndarray | None) -> np.ndarray:
+    """Static condensation of released local DOFs: K_rr - K_rc K_cc^-1 K_cr, released rows and
+    columns zero (the element transmits no force there)."""
+    if released is None:
+        return K
+    K = K.copy()
+    for pattern in np.unique(released, axis=0):
+        if not pattern.any():
+            continue
+        rows = np.flatnonzero((released == pattern).all(axis=1))
+        c = np.flatnonzero(pattern)
+        r = np.flatnonzero(~pattern)
+        block = K[rows]
+        Kcc = block[:, c][:, :, c]
+        Krc = block[:, r][:, :, c]
+        correction = np.matmul(Krc, np.linalg.solve(Kcc, np.transpose(Krc, (0, 2, 1))))
+        reduced = block[:, r][:, :, r] - correction
+        block[:] = 0.0
+        block[:, r[:, None], r[None, :]] = reduced
+        K[rows] = block
+    return K
 
 
 def _local_axes(x_axis: np.ndarray, up: np.ndarray) -> np.ndarray:
@@ -318,7 +366,7 @@ def _solve_linear(model: FrameModel, supports: Supports, loads: np.ndarray) -> _
     _check_rigid_modes(el.nodes, restrained)
     L, R = _geometry(el, el.nodes)
     T = _transformation(R)
-    K_local = _local_stiffness(L, el)
+    K_local = _condense(_local_stiffness(L, el), el.released)
     dofs = _dofs(el.connectivity)
     K = _assemble(congruent(T, K_local), dofs, 6 * n_all)
     free = np.flatnonzero(~restrained)
@@ -358,7 +406,7 @@ def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_
     state = _solve_linear(model, supports, loads)
     el = state.el
     N = state.local_forces[:, 6]
-    K_G = _assemble(congruent(state.T, _geometric_stiffness(state.L, N, el)),
+    K_G = _assemble(congruent(state.T, _released_zero(_geometric_stiffness(state.L, N, el), el.released)),
                     _dofs(el.connectivity), len(state.u))
     free = state.free
     KG_free = (-K_G[free][:, free]).tocsc()
@@ -451,7 +499,7 @@ class _Corotational:
         d[:, 6] = length - self.L0
         d[:, 3:6] = theta_a
         d[:, 9:12] = theta_b
-        K_local = _local_stiffness(self.L0, el)
+        K_local = _condense(_local_stiffness(self.L0, el), el.released)
         f_local = np.einsum("mij,mj->mi", K_local, d)
         return R, length, K_local, f_local
 
@@ -466,7 +514,7 @@ class _Corotational:
     def tangent(self, cache) -> sp.csc_matrix:
         R, length, K_local, f_local, T = cache
         N = f_local[:, 6]
-        K_elements = K_local + _geometric_stiffness(length, N, self.el)
+        K_elements = K_local + _released_zero(_geometric_stiffness(length, N, self.el), self.el.released)
         # the axial force also stiffens (tension) or softens the transverse chord rotation
         return _assemble(congruent(T, K_elements), self.dofs, 6 * self.n_all)
 
@@ -693,9 +741,12 @@ def model_from_json(data: dict) -> tuple[FrameModel, Supports, np.ndarray]:
                 continue
             fields[key].append(_require(beam, key, f"frame model: beam {i}"))
     n = len(nodes)
+    releases = None
+    if any("releases" in beam for beam in beams):
+        releases = np.array([beam.get("releases", [[0] * 6, [0] * 6]) for beam in beams], dtype=bool)
     model = FrameModel(nodes=nodes, beams=np.array(fields["nodes"]), E=fields["E"], G=fields["G"], A=fields["A"],
                        Iy=fields["Iy"], Iz=fields["Iz"], J=fields["J"], up=np.array(fields["up"], dtype=float),
-                       elements_per_beam=int(data.get("elements_per_beam", 1)))
+                       elements_per_beam=int(data.get("elements_per_beam", 1)), releases=releases)
     support_nodes, flags = _node_table(_require(data, "supports"), "supports", n)
     supports = Supports(nodes=support_nodes, restraints=flags.astype(bool))
     load_nodes, forces = _node_table(data.get("loads", {}), "loads", n)

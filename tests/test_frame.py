@@ -202,3 +202,24 @@ def test_json_errors_name_the_problem():
         solve_frame_json(model)
     with pytest.raises(InputError, match="analysis"):
         solve_frame_json(_json_model(), analysis="dynamic")
+
+
+def test_end_release_makes_a_pin():
+    """Both ends fixed, moments released at one: a propped cantilever under a mid-span load,
+    deflection 7 P L^3 / (768 EI) under the load."""
+    length, n, P = 4.0, 8, 1000.0
+    model = _line((1, 0, 0), length, n, (0, 0, 1))
+    releases = np.zeros((n, 2, 6), bool)
+    releases[-1, 1, 3:] = True          # the last beam's end: no moments, no torsion
+    pinned = FrameModel(nodes=model.nodes, beams=model.beams, E=E, G=G, A=A, Iy=IY, Iz=IZ, J=J,
+                        up=np.array([0.0, 0, 1]), releases=releases)
+    supports = Supports(nodes=np.array([0, n]), restraints=np.ones((2, 6), bool))
+    loads = np.zeros((n + 1, 6))
+    loads[n // 2, 2] = -P
+    result = linear_static(pinned, supports, loads)
+    assert -result.displacements[n // 2, 2] == pytest.approx(7 * P * length**3 / (768 * E * IY), rel=1e-9)
+    assert abs(result.beam_end_forces[-1, 1, 4]) < 1e-9 * P * length
+    assert abs(result.reactions[n, 4]) < 1e-9 * P * length, "the released end carries no moment"
+    with pytest.raises(InputError, match="released"):
+        FrameModel(nodes=model.nodes, beams=model.beams, E=E, G=G, A=A, Iy=IY, Iz=IZ, J=J,
+                   up=np.array([0.0, 0, 1]), releases=np.ones((n, 2, 6), bool))
