@@ -147,22 +147,24 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
     else:
         hub_radius = settings.hub_radius_mm or 1.5 * outer
         hub_height = 2.0 * outer
-        solid = Cylinder(hub_radius, hub_height).moved(Location(_plane((0, 0, 0), axis)))
-        for d in directions:
-            solid = solid + Cylinder(outer, setback + sleeve, align=base).moved(Location(_plane((0, 0, 0), d)))
+        hub = Cylinder(hub_radius, hub_height).moved(Location(_plane((0, 0, 0), axis)))
+        sleeves = [Cylinder(outer, setback + sleeve, align=base).moved(Location(_plane((0, 0, 0), d)))
+                   for d in directions]
+        tools = []
         for d in directions:
             side = _perpendicular(d, axis)
-            solid = solid - Cylinder(bore, sleeve + 1.0, align=base).moved(Location(_plane(d * setback, d)))
+            tools.append(Cylinder(bore, sleeve + 1.0, align=base).moved(Location(_plane(d * setback, d))))
             pin_centre = d * (setback + 0.6 * sleeve)
-            solid = solid - Cylinder(0.5 * settings.pin_hole_mm, 4 * outer).moved(Location(_plane(pin_centre, side)))
+            tools.append(Cylinder(0.5 * settings.pin_hole_mm, 4 * outer).moved(Location(_plane(pin_centre, side))))
         if settings.engrave:
             try:
                 label = Text(name, font_size=0.45 * hub_radius, align=(Align.CENTER, Align.CENTER))
-                cut = extrude(label, amount=0.6).moved(Location(_plane(axis * (0.5 * hub_height - 0.6), axis)))
-                solid = solid - cut
+                tools.append(extrude(label, amount=0.6).moved(Location(_plane(axis * (0.5 * hub_height - 0.6), axis))))
                 report["engraved"] = True
             except Exception:  # noqa: BLE001 - a font problem must not stop the joints
                 report["engraved"] = False
+        # one fuse and one cut with all tools: faster than a boolean per feature
+        solid = hub.fuse(*sleeves).cut(*tools)
         # wall left between neighbouring bores at their start
         wall_between = 2 * setback * np.sin(0.5 * angle) - 2 * bore if len(directions) > 1 else settings.wall_mm
         report["min_wall_mm"] = float(min(settings.wall_mm, wall_between))

@@ -169,7 +169,54 @@ def run(ctx):
         pd.DataFrame(rows, columns=["shape", "load_factor", "control_displacement_m"]).to_csv(tmp, index=False)
     ctx.step("drawing")
     _draw(ctx, polymesh, result, utilisation, axial, project)
+    if config.control_points and config.nonlinear:
+        ctx.step("incremental load test")
+        figures["load_test"] = _load_test(ctx, project, surface, polymesh, model, supports, props, sls_combo)
+        write_text_atomic(ctx.folder / "analysis.json", json.dumps(figures, indent=1, default=float))
     return AnalysisSummary(figures=figures, axial_forces=axial)
+
+
+def _load_test(ctx, project: Project, surface, polymesh, model, supports, props, combination) -> dict:
+    """The mock-up's incremental load test (METHOD.md 7): the permanent cases of the SLS
+    combination (those with self-weight) held, the others scaled by the load factor; the vertical
+    deflection of each named control point's nearest node against the load factor."""
+    from scipy.spatial import cKDTree
+
+    nonlinear_static = require("analysis", "engine.frame", "nonlinear_static")
+    import pandas as pd
+
+    permanent = {n: f for n, f in combination.factors.items() if surface.load_cases[n].self_weight}
+    variable = {n: f for n, f in combination.factors.items() if n not in permanent}
+    if not variable:
+        return {"skipped": "the SLS combination has no variable load case to increase"}
+
+    def loads_of(factors: dict) -> np.ndarray:
+        if not factors:
+            return np.zeros((polymesh.n_nodes, 6))
+        case = combine(surface.load_cases, LoadCombination(name="part", limit_state="SLS", factors=factors))
+        return gridshell_loads(polymesh, case, mass_per_length=props.mass_per_length, surface_vertices=surface.mesh.vertices)
+
+    names = list(project.analysis.control_points)
+    points = np.array([project.analysis.control_points[n] for n in names], dtype=float)
+    _, nodes = cKDTree(polymesh.nodes).query(points)
+    run = nonlinear_static(model, supports, loads_of(variable), control=(int(nodes[0]), 2),
+                           initial_loads=loads_of(permanent), max_load_factor=project.analysis.max_load_factor,
+                           max_steps=60, monitor=[(int(n), 2) for n in nodes])
+    table = pd.DataFrame({"load_factor": run.path[:, 0]})
+    for name, column in zip(names, run.monitored.T):
+        table[f"{name}_uz_mm"] = 1000 * column
+    with atomic_path(ctx.folder / "loadtest.csv") as tmp:
+        table.to_csv(tmp, index=False, float_format="%.6g")
+    plot_response = require("analysis", "workflow.plots.analysis", "plot_response")
+    curves = {f"{name} (N{int(n) + 1:04d})": np.c_[run.path[:, 0], column]
+              for name, n, column in zip(names, nodes, run.monitored.T)}
+    plot_response(curves, ctx.folder / "loadtest.png", required=project.analysis.required_load_factor,
+                  title=f"{project.project.name}: load test, {', '.join(permanent) or 'no'} load held, "
+                        f"{', '.join(variable)} increased")
+    return {"permanent_cases": list(permanent), "variable_cases": list(variable),
+            "control_nodes": {name: f"N{int(n) + 1:04d}" for name, n in zip(names, nodes)},
+            "limit_load_factor": run.limit_load_factor, "largest_load_factor": float(run.path[:, 0].max()),
+            "path_complete": bool(run.converged)}
 
 
 def _draw(ctx, polymesh, result, utilisation, axial, project: Project) -> None:
