@@ -25,7 +25,7 @@ from engine.voronoi import RemeshSettings, remesh  # noqa: E402
 
 
 def surface(triangles: int) -> TriMesh:
-    divisions = int(round(np.sqrt(triangles / 2)))
+    divisions = 2 * max(2, int(round(np.sqrt(triangles / 2) / 2)))  # mockup needs an even count
     return mockup(divisions=divisions).mesh
 
 

@@ -1,13 +1,14 @@
 """Statics-aware Voronoi remeshing: anisotropic centroidal Voronoi tessellation on the surface.
 
 (METHOD.md section 3.) The direct discrete route: the surface is refined until a cell spans
-some tens of vertices; cells are regions of a multi-source Dijkstra whose edge lengths are
-measured in the guiding field's metric (so a cell is an ellipse of semi-axes h sqrt(a) and
-h / sqrt(a)); Lloyd iterations move each seed to its region's centroid under the Riemannian
-area element 1/h^2. The polygon grid-shell is the dual of the regions: a node where three
-regions meet (a fine triangle with three labels, placed where the metric distances balance),
-a beam along each border between two nodes, boundary nodes where a border meets the surface
-boundary, the surface's corners kept as nodes, boundary cells closed along the boundary.
+some tens of vertices; each fine vertex belongs to the seed nearest in the guiding field's
+metric (the mean of the metrics at the vertex and at the seed, among the Euclidean-nearest
+seeds), so a cell is an ellipse of semi-axes h sqrt(a) and h / sqrt(a); over-relaxed Lloyd
+iterations move each seed to its region's centroid weighted by h^-3 (see _lloyd_step). The
+polygon grid-shell is the dual of the regions: a node where three regions meet (a fine
+triangle with three labels, placed where the metric distances balance), a beam along each
+border between two nodes, boundary nodes where a border meets the surface boundary, the
+surface's corners kept as nodes, boundary cells closed along the boundary.
 Why this route and not the deform-then-uniform-CVT one: docs/decisions.md.
 """
 
