@@ -20,7 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .linalg import congruent
+from .linalg import assemble_blocks, congruent
 from .errors import ConvergenceError, InputError, MechanismError
 from .supports import Supports
 
@@ -119,6 +119,7 @@ class NonlinearResult:
     displacements: np.ndarray
     converged: bool = True
     load_factors: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    monitored: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 # ----------------------------------------------------------------------------- mesh of elements
@@ -274,9 +275,8 @@ def _dofs(connectivity: np.ndarray) -> np.ndarray:
 
 
 def _assemble(K_elements: np.ndarray, dofs: np.ndarray, n_dofs: int) -> sp.csc_matrix:
-    rows = np.repeat(dofs, 12, axis=1).ravel()
-    cols = np.tile(dofs, (1, 12)).ravel()
-    return sp.csc_matrix((K_elements.ravel(), (rows, cols)), shape=(n_dofs, n_dofs))
+    """Global matrix from element matrices (m,12,12) on the node-major DOFs (m,12) of _dofs."""
+    return assemble_blocks(K_elements, dofs[:, ::6] // 6, n_dofs // 6)
 
 
 def _geometry(el: _Elements, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -532,7 +532,8 @@ def _negative_pivots(K_free: sp.csc_matrix) -> tuple[object, int]:
 
 def nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *, control: tuple[int, int],
                      max_load_factor: float = 10.0, max_steps: int = 80, initial_loads: np.ndarray | None = None,
-                     tolerance: float = 1e-6, steps_past_limit: int = 3) -> NonlinearResult:
+                     tolerance: float = 1e-6, steps_past_limit: int = 3,
+                     monitor: list[tuple[int, int]] | None = None) -> NonlinearResult:
     """Geometrically non-linear static analysis with arc-length control.
 
     loads: reference load (n,6) scaled by the load factor; initial_loads: a dead load held
@@ -594,6 +595,13 @@ def nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *
     u_ref[free] = lu.solve(F_ref[free])
     arc = np.linalg.norm(u_ref[free]) * min(max_load_factor, 10.0) / 20.0
     lam = 0.0
+    watch = list(monitor or [])
+
+    def watched(x, triads):
+        return [float(x[n_, d_] - cr.X[n_, d_]) if d_ < 3 else float(_rotation_vectors(triads[n_:n_ + 1])[0, d_ - 3])
+                for n_, d_ in watch]
+
+    monitored = [watched(x, triads)]
     path = [[0.0, displacement_of(x, triads)]]
     pivots = [0]
     factors = [0.0]
@@ -669,6 +677,7 @@ def nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *
             limit_state = (x.copy(), triads.copy())
         x, triads, lam = x_try, t_try, lam_try
         path.append([lam, displacement_of(x, triads)])
+        monitored.append(watched(x, triads))
         pivots.append(negatives)
         factors.append(lam)
         if limit is not None:
@@ -688,7 +697,8 @@ def nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *
     displacements[:, :3] = lx - cr.X
     displacements[:, 3:] = _rotation_vectors(lt)
     return NonlinearResult(path=np.array(path), limit_load_factor=limit, negative_pivots=np.array(pivots),
-                           displacements=displacements[:n], converged=converged_all, load_factors=np.array(factors))
+                           displacements=displacements[:n], converged=converged_all, load_factors=np.array(factors),
+                           monitored=np.array(monitored, dtype=float).reshape(len(path), len(watch)))
 
 
 def _factor_or_none(K_free: sp.csc_matrix):

@@ -18,7 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .linalg import congruent
+from .linalg import assemble_blocks, congruent
 from .errors import InputError, MechanismError
 from .loads import GRAVITY, LoadCase
 from .mesh import TriMesh
@@ -206,10 +206,7 @@ def shell_stiffness(vertices: np.ndarray, triangles: np.ndarray, thickness: floa
     K_local = _local_stiffness(local, area, thickness, material)
     K_global = congruent(T, K_local)
     dofs = _dof_indices(triangles)
-    rows = np.repeat(dofs, 18, axis=1).ravel()
-    cols = np.tile(dofs, (1, 18)).ravel()
-    n = 6 * len(vertices)
-    K = sp.csc_matrix((K_global.ravel(), (rows, cols)), shape=(n, n))
+    K = assemble_blocks(K_global, triangles, len(vertices))
     return K, {"frames": frames, "local": local, "area": area, "T": T, "dofs": dofs}
 
 
