@@ -1,7 +1,8 @@
 """Statics-aware guiding field: target cell size, anisotropy and direction per vertex.
 
 (METHOD.md section 2.) From the shell's membrane forces N: the size h falls where |N| is
-large (energy criterion h ~ n^(-2/3), or a linear remap), remapped so that h_max / h_min = D;
+large: energy criterion h ~ n^(-2/3), capped at h_max / h_min = D (or, where n varies by less
+than D^(3/2), with the exponent raised to reach D), or a linear map of n onto [D, 1];
 the anisotropy a = sqrt(|N1| / |N2|) for principal forces of the same sign (energy criterion)
 or a linear remap of |N1| / |N2| over its range to [1, A]; the direction u is that of the larger
 |principal force|. Scalars and the line field are smoothed over the mesh and symmetrised with
@@ -83,18 +84,54 @@ class FieldSettings:
     clamp_percentiles: tuple[float, float] = (1.0, 99.0)
     smoothing_iterations: int = 10
     direction_smoothing_iterations: int = 10
-    symmetry_planes: tuple = ()
+    symmetry_planes: tuple[tuple[tuple[float, float, float], tuple[float, float, float]], ...] = ()
 
     def __post_init__(self) -> None:
-        if not self.max_size_ratio >= 1.0:
-            raise InputError(f"field: D (max_size_ratio) must be at least 1, got {self.max_size_ratio}")
-        if not self.max_aspect >= 1.0:
-            raise InputError(f"field: A (max_aspect) must be at least 1, got {self.max_aspect}")
-        low, high = self.clamp_percentiles
+        if not (np.isfinite(self.max_size_ratio) and self.max_size_ratio >= 1.0):
+            raise InputError(f"field: D (max_size_ratio) must be a finite number >= 1, got {self.max_size_ratio}",
+                             hint="Voro(D, A): D = 1 gives uniform cells, D = 2 lets them vary by a factor 2")
+        if not (np.isfinite(self.max_aspect) and self.max_aspect >= 1.0):
+            raise InputError(f"field: A (max_aspect) must be a finite number >= 1, got {self.max_aspect}",
+                             hint="Voro(D, A): A = 1 gives isotropic cells, A = 2 lets them stretch by 2")
+        for name, enum in (("size_map", SizeMap), ("anisotropy_map", AnisotropyMap)):
+            try:
+                object.__setattr__(self, name, enum(getattr(self, name)))
+            except ValueError:
+                raise InputError(f"field: {name} must be one of {[m.value for m in enum]}, "
+                                 f"got {getattr(self, name)!r}") from None
+        if not (np.isfinite(self.opposite_sign_anisotropy) and self.opposite_sign_anisotropy >= 1.0):
+            raise InputError(f"field: opposite_sign_anisotropy must be >= 1, got {self.opposite_sign_anisotropy}",
+                             hint="1 keeps cells isotropic where the principal forces differ in sign")
+        try:
+            low, high = (float(p) for p in self.clamp_percentiles)
+        except (TypeError, ValueError):
+            raise InputError(f"field: clamp_percentiles must be two numbers, got {self.clamp_percentiles!r}") from None
         if not 0.0 <= low < high <= 100.0:
             raise InputError(f"field: clamp_percentiles must satisfy 0 <= low < high <= 100, got {low, high}")
-        if len(self.symmetry_planes) > 2:
-            raise InputError("field: at most two symmetry planes")
+        for name in ("smoothing_iterations", "direction_smoothing_iterations"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+                raise InputError(f"field: {name} must be a whole number >= 0, got {value!r}")
+        object.__setattr__(self, "symmetry_planes", _check_planes(self.symmetry_planes))
+
+
+def _check_planes(planes) -> tuple:
+    """Validated ((point, unit normal), ...) with at most two planes."""
+    planes = tuple(planes)
+    if len(planes) > 2:
+        raise InputError(f"field: at most two symmetry planes, got {len(planes)}")
+    checked = []
+    for plane in planes:
+        try:
+            point, normal = (np.asarray(part, dtype=float) for part in plane)
+        except (TypeError, ValueError):
+            raise InputError(f"field: a symmetry plane is a (point, normal) pair, got {plane!r}") from None
+        length = float(np.linalg.norm(normal)) if normal.shape == (3,) else 0.0
+        if point.shape != (3,) or not np.all(np.isfinite(point)) or not (np.isfinite(length) and length > 0):
+            raise InputError(f"field: a symmetry plane needs a 3-D point and a non-zero 3-D normal, got {plane!r}",
+                             hint="e.g. ((0, 0, 0), (1, 0, 0)) for the plane x = 0")
+        checked.append((tuple(point.tolist()), tuple((normal / length).tolist())))
+    return tuple(checked)
 
 
 def tangent_basis(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -129,14 +166,46 @@ def _adjacency(mesh: TriMesh) -> sp.csr_matrix:
     return sp.csr_matrix((data, (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])), shape=(n, n))
 
 
-def smooth_scalar(mesh: TriMesh, values: np.ndarray, iterations: int) -> np.ndarray:
-    """Diffuse a vertex scalar: each iteration moves a value halfway to its neighbours' mean
-    (uniform Laplacian). Constants are kept; variation falls."""
-    adjacency = _adjacency(mesh)
-    degree = np.maximum(np.asarray(adjacency.sum(axis=1)).ravel(), 1.0)
-    out = np.asarray(values, dtype=float).copy()
+def _cotangent_adjacency(mesh: TriMesh) -> sp.csr_matrix:
+    """Symmetric (n, n) edge weights (cot alpha + cot beta) / 2, clamped at 0 so the smoothing
+    stays a convex average (no overshoot next to obtuse triangles)."""
+    v, f = mesh.vertices, mesh.faces
+    rows, cols, data = [], [], []
+    for k in range(3):
+        i, j, o = f[:, (k + 1) % 3], f[:, (k + 2) % 3], f[:, k]  # edge (i, j) opposite corner o
+        a, b = v[i] - v[o], v[j] - v[o]
+        cot = np.einsum("mi,mi->m", a, b) / np.maximum(np.linalg.norm(np.cross(a, b), axis=1), 1e-300)
+        rows += [i, j]
+        cols += [j, i]
+        data += [0.5 * cot, 0.5 * cot]
+    n = mesh.n_vertices
+    W = sp.csr_matrix((np.concatenate(data), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    W.data = np.maximum(W.data, 0.0)
+    return W
+
+
+def smooth_scalar(mesh: TriMesh, values: np.ndarray, iterations: int, *, laplacian: str = "uniform") -> np.ndarray:
+    """Diffuse a vertex scalar (n,): each iteration moves a value halfway to the weighted mean of
+    its neighbours. laplacian: "uniform" (every edge weight 1) or "cotangent" (cotangent weights,
+    clamped at 0). Constants are kept; the total variation falls."""
+    values = np.asarray(values, dtype=float)
+    if values.shape != (mesh.n_vertices,):
+        raise InputError(f"field: smoothing needs one value per vertex ({mesh.n_vertices},), got {values.shape}")
+    if iterations < 0:
+        raise InputError(f"field: smoothing iterations must be >= 0, got {iterations}")
+    if laplacian == "uniform":
+        adjacency = _adjacency(mesh)
+    elif laplacian == "cotangent":
+        adjacency = _cotangent_adjacency(mesh)
+    else:
+        raise InputError(f"field: laplacian must be 'uniform' or 'cotangent', got {laplacian!r}")
+    degree = np.asarray(adjacency.sum(axis=1)).ravel()
+    lonely = degree <= 0.0
+    degree[lonely] = 1.0
+    out = values.copy()
     for _ in range(iterations):
-        out = 0.5 * out + 0.5 * (adjacency @ out) / degree
+        neighbours = (adjacency @ out) / degree
+        out = 0.5 * out + 0.5 * np.where(lonely, out, neighbours)
     return out
 
 
@@ -176,6 +245,7 @@ def _reflection(normal) -> np.ndarray:
 def symmetrise(mesh: TriMesh, field: GuidingField, planes) -> GuidingField:
     """Average the field with its mirror images through each plane ((point, normal) pairs);
     each vertex pairs with the vertex nearest to its reflection."""
+    planes = _check_planes(planes)
     size, anisotropy, direction = field.size.copy(), field.anisotropy.copy(), field.direction.copy()
     tree = cKDTree(mesh.vertices)
     for point, normal in planes:
@@ -217,12 +287,17 @@ def guiding_field(mesh: TriMesh, vertex_membrane_forces: np.ndarray, settings: F
     level = smooth_scalar(mesh, level, settings.smoothing_iterations)
     D, A = settings.max_size_ratio, settings.max_aspect
     if SizeMap(settings.size_map) is SizeMap.ENERGY:
-        size = _remap_to_ratio(level ** (-2.0 / 3.0), D)
+        # equal strain energy per cell: h ~ n^(-2/3), smallest cell (largest force) = 1. Where the
+        # law spans more than D, the low-force side is capped at D (denser than the law there: the
+        # safe side); where it spans less, the exponent is raised so that h_max / h_min = D still.
+        law = (level / level.max()) ** (-2.0 / 3.0)
+        size = np.minimum(law, D) if law.max() >= D else _remap_to_ratio(law, D)
     else:
         span = level.max() - level.min()
         t = (level - level.min()) / span if span > 1e-12 * level.max() else np.zeros_like(level)
         size = D - (D - 1.0) * t if span > 1e-12 * level.max() else np.ones_like(level)
-    same_sign = values[:, 0] * values[:, 1] > 0
+    # N2 = 0 (uniaxial) counts as the limit of the same-sign case: a reaches A there
+    same_sign = values[:, 0] * values[:, 1] >= 0
     ratio = larger / np.maximum(smaller, 1e-12 * scale)
     if AnisotropyMap(settings.anisotropy_map) is AnisotropyMap.ENERGY:
         aspect = np.where(same_sign, np.sqrt(ratio), settings.opposite_sign_anisotropy)
@@ -244,6 +319,8 @@ def guiding_field(mesh: TriMesh, vertex_membrane_forces: np.ndarray, settings: F
         ratio_before = float(size.max() / size.min())
         field = symmetrise(mesh, field, settings.symmetry_planes)
         size = _remap_to_ratio(field.size, ratio_before)
-        field = GuidingField(size=size, anisotropy=np.clip(field.anisotropy, 1.0, A), direction=field.direction,
-                             normals=normals)
+        aspect = np.clip(field.anisotropy, 1.0, A)
+        if reached and 1.0 < aspect.max() < A:  # averaging lowered the peak: restore a_max = A (affine, symmetric)
+            aspect = 1.0 + (aspect - 1.0) * (A - 1.0) / (aspect.max() - 1.0)
+        field = GuidingField(size=size, anisotropy=aspect, direction=field.direction, normals=normals)
     return field

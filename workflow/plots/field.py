@@ -48,4 +48,4 @@ def plot_field(mesh: TriMesh, field: GuidingField, path: Path, *, title: str = "
         ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
     fig.suptitle(title or "guiding field")
     fig.tight_layout()
-    return save_png(fig, path)
+    return save_png(fig, path, dpi=150)

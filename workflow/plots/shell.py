@@ -18,7 +18,9 @@ MAX_CROSSES = 1500
 def plot_principal_forces(mesh: TriMesh, principal_forces: np.ndarray, principal_directions: np.ndarray,
                           path: Path, *, support_nodes: np.ndarray | None = None, title: str = "") -> Path:
     """Plan view with one cross per facet (thinned to about 1500): N1 along its direction, N2
-    across it (in the facet plane), bar lengths proportional to |N|; compression red, tension blue."""
+    across it (in the facet plane), bar lengths proportional to |N| up to the 98th percentile of
+    |N| (longer bars are capped, so that a singular peak at a support does not shrink the rest);
+    compression red, tension blue. principal_forces (m,2) N/m, principal_directions (m,3) of N1."""
     plt = pyplot()
     from matplotlib.collections import LineCollection
     from matplotlib.lines import Line2D
@@ -32,9 +34,10 @@ def plot_principal_forces(mesh: TriMesh, principal_forces: np.ndarray, principal
     first = principal_directions[picked]
     second = np.cross(normals[picked], first)
     values = principal_forces[picked]
-    peak = max(float(np.abs(values).max()), 1e-300)
+    peak = max(float(np.abs(principal_forces).max()), 1e-300)
+    reference = max(float(np.percentile(np.abs(principal_forces[:, 0]), 98.0)), 1e-9 * peak)
     spacing = np.sqrt(mesh.area / max(len(picked), 1))
-    half = 0.45 * spacing * np.abs(values) / peak
+    half = 0.45 * spacing * np.minimum(np.abs(values) / reference, 1.0)
     segments, colours = [], []
     for k, axis in enumerate((first, second)):
         offset = axis[:, :2] * half[:, k:k + 1]
@@ -57,6 +60,7 @@ def plot_principal_forces(mesh: TriMesh, principal_forces: np.ndarray, principal
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
     ax.set_title(title or "principal membrane forces")
-    ax.text(0.01, 0.01, f"largest |N| = {peak / 1e3:.3g} kN/m", transform=ax.transAxes, fontsize=8)
+    ax.text(0.01, 0.01, f"largest |N| = {peak / 1e3:.3g} kN/m; full bar = {reference / 1e3:.3g} kN/m "
+            f"(98th percentile), longer bars capped", transform=ax.transAxes, fontsize=8)
     fig.tight_layout()
-    return save_png(fig, path)
+    return save_png(fig, path, dpi=150)
