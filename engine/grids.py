@@ -1,17 +1,18 @@
 """Reference grids for the same-length comparison (METHOD.md section 5): a regular triangular
 and a regular square grid over the surface's plan, clipped to its outline (holes too), lifted
 onto the surface, with the spacing found so that the total beam length matches a target within
-1 %. Surfaces must be height fields over their plan (a surface that folds over itself in plan
+1 % (the lattice is aligned with the plan's principal axes, shifted or turned when an alignment
+cannot reach 1 %). Surfaces must be height fields over their plan (a surface that folds over itself in plan
 is refused with a clear error)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from .errors import InputError
+from .errors import ConvergenceError, InputError
 from .mesh import PolyMesh, TriMesh
 
-__all__ = ["is_height_field", "triangular_grid", "quad_grid", "lattice_grid"]
+__all__ = ["is_height_field", "triangular_grid", "quad_grid", "lattice_grid", "principal_angle"]
 
 
 def is_height_field(mesh: TriMesh) -> bool:
@@ -115,12 +116,15 @@ def _insert_hanging_nodes(points: np.ndarray, faces: list[np.ndarray]) -> list[n
 
 
 def lattice_grid(mesh: TriMesh, kind: str, spacing: float, support_vertices: np.ndarray | None = None,
-                 angle_deg: float = 0.0) -> PolyMesh:
+                 angle_deg: float = 0.0, offset: tuple[float, float] = (0.0, 0.0)) -> PolyMesh:
     """The ``kind`` ("triangle" or "quad") lattice of ``spacing`` (m), turned by ``angle_deg`` in
-    plan, clipped to the plan and lifted."""
+    plan about the plan's centroid and shifted by ``offset`` (fractions of the spacing along the
+    lattice axes), clipped to the plan and lifted."""
     from matplotlib.tri import LinearTriInterpolator, Triangulation
     from scipy.spatial import cKDTree
 
+    if support_vertices is None and mesh.flagged is not None:
+        support_vertices = mesh.flagged
     if not is_height_field(mesh):
         raise InputError("the reference grids need a surface that is a height field over its plan",
                          hint="compare on a surface without overhangs or vertical parts")
@@ -130,7 +134,7 @@ def lattice_grid(mesh: TriMesh, kind: str, spacing: float, support_vertices: np.
     polygon = _outline(mesh).simplify(0.01 * spacing, preserve_topology=True)
     centre = np.array(polygon.centroid.coords[0])
     turned = affinity.rotate(polygon, -angle_deg, origin=tuple(centre))
-    plan, faces = _clipped(kind, spacing, turned, centre)
+    plan, faces = _clipped(kind, spacing, turned, centre + spacing * np.asarray(offset, dtype=float))
     if angle_deg:
         c, s = np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg))
         plan = (plan - centre) @ np.array([[c, s], [-s, c]]) + centre
@@ -163,44 +167,74 @@ def lattice_grid(mesh: TriMesh, kind: str, spacing: float, support_vertices: np.
     return PolyMesh(nodes=nodes, faces=tuple(faces), boundary=on_boundary, supports=supports, corners=corners)
 
 
+def principal_angle(mesh: TriMesh) -> float:
+    """Angle (degrees, in [-90, 90)) of the plan's major principal axis of area (second moments of
+    the facets' plan areas about the centroid); 0 when the two principal moments are within 5 %
+    (square or round plans: no preferred direction, keep the x axis) or the axis is within 1 degree
+    of x or y."""
+    areas = mesh.face_plan_areas
+    centres = mesh.face_centroids[:, :2]
+    centre = (areas[:, None] * centres).sum(axis=0) / areas.sum()
+    d = centres - centre
+    moments = np.einsum("f,fi,fj->ij", areas, d, d)
+    values, vectors = np.linalg.eigh(moments)
+    if values[1] - values[0] < 0.05 * values[1]:
+        return 0.0
+    major = vectors[:, 1]
+    angle = (float(np.degrees(np.arctan2(major[1], major[0]))) + 90.0) % 180.0 - 90.0
+    # within 1 degree of the x or y axis: take the axis (plans drawn on the axes stay exact)
+    snapped = 90.0 * round(angle / 90.0)
+    return float(((snapped if abs(angle - snapped) < 1.0 else angle) + 90.0) % 180.0 - 90.0)
+
+
 def _matched(mesh: TriMesh, kind: str, total_length: float, support_vertices) -> PolyMesh:
+    """Secant iteration on the spacing for L_tot (the clipped length is a step function of the
+    spacing: whole rows enter or leave); when an alignment misses 1 %, the lattice is shifted by
+    half and a quarter cell, then turned (45 degrees for squares, 30 for triangles), then scanned
+    +-10 % around the best spacing. ConvergenceError when nothing is within 1 %."""
     if not total_length > 0:
         raise InputError(f"grid: the total length must be positive, got {total_length}")
     # an infinite lattice has length per area 3 / (sqrt3/2 s) (triangles) or 2 / s (squares)
     per_area = (2 * np.sqrt(3), 2.0)[kind == "quad"]
     plan_area = float(mesh.face_plan_areas.sum())
     spacing = per_area * plan_area / total_length
+    base = principal_angle(mesh)
+    turn = 45.0 if kind == "quad" else 30.0
+    candidates = [(base, (0.0, 0.0)), (base, (0.5, 0.5)), (base, (0.25, 0.25)),
+                  (base + turn, (0.0, 0.0)), (base + turn, (0.5, 0.5))]
     best = None
-    # aligned with the plan first; a quad lattice aligned with straight edges changes its length in
-    # steps (whole rows), so a diagonal lattice is tried when the aligned one misses 1 %
-    for angle in (0.0, 45.0):
+    for angle, offset in candidates:
         trial_spacing = spacing
-        for _ in range(12):
-            grid = lattice_grid(mesh, kind, trial_spacing, support_vertices, angle)
+        for _ in range(8):
+            grid = lattice_grid(mesh, kind, trial_spacing, support_vertices, angle, offset)
             error = grid.total_length / total_length - 1
             if best is None or abs(error) < abs(best[0]):
-                best = (error, grid, trial_spacing, angle)
+                best = (error, grid, trial_spacing, angle, offset)
             if abs(error) < 0.005:
-                break
+                return grid
             trial_spacing *= 1 + error
-        if abs(best[0]) >= 0.01:
-            for factor in np.linspace(0.9, 1.1, 41):
-                grid = lattice_grid(mesh, kind, best[2] * factor, support_vertices, best[3])
-                error = grid.total_length / total_length - 1
-                if abs(error) < abs(best[0]):
-                    best = (error, grid, best[2] * factor, best[3])
-                if abs(best[0]) < 0.01:
-                    break
-        if abs(best[0]) < 0.01 or kind != "quad":
-            break
-    return best[1]
+        if abs(best[0]) < 0.01:
+            return best[1]
+    for factor in np.linspace(0.9, 1.1, 41):
+        grid = lattice_grid(mesh, kind, best[2] * factor, support_vertices, best[3], best[4])
+        error = grid.total_length / total_length - 1
+        if abs(error) < abs(best[0]):
+            best = (error, grid, best[2] * factor, best[3], best[4])
+        if abs(best[0]) < 0.01:
+            return best[1]
+    raise ConvergenceError(f"grid: no {kind} lattice spacing gives the total length {total_length:.2f} m within 1 % "
+                           f"(best {100 * best[0]:+.1f} %)", hint="the surface may be too small for this length; "
+                           "try a longer or shorter target length")
 
 
 def triangular_grid(mesh: TriMesh, *, total_length: float, support_vertices: np.ndarray | None = None) -> PolyMesh:
-    """Equilateral triangles over the plan, lifted onto the surface, with L_tot matched within 1 %."""
+    """Equilateral triangles over the plan (one edge direction along the plan's major principal
+    axis), lifted onto the surface, with L_tot (m) matched within 1 %; support_vertices (n,) bool
+    of the surface (default: its flagged vertices) mark the grid's boundary nodes near them."""
     return _matched(mesh, "triangle", total_length, support_vertices)
 
 
 def quad_grid(mesh: TriMesh, *, total_length: float, support_vertices: np.ndarray | None = None) -> PolyMesh:
-    """Squares over the plan, lifted onto the surface, with L_tot matched within 1 %."""
+    """Squares over the plan (sides along the plan's principal axes), lifted onto the surface,
+    with L_tot (m) matched within 1 %; support_vertices as for triangular_grid."""
     return _matched(mesh, "quad", total_length, support_vertices)

@@ -1,0 +1,63 @@
+"""Analysis and remeshing pictures: each PNG is written, re-read by matplotlib and not blank."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+matplotlib = pytest.importorskip("matplotlib")
+from matplotlib import image  # noqa: E402
+
+from engine.grids import quad_grid  # noqa: E402
+from engine.parametric import cap  # noqa: E402
+from workflow.plots.analysis import (plot_axial_forces, plot_buckling_modes, plot_response,  # noqa: E402
+                                     plot_utilisation)
+from workflow.plots.remesh import plot_gridshell  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def grid():
+    mesh = cap()
+    support = np.zeros(mesh.n_vertices, dtype=bool)
+    support[mesh.boundary_loops[0]] = True
+    return quad_grid(mesh, total_length=12.0 * np.sqrt(mesh.area), support_vertices=support)
+
+
+def _check_png(path):
+    assert path.exists() and path.stat().st_size > 2000
+    pixels = image.imread(path)
+    assert pixels.ndim == 3 and pixels.shape[0] > 200 and pixels.shape[1] > 200
+    rgb = pixels[..., :3].reshape(-1, 3)
+    assert len(np.unique(np.round(rgb, 2), axis=0)) > 20, "more than a few colours"
+    assert (rgb.std(axis=0) > 0.02).any(), "not one colour"
+    assert not list(path.parent.glob("*.tmp*")), "no temporary file left behind"
+
+
+@pytest.mark.parametrize("color_by", ["degree", "planarity"])
+def test_gridshell_picture(grid, tmp_path, color_by):
+    _check_png(plot_gridshell(grid, tmp_path / f"grid_{color_by}.png", color_by=color_by, title="cap"))
+
+
+def test_utilisation_and_axial_force_pictures(grid, tmp_path):
+    beams = grid.edges
+    rng = np.random.default_rng(1)
+    utilisation = rng.uniform(0.0, 1.3, len(beams))
+    _check_png(plot_utilisation(grid.nodes, beams, utilisation, tmp_path / "utilisation.png", title="u"))
+    forces = rng.normal(0.0, 20e3, len(beams))
+    _check_png(plot_axial_forces(grid.nodes, beams, forces, tmp_path / "axial.png"))
+
+
+def test_buckling_mode_picture(grid, tmp_path):
+    n = grid.n_nodes
+    centre = grid.nodes[:, :2] - grid.nodes[:, :2].mean(axis=0)
+    modes = np.zeros((2, n, 6))
+    modes[0, :, 2] = np.cos(3 * centre[:, 0])
+    modes[1, :, 2] = np.sin(2 * centre[:, 1])
+    _check_png(plot_buckling_modes(grid.nodes, grid.edges, modes, np.array([4.2, 5.1]), tmp_path / "modes.png"))
+
+
+def test_response_picture(tmp_path):
+    t = np.linspace(0, 1, 40)
+    curves = {"perfect": np.column_stack([3 * np.sin(2 * t), -0.05 * t]),
+              "LB mode 1 +": np.column_stack([2.4 * np.sin(2 * t), -0.06 * t])}
+    _check_png(plot_response(curves, tmp_path / "response.png", worst="LB mode 1 +", required=1.5))
