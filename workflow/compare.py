@@ -156,6 +156,10 @@ def run_compare(args: argparse.Namespace) -> int:
                       required=project.analysis.required_load_factor,
                       title=f"{project.project.name}: grids of equal length")
     progress.stage_done("compare", "ran", 0.0)
+    if (out_dir / "report").is_dir():
+        # the project's report was made before: make it again so that it shows the comparison
+        run_project(project, out_dir, STAGES, only="report", force=True, progress=progress,
+                    project_file=str(project_path.resolve()))
     print(markdown_table(rows))
     print(f"comparison: {(folder / 'compare.md').resolve()}")
     return 0
