@@ -532,7 +532,7 @@ def _negative_pivots(K_free: sp.csc_matrix) -> tuple[object, int]:
 
 def nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *, control: tuple[int, int],
                      max_load_factor: float = 10.0, max_steps: int = 80, initial_loads: np.ndarray | None = None,
-                     tolerance: float = 1e-6, steps_past_limit: int = 3,
+                     tolerance: float = 1e-5, steps_past_limit: int = 3,
                      monitor: list[tuple[int, int]] | None = None) -> NonlinearResult:
     """Geometrically non-linear static analysis with arc-length control.
 
