@@ -32,8 +32,7 @@ def plot_utilisation(nodes: np.ndarray, beams: np.ndarray, utilisation: np.ndarr
 
     fig, ax = plt.subplots(figsize=(9, 8))
     utilisation = np.asarray(utilisation, dtype=float)
-    cmap = plt.get_cmap("RdYlGn_r")
-    cmap.set_over("#5b0000")
+    cmap = plt.get_cmap("RdYlGn_r").with_extremes(over="#5b0000")
     lines = LineCollection(_segments(nodes, beams), cmap=cmap, norm=plt.Normalize(0.0, 1.0),
                            linewidths=1.5 + 2.5 * np.clip(utilisation, 0, 1.2))
     lines.set_array(utilisation)
