@@ -1,36 +1,52 @@
 """Regular, planar cells that stay on the surface (METHOD.md section 4).
 
-Local/global iterations in the manner of Shape-Up (Bouaziz et al. 2012). Local step, per
-cell: (regularity) the PCA of its nodes, un-stretched by the square roots of the eigenvalues
-so that the cell's own anisotropy is kept, a regular polygon of equal area fitted by a rigid
-rotation, stretched back; (planarity) the nodes projected onto the best-fit plane. Per node:
-(closeness) the nearest point of the reference surface; (fairness) the mean of its
-neighbours. Global step: the weighted least-squares fit of all targets, with each cell's
-targets compared after removing their mean (translation-free), so the system matrix is the
-same every iteration and is factored once. Corners and supports are fixed; boundary nodes are
-pulled back onto the surface's boundary after each step.
+Local/global iterations in the manner of Shape-Up (Bouaziz et al. 2012) and ShapeOp.
+
+Local step, per cell: (regularity) the PCA of its nodes in its best-fit plane, un-stretched by
+the square roots of the eigenvalues so that the cell's own anisotropy is kept, a regular polygon
+of equal area fitted by a rigid rotation (2-D Procrustes), stretched back; (planarity) the nodes
+projected onto the best-fit plane. Per node: (closeness) the nearest point of the reference
+surface; (fairness) the mean of its neighbours (interior nodes).
+
+Global step: the weighted least-squares fit of all targets,
+
+    S * sum_cells ||C x - ((1 - t) R + t P)||^2 + sum_nodes E * ||x_i - ((1 - f) s_i + f m_i)||^2,
+
+C the translation-free rows (x_j - mean of the cell), R, P the mean-free regular and planar
+targets, s_i the closest surface point, m_i the neighbours' mean. The shape weight
+S = K (w_regularity + w_planarity) and the node weight E = w_closeness + w_fairness are constant;
+only the blends t (planarity share) and f (fairness share) change over the iterations, so the
+matrix is the same every iteration and is factored ONCE. The planarity share is ramped from
+w_p / (w_r + w_p) up to 1, and the last iterations are pure planarity + closeness (t = 1, f = 0).
+
+Constraints: corners and supports are fixed (their DOFs are eliminated); a free boundary node
+moves along the tangent of the surface's boundary polyline at its start position (one DOF) and is
+projected back onto the polyline after each step (exact on straight boundary edges).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from scipy.spatial import cKDTree
 
 from .errors import InputError
 from .field import GuidingField
 from .mesh import PolyMesh, TriMesh
-from .proximity import closest_points
+from .proximity import closest_point_on_triangles
 
-__all__ = ["OptimizeSettings", "OptimizeResult", "optimize", "regular_targets", "planar_targets"]
+__all__ = ["OptimizeSettings", "OptimizeResult", "optimize", "regular_targets", "planar_targets",
+           "optimize_quality"]
 
 
 @dataclass(frozen=True, kw_only=True)
 class OptimizeSettings:
-    """Weights of the four terms, the number of iterations, and whether panels must be planar
-    (planar False: the planarity weight is ignored)."""
+    """Weights of the four terms (dimensionless, relative), the number of local/global
+    iterations, and whether panels must be planar (planar False: the planarity weight is ignored)."""
 
     regularity_weight: float = 1.0
     planarity_weight: float = 1.0
@@ -41,30 +57,56 @@ class OptimizeSettings:
 
     def __post_init__(self) -> None:
         for name in ("regularity_weight", "planarity_weight", "closeness_weight", "fairness_weight"):
-            if not getattr(self, name) >= 0:
-                raise InputError(f"optimize: {name} must be zero or positive, got {getattr(self, name)}")
-        if self.iterations < 0:
-            raise InputError(f"optimize: iterations must be zero or positive, got {self.iterations}")
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise InputError(f"optimize: {name} must be a finite number >= 0, got {value}",
+                                 hint="weights are relative; use 0 to switch a term off")
+        if int(self.iterations) != self.iterations or self.iterations < 0:
+            raise InputError(f"optimize: iterations must be a whole number >= 0, got {self.iterations}")
 
 
 @dataclass(frozen=True, kw_only=True)
 class OptimizeResult:
-    """The optimised grid-shell and the figures before and after (JSON-ready)."""
+    """The optimised grid-shell and the figures before and after (JSON-ready dict)."""
 
     polymesh: PolyMesh
     quality: dict
 
 
-#: Internal scale of the planarity weight: planar panels need it to dominate at the end.
-PLANARITY_SCALE = 20.0
+#: Shape rows (regularity + planarity) against node rows (closeness + fairness): S = K (w_r + w_p).
+SHAPE_SCALE = 4.0
+#: Share of the iterations (at least one) at the end that are pure planarity + closeness.
+FINAL_SHARE = 0.3
+#: Weight of the damping term ||x - x_current||^2 relative to S + E (keeps the system regular).
+DAMPING = 1e-6
+#: Anderson acceleration (Peng et al. 2018) of the final, pure planarity + closeness iterations:
+#: number of previous iterates combined (0: off). Steps that raise the energy are rejected.
+ANDERSON_DEPTH = 6
+#: Closeness tolerance band, relative to the surface's bounding-box diagonal: a node within the band
+#: is its own closeness target (free to leave the surface for planarity), one outside is pulled
+#: back to the band's edge.
+CLOSENESS_BAND = 0.0025
+#: Hard limit of the node distance to the surface after the iterations, relative to the diagonal.
+CLOSENESS_LIMIT = 0.0045
+#: Planarity share in the final iterations (1: pure planarity + closeness).
+FINAL_PLANARITY = 1.0
 
+
+def _into_band(points: np.ndarray, closest: np.ndarray, distance: np.ndarray, band: float) -> np.ndarray:
+    """(p,3) closeness targets: the points themselves within ``band`` (m) of the surface, else the
+    point at distance ``band`` on the way to their closest surface point."""
+    factor = np.minimum(1.0, band / np.maximum(distance, 1e-300))
+    return closest + (points - closest) * factor[:, None]
+
+
+# ----------------------------------------------------------------------------- local steps
 
 def _groups(faces: tuple[np.ndarray, ...]) -> dict[int, np.ndarray]:
     """Faces grouped by degree: {k: (f_k, k) node ids}."""
     groups: dict[int, list[np.ndarray]] = {}
     for face in faces:
         groups.setdefault(len(face), []).append(face)
-    return {k: np.array(v, dtype=np.int64) for k, v in groups.items()}
+    return {k: np.array(v, dtype=np.int64) for k, v in sorted(groups.items())}
 
 
 def _frames(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -75,149 +117,344 @@ def _frames(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def planar_targets(points: np.ndarray) -> np.ndarray:
-    """(f,k,3) nodes projected onto each cell's best-fit plane."""
+    """(f,k,3) nodes of (f,k,3) cells projected onto each cell's best-fit plane, m."""
+    points = np.asarray(points, dtype=float)
     centroid, _, normal = _frames(points)
     offset = np.einsum("fki,fi->fk", points - centroid[:, None], normal)
     return points - offset[..., None] * normal[:, None]
 
 
-def regular_targets(points: np.ndarray) -> np.ndarray:
-    """(f,k,3) the regular k-gon of equal area best fitting each cell after un-stretching it
-    by its PCA axes, stretched back (a regular or affinely stretched regular cell is its own target)."""
-    f, k, _ = points.shape
+def _unstretched(points: np.ndarray):
+    """In-plane principal coordinates of (f,k,3) cells divided by the sqrt-eigenvalue spreads:
+    (unstretched (f,k,2), spread (f,2), vectors (f,2,2), axes (f,2,3), centroid (f,3))."""
+    k = points.shape[1]
     centroid, axes, _ = _frames(points)
     local = np.einsum("fki,fji->fkj", points - centroid[:, None], axes)
     covariance = np.einsum("fki,fkj->fij", local, local) / k
     values, vectors = np.linalg.eigh(covariance)
     spread = np.sqrt(np.maximum(values, 1e-300))
     principal = np.einsum("fki,fij->fkj", local, vectors)
-    unstretched = principal / spread[:, None, :]
+    return principal / spread[:, None, :], spread, vectors, axes, centroid
+
+
+def regular_targets(points: np.ndarray) -> np.ndarray:
+    """(f,k,3) targets of (f,k,3) cells: the regular k-gon of equal area best fitting each cell
+    after un-stretching it by its PCA axes, stretched back. A regular cell, and an affinely
+    stretched regular cell, is its own target (either orientation)."""
+    points = np.asarray(points, dtype=float)
+    f, k, _ = points.shape
+    unstretched, spread, vectors, axes, centroid = _unstretched(points)
     angle = 2 * np.pi * np.arange(k) / k
-    template = np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    template = np.broadcast_to(np.stack([np.cos(angle), np.sin(angle)], axis=1), (f, k, 2))
     signed = 0.5 * np.sum(unstretched[:, :, 0] * np.roll(unstretched[:, :, 1], -1, axis=1)
                           - np.roll(unstretched[:, :, 0], -1, axis=1) * unstretched[:, :, 1], axis=1)
-    template = np.where((signed < 0)[:, None, None], template * [1.0, -1.0], template[None])
+    template = np.where((signed < 0)[:, None, None], template * [1.0, -1.0], template)
     unit_area = 0.5 * k * np.sin(2 * np.pi / k)
     scale = np.sqrt(np.abs(signed) / unit_area)
-    # best rotation (2D Procrustes) of the template onto the cell
+    # best rotation of the template onto the cell (2-D Procrustes, node j <-> template corner j)
     dot = np.einsum("fki,fki->f", template, unstretched)
     cross = np.einsum("fk,fk->f", template[:, :, 0], unstretched[:, :, 1]) - np.einsum(
         "fk,fk->f", template[:, :, 1], unstretched[:, :, 0])
     phi = np.arctan2(cross, dot)
-    c, s = np.cos(phi), np.sin(phi)
-    rotated = np.stack([c[:, None] * template[:, :, 0] - s[:, None] * template[:, :, 1],
-                        s[:, None] * template[:, :, 0] + c[:, None] * template[:, :, 1]], axis=2)
+    c, s = np.cos(phi)[:, None], np.sin(phi)[:, None]
+    rotated = np.stack([c * template[:, :, 0] - s * template[:, :, 1],
+                        s * template[:, :, 0] + c * template[:, :, 1]], axis=2)
     fitted = rotated * scale[:, None, None]
     back = np.einsum("fkj,fij->fki", fitted * spread[:, None, :], vectors)
     return centroid[:, None] + np.einsum("fkj,fji->fki", back, axes)
 
 
-def _centering_blocks(groups: dict[int, np.ndarray], n: int) -> sp.csr_matrix:
-    """Rows (x_i - mean of its cell) for every cell corner, stacked over the degree groups."""
+# ----------------------------------------------------------------------------- projections
+
+class _Surface:
+    """Closest points on a triangle mesh with the candidate index built once."""
+
+    def __init__(self, mesh: TriMesh, candidates: int = 16):
+        self.corners = mesh.vertices[mesh.faces]
+        self.diagonal = float(mesh.diagonal)
+        self.tree = cKDTree(self.corners.mean(axis=1))
+        self.k = min(candidates, len(mesh.faces))
+
+    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(closest points (p,3), distances (p,))."""
+        p = len(points)
+        _, cand = self.tree.query(points, k=self.k)
+        cand = np.asarray(cand).reshape(p, self.k).ravel()
+        repeated = np.repeat(points, self.k, axis=0)
+        q = closest_point_on_triangles(repeated, self.corners[cand, 0], self.corners[cand, 1], self.corners[cand, 2])
+        distance = np.linalg.norm(q - repeated, axis=1).reshape(p, self.k)
+        best = np.argmin(distance, axis=1)
+        rows = np.arange(p)
+        return q.reshape(p, self.k, 3)[rows, best], distance[rows, best]
+
+
+class _Boundary:
+    """Closest points on the surface's boundary polylines and the segment directions there."""
+
+    def __init__(self, mesh: TriMesh, candidates: int = 16):
+        segments = [np.stack([mesh.vertices[loop], mesh.vertices[np.roll(loop, -1)]], axis=1)
+                    for loop in mesh.boundary_loops]
+        self.segments = np.concatenate(segments) if segments else np.zeros((0, 2, 3))
+        if len(self.segments):
+            self.tree = cKDTree(self.segments.mean(axis=1))
+        self.k = min(candidates, len(self.segments))
+
+    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(closest points (p,3), unit direction of the segment they lie on (p,3))."""
+        p = len(points)
+        _, cand = self.tree.query(points, k=self.k)
+        cand = np.asarray(cand).reshape(p, self.k)
+        a, b = self.segments[cand, 0], self.segments[cand, 1]
+        d = b - a
+        length2 = np.maximum(np.einsum("pki,pki->pk", d, d), 1e-300)
+        t = np.clip(np.einsum("pki,pki->pk", points[:, None] - a, d) / length2, 0.0, 1.0)
+        q = a + t[..., None] * d
+        best = np.argmin(np.einsum("pki,pki->pk", q - points[:, None], q - points[:, None]), axis=1)
+        rows = np.arange(p)
+        direction = d[rows, best] / np.sqrt(length2[rows, best])[:, None]
+        return q[rows, best], direction
+
+
+# ----------------------------------------------------------------------------- operators
+
+def _centering(groups: dict[int, np.ndarray], n: int) -> sp.csr_matrix:
+    """Rows x_j - mean of its cell for every cell corner, stacked over the degree groups (r, n)."""
     rows, cols, vals, offset = [], [], [], 0
     for k, faces in groups.items():
         f = len(faces)
         row = offset + np.arange(f * k).reshape(f, k)
-        for j in range(k):
-            rows.append(np.repeat(row[:, j], k))
-            cols.append(faces.ravel())
-            vals.append(np.tile(np.where(np.arange(k) == j, 1.0 - 1.0 / k, -1.0 / k), f))
+        rows.append(np.repeat(row.ravel(), k))
+        cols.append(np.repeat(faces, k, axis=0).ravel())
+        vals.append(np.tile((np.eye(k) - 1.0 / k).ravel(), f))
         offset += f * k
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(offset, n))
 
 
-def _laplacian(edges: np.ndarray, n: int, active: np.ndarray) -> sp.csr_matrix:
-    """Rows x_i - mean of neighbours for the ``active`` nodes."""
-    adjacency = sp.csr_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
-                              shape=(n, n))
-    degree = np.maximum(np.asarray(adjacency.sum(axis=1)).ravel(), 1.0)
-    L = sp.eye(n, format="csr") - sp.diags(1.0 / degree) @ adjacency
-    return L[np.flatnonzero(active)]
+def _stack(groups: dict[int, np.ndarray], targets: dict[int, np.ndarray]) -> np.ndarray:
+    """Mean-free targets (r,3) of every cell corner, in the row order of _centering."""
+    return np.concatenate([(targets[k] - targets[k].mean(axis=1, keepdims=True)).reshape(-1, 3) for k in groups])
 
 
-def _stack_targets(groups: dict[int, np.ndarray], targets: dict[int, np.ndarray]) -> np.ndarray:
-    """Mean-free targets of every cell corner, in the row order of _centering_blocks."""
-    out = []
-    for k in groups:
-        t = targets[k]
-        out.append((t - t.mean(axis=1, keepdims=True)).reshape(-1, 3))
-    return np.concatenate(out)
+def _neighbour_mean(edges: np.ndarray, n: int) -> sp.csr_matrix:
+    """(n, n) operator: mean of each node's neighbours (a node without neighbours: itself)."""
+    adjacency = sp.csr_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
+                                                          np.r_[edges[:, 1], edges[:, 0]])), shape=(n, n))
+    degree = np.asarray(adjacency.sum(axis=1)).ravel()
+    lonely = degree == 0
+    return (sp.diags(1.0 / np.maximum(degree, 1.0)) @ adjacency + sp.diags(lonely.astype(float))).tocsr()
 
 
-def _boundary_polylines(mesh: TriMesh) -> np.ndarray:
-    """(s,2,3) segments of the surface's boundary loops."""
-    segments = []
-    for loop in mesh.boundary_loops:
-        p = mesh.vertices[loop]
-        segments.append(np.stack([p, np.roll(p, -1, axis=0)], axis=1))
-    return np.concatenate(segments) if segments else np.zeros((0, 2, 3))
+def _reduction(n: int, interior: np.ndarray, sliding: np.ndarray, tangents: np.ndarray) -> sp.csr_matrix:
+    """(3n, m) basis of the admissible displacements: 3 DOFs per free interior node, one along
+    the boundary tangent per sliding node, none for fixed nodes (x flattened node-major)."""
+    free = np.flatnonzero(interior)
+    slide = np.flatnonzero(sliding)
+    rows = np.r_[(3 * free[:, None] + np.arange(3)).ravel(), (3 * slide[:, None] + np.arange(3)).ravel()]
+    cols = np.r_[np.arange(3 * len(free)), 3 * len(free) + np.repeat(np.arange(len(slide)), 3)]
+    vals = np.r_[np.ones(3 * len(free)), tangents[slide].ravel()]
+    return sp.csr_matrix((vals, (rows, cols)), shape=(3 * n, 3 * len(free) + len(slide)))
 
 
-def _onto_segments(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """Closest points of ``points`` on a set of segments (brute force over segments, chunked)."""
-    out = np.empty_like(points)
-    a, b = segments[:, 0], segments[:, 1]
-    d = b - a
-    length2 = np.maximum(np.einsum("si,si->s", d, d), 1e-300)
-    for start in range(0, len(points), 256):
-        p = points[start:start + 256]
-        t = np.clip(np.einsum("psi,si->ps", p[:, None] - a[None], d) / length2, 0.0, 1.0)
-        q = a[None] + t[..., None] * d[None]
-        nearest = np.argmin(np.einsum("psi,psi->ps", q - p[:, None], q - p[:, None]), axis=1)
-        out[start:start + 256] = q[np.arange(len(p)), nearest]
+# ----------------------------------------------------------------------------- quality
+
+def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface: _Surface | None = None) -> dict:
+    """Figures of a grid-shell (JSON-ready): planarity_max_m, planarity_p95_m (largest node distance
+    from a cell's best-fit plane), planarity_max_rel, planarity_p95_rel (to the mean beam length),
+    regularity (mean over cells of std/mean of edge lengths after un-stretching the cell's own
+    anisotropy), closeness_max_rel, closeness_mean_rel (node distance to the surface / bounding-box
+    diagonal, with a mesh), shortest_beam_m, mean_beam_length_m, smallest_angle_deg."""
+    x = np.asarray(polymesh.nodes, dtype=float)
+    lengths = polymesh.beam_lengths
+    mean_length = float(lengths.mean()) if len(lengths) else 0.0
+    planarity, regularity, smallest = [], [], 180.0
+    for k, faces in _groups(polymesh.faces).items():
+        points = x[faces]
+        centroid, _, normal = _frames(points)
+        distance = np.abs(np.einsum("fki,fi->fk", points - centroid[:, None], normal)).max(axis=1)
+        planarity.append(distance if k > 3 else np.zeros(len(faces)))
+        unstretched = _unstretched(points)[0]
+        edges = np.linalg.norm(unstretched - np.roll(unstretched, -1, axis=1), axis=2)
+        regularity.append(edges.std(axis=1) / np.maximum(edges.mean(axis=1), 1e-300))
+        a, b = np.roll(points, 1, axis=1) - points, np.roll(points, -1, axis=1) - points
+        cosine = np.einsum("fki,fki->fk", a, b) / np.maximum(
+            np.linalg.norm(a, axis=2) * np.linalg.norm(b, axis=2), 1e-300)
+        smallest = min(smallest, float(np.degrees(np.arccos(np.clip(cosine, -1, 1))).min()))
+    planarity = np.concatenate(planarity) if planarity else np.zeros(0)
+    regularity = np.concatenate(regularity) if regularity else np.zeros(0)
+    scale = max(mean_length, 1e-300)
+    out = {
+        "planarity_max_m": float(planarity.max()) if len(planarity) else 0.0,
+        "planarity_p95_m": float(np.percentile(planarity, 95)) if len(planarity) else 0.0,
+        "planarity_max_rel": float(planarity.max() / scale) if len(planarity) else 0.0,
+        "planarity_p95_rel": float(np.percentile(planarity, 95) / scale) if len(planarity) else 0.0,
+        "regularity": float(regularity.mean()) if len(regularity) else 0.0,
+        "shortest_beam_m": float(lengths.min()) if len(lengths) else 0.0,
+        "mean_beam_length_m": mean_length,
+        "smallest_angle_deg": smallest,
+    }
+    if mesh is not None or surface is not None:
+        surface = surface or _Surface(mesh)
+        distance = surface.closest(x)[1]
+        out["closeness_max_rel"] = float(distance.max() / surface.diagonal)
+        out["closeness_mean_rel"] = float(distance.mean() / surface.diagonal)
     return out
 
 
+# ----------------------------------------------------------------------------- driver
+
+def _check(polymesh: PolyMesh, mesh: TriMesh) -> None:
+    if polymesh.n_nodes == 0 or polymesh.n_faces == 0:
+        raise InputError("optimize: the grid-shell has no nodes or no cells",
+                         hint="run the remesh stage first and check that it produced cells")
+    if not np.all(np.isfinite(polymesh.nodes)):
+        raise InputError("optimize: the grid-shell has non-finite node coordinates")
+    degrees = polymesh.face_degrees
+    if degrees.min() < 3:
+        raise InputError(f"optimize: a cell has {int(degrees.min())} nodes; cells need at least 3")
+    if mesh.n_faces == 0:
+        raise InputError("optimize: the reference surface has no triangles")
+
+
+def _schedule(settings: OptimizeSettings) -> tuple[float, list[tuple[float, float]]]:
+    """Shape weight S and per iteration (planarity share t, fairness share f of E)."""
+    w_r = settings.regularity_weight
+    w_p = settings.planarity_weight if settings.planar else 0.0
+    w_c, w_f = settings.closeness_weight, settings.fairness_weight
+    shape = SHAPE_SCALE * (w_r + w_p)
+    fair = w_f / (w_c + w_f) if w_c + w_f > 0 else 0.0
+    n = int(settings.iterations)
+    if w_p == 0:
+        return shape, [(0.0, fair)] * n
+    final = min(n, max(1, int(round(FINAL_SHARE * n))))
+    main = n - final
+    t0 = w_p / (w_r + w_p)
+    plan = [(t0 + (1 - t0) * (i / max(main, 1)), fair) for i in range(main)]
+    return shape, plan + [(FINAL_PLANARITY, 0.0)] * final
+
+
 def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, settings: OptimizeSettings, *,
-             progress=None) -> OptimizeResult:
-    """Regularise and planarise the cells of ``polymesh`` on the reference surface ``mesh``."""
-    from .voronoi import polymesh_quality
+             progress: Callable[[str, float | None], None] | None = None) -> OptimizeResult:
+    """Regularise and (with ``settings.planar``) planarise the cells of ``polymesh`` on the
+    reference surface ``mesh``; corners and supports stay put, boundary nodes on the boundary.
 
-    def say(text: str, fraction: float | None = None) -> None:
-        if progress is not None:
-            progress(text, fraction)
-
+    ``field`` is accepted for the workflow's sake (cells keep their own anisotropy).
+    ``progress(text, fraction)`` is called once per iteration. quality: "before" and "after"
+    figures (see :func:`optimize_quality`), "iterations", "converged" (the last step moved no
+    node more than 1e-4 of the mean beam length), "final_step_rel", "factorisations" (1),
+    "planar".
+    """
+    _check(polymesh, mesh)
     n = polymesh.n_nodes
-    before = polymesh_quality(polymesh, mesh=mesh)
+    surface = _Surface(mesh)
+    before = optimize_quality(polymesh, surface=surface)
     fixed = polymesh.corners | polymesh.supports
-    free = np.flatnonzero(~fixed)
+    boundary = _Boundary(mesh)
+    sliding = polymesh.boundary & ~fixed
+    if sliding.any() and not len(boundary.segments):
+        raise InputError("optimize: the grid-shell has boundary nodes but the surface has no boundary",
+                         hint="closed surfaces: clear the boundary flags of the grid-shell")
+    interior = ~polymesh.boundary & ~fixed
+    x = np.array(polymesh.nodes, dtype=float)
+    tangents = np.zeros((n, 3))
+    if sliding.any() and settings.iterations > 0:
+        x[sliding], tangents[sliding] = boundary.closest(x[sliding])
+
     groups = _groups(polymesh.faces)
-    C = _centering_blocks(groups, n)
-    w_reg = settings.regularity_weight
-    w_plan = PLANARITY_SCALE * settings.planarity_weight if settings.planar else 0.0
-    w_close, w_fair = settings.closeness_weight, settings.fairness_weight
-    L = _laplacian(polymesh.edges, n, ~polymesh.boundary)
-    # system: (w_reg + w_plan) C^T C + w_close I + w_fair L^T L  (a fixed matrix), in the free nodes
-    A = (w_reg + w_plan) * (C.T @ C) + w_close * sp.eye(n) + w_fair * (L.T @ L)
-    A = A.tocsc()
-    A_free = A[free][:, free].tocsc()
-    coupling = A[free][:, np.flatnonzero(fixed)]
-    if len(free):
-        solve = spla.factorized(A_free + 1e-12 * sp.eye(len(free), format="csc"))
-    factorisations = 1
-    x = polymesh.nodes.copy()
-    segments = _boundary_polylines(mesh)
-    moving_boundary = polymesh.boundary & ~fixed
-    for iteration in range(settings.iterations):
+    C = _centering(groups, n)
+    neighbours = _neighbour_mean(polymesh.edges, n)
+    shape, plan = _schedule(settings)
+    node_weight = settings.closeness_weight + settings.fairness_weight
+    damping = DAMPING * max(shape + node_weight, 1.0)
+    A = shape * (C.T @ C) + (node_weight + damping) * sp.eye(n)
+    A3 = sp.kron(A, sp.eye(3), format="csr")
+    B = _reduction(n, interior, sliding, tangents)
+    factorisations = 0
+    solve = None
+    if B.shape[1] and plan:
+        solve = spla.factorized((B.T @ A3 @ B).tocsc())
+        factorisations = 1
+
+    mean_length = max(before["mean_beam_length_m"], 1e-300)
+    band = CLOSENESS_BAND * surface.diagonal
+
+    def local(x: np.ndarray, t: float, f: float) -> tuple[np.ndarray, float]:
+        """Right-hand side of the global step at x and the energy of the current phase at x."""
         points = {k: x[faces] for k, faces in groups.items()}
-        regular = _stack_targets(groups, {k: regular_targets(p) for k, p in points.items()}) if w_reg else 0.0
-        planar = _stack_targets(groups, {k: planar_targets(p) for k, p in points.items()}) if w_plan else 0.0
-        surface_points = closest_points(mesh.vertices, mesh.faces, x)[0]
-        rhs = C.T @ (w_reg * regular + w_plan * planar) + w_close * surface_points
-        if len(free):
-            rhs_free = rhs[free] - coupling @ x[fixed]
-            x[free] = np.column_stack([solve(rhs_free[:, k]) for k in range(3)])
-        if moving_boundary.any():
-            x[moving_boundary] = _onto_segments(x[moving_boundary], segments)
-        say(f"iteration {iteration + 1}/{settings.iterations}", (iteration + 1) / max(settings.iterations, 1))
-    # the nodes end on the surface; a last planarity projection follows only if it keeps them close
+        target = np.zeros((C.shape[0], 3))
+        if shape > 0:
+            if t < 1.0:
+                target += (1 - t) * _stack(groups, {k: regular_targets(p) for k, p in points.items()})
+            if t > 0.0:
+                target += t * _stack(groups, {k: planar_targets(p) for k, p in points.items()})
+        node_target = _into_band(x, *surface.closest(x), band)
+        if f > 0:
+            smooth = neighbours @ x
+            node_target[interior] = (1 - f) * node_target[interior] + f * smooth[interior]
+        energy = shape * float(np.sum((C @ x - target) ** 2)) + node_weight * float(np.sum((x - node_target) ** 2))
+        return shape * (C.T @ target) + node_weight * node_target + damping * x, energy
+
+    def solve_global(x: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+        residual = rhs.ravel() - A3 @ x.ravel()
+        new = x + (B @ solve(B.T @ residual)).reshape(n, 3)
+        if sliding.any():
+            new[sliding] = boundary.closest(new[sliding])[0]
+        return new
+
+    step, done, accepted, rejected = 0.0, 0, 0, 0
+    first_final = next((i for i, (t, f) in enumerate(plan) if f == 0.0 and t == FINAL_PLANARITY), len(plan))
+    history_g: list[np.ndarray] = []
+    history_f: list[np.ndarray] = []
+    previous_energy, previous_plain = np.inf, None
+    for iteration, (t, f) in enumerate(plan if solve is not None else []):
+        accelerate = ANDERSON_DEPTH > 0 and iteration >= first_final
+        rhs, energy = local(x, t, f)
+        if accelerate and previous_plain is not None and energy > previous_energy:
+            # the accelerated point raised the energy: fall back to the plain step, restart the history
+            rejected += 1
+            x = previous_plain
+            history_g.clear()
+            history_f.clear()
+            rhs, energy = local(x, t, f)
+        plain = solve_global(x, rhs)
+        new = plain
+        if accelerate:
+            g, r = plain.ravel(), (plain - x).ravel()
+            history_g.append(g)
+            history_f.append(r)
+            if len(history_f) > 1:
+                dF = np.diff(np.array(history_f[-ANDERSON_DEPTH - 1:]), axis=0).T
+                dG = np.diff(np.array(history_g[-ANDERSON_DEPTH - 1:]), axis=0).T
+                theta = np.linalg.lstsq(dF, r, rcond=None)[0]
+                new = (g - dG @ theta).reshape(n, 3)
+                if sliding.any():
+                    new[sliding] = boundary.closest(new[sliding])[0]
+                accepted += 1
+            del history_g[:-ANDERSON_DEPTH - 1], history_f[:-ANDERSON_DEPTH - 1]
+            previous_energy, previous_plain = energy, plain
+        step = float(np.linalg.norm(new - x, axis=1).max())
+        x = new
+        done = iteration + 1
+        if progress is not None:
+            progress(f"optimize: iteration {done}/{len(plan)}", done / len(plan))
+    if previous_plain is not None and local(x, *plan[-1])[1] > previous_energy:
+        x = previous_plain  # never end on an accelerated point that raised the energy
+    if done:
+        # the closeness band is a soft constraint: bring stray nodes back within the hard limit
+        moving = interior | sliding
+        x[moving] = _into_band(x[moving], *surface.closest(x[moving]), CLOSENESS_LIMIT * surface.diagonal)
+
     result = polymesh.replace_nodes(x)
-    after = polymesh_quality(result, mesh=mesh)
-    keys = ("planarity_max_m", "planarity_p95_m", "planarity_max_rel", "planarity_p95_rel", "regularity",
-            "closeness_max_rel", "closeness_mean_rel", "shortest_beam_m", "smallest_angle_deg", "hexagon_share_interior",
-            "valence3_share_interior", "mean_beam_length_m", "total_length_m")
-    quality = {"before": {k: before.get(k) for k in keys}, "after": {k: after.get(k) for k in keys},
-               "iterations": settings.iterations, "factorisations": factorisations,
-               "planar": settings.planar}
-    quality.update({k: v for k, v in after.items() if k not in quality})
+    after = optimize_quality(result, surface=surface)
+    try:  # the remesher's wider figures (cell degrees, sizes against the field), where available
+        from .voronoi import polymesh_quality
+    except ImportError:  # pragma: no cover
+        polymesh_quality = None
+    if polymesh_quality is not None:
+        for mine, grid in ((before, polymesh), (after, result)):
+            for key, value in polymesh_quality(grid, mesh=mesh, field=field).items():
+                mine.setdefault(key, value)
+    quality = {"before": before, "after": after, "iterations": done,
+               "converged": bool(step <= 1e-4 * mean_length), "final_step_rel": step / mean_length,
+               "factorisations": factorisations, "planar": bool(settings.planar),
+               "accelerated_steps": accepted, "rejected_steps": rejected}
     return OptimizeResult(polymesh=result, quality=quality)
