@@ -146,7 +146,7 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
         report["min_wall_mm"] = float(settings.plate_thickness_mm)
     else:
         hub_radius = settings.hub_radius_mm or 1.5 * outer
-        hub_height = 2.0 * outer
+        hub_height = 2.0 * outer + 1.0  # taller than a sleeve: no tangent faces between hub top and sleeves
         hub = Cylinder(hub_radius, hub_height).moved(Location(_plane((0, 0, 0), axis)))
         sleeves = [Cylinder(outer, setback + sleeve, align=base).moved(Location(_plane((0, 0, 0), d)))
                    for d in directions]
