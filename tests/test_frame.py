@@ -223,3 +223,156 @@ def test_end_release_makes_a_pin():
     with pytest.raises(InputError, match="released"):
         FrameModel(nodes=model.nodes, beams=model.beams, E=E, G=G, A=A, Iy=IY, Iz=IZ, J=J,
                    up=np.array([0.0, 0, 1]), releases=np.ones((n, 2, 6), bool))
+
+
+def test_deep_circular_arch_limit_load():
+    """Clamped-hinged deep circular arch (R 100, opening 215 degrees, EI 1e6, EA 1e8) under an apex
+    load: limit load 897 = 8.97 EI / R^2 (DaDeppo & Schmidt 1975, inextensible closed-form
+    solution; co-rotational beam results in the literature lie within about 1 % of it)."""
+    n, radius = 40, 100.0
+    angle = np.linspace(-np.radians(107.5), np.radians(107.5), n + 1)
+    nodes = np.c_[radius * np.sin(angle), np.zeros(n + 1), radius * np.cos(angle)]
+    model = FrameModel(nodes=nodes, beams=np.c_[np.arange(n), np.arange(1, n + 1)], E=1.0, G=1.0, A=1e8,
+                       Iy=1e6, Iz=1e6, J=1e6, up=np.array([0.0, 1.0, 0.0]))
+    in_plane = np.array([0, 1, 0, 1, 0, 1], bool)          # a plane problem: uy, rx, rz held
+    supports = Supports.merge([(np.array([0]), np.array([1, 1, 1, 1, 0, 1], bool)),
+                               (np.array([n]), FIXED), (np.arange(1, n), in_plane)])
+    loads = np.zeros((n + 1, 6))
+    loads[n // 2, 2] = -1.0
+    run = nonlinear_static(model, supports, loads, control=(n // 2, 2), max_load_factor=2000.0, max_steps=150)
+    assert run.converged and run.limit_load_factor is not None
+    assert run.limit_load_factor == pytest.approx(897.0, rel=0.015)
+    assert run.negative_pivots[-1] >= 1, "one negative pivot past a limit point"
+
+
+def test_elastica_of_a_buckled_cantilever_column():
+    """Post-buckling of a fixed-free column (Euler's elastica): at a tip rotation alpha the load is
+    P / P_cr = (2 K(k) / pi)^2 and the tip deflection delta / L = 2 k / K(k), k = sin(alpha / 2),
+    P_cr = pi^2 EI / (4 L^2) (Timoshenko & Gere, Theory of Elastic Stability, 2.7: 1.152 at 60 deg)."""
+    from scipy.special import ellipk
+
+    length, n = 1.0, 24
+    model = _line((0, 0, 1), length, n, (1, 0, 0), E=1.0, G=1.0, A=1e5, Iy=1.0, Iz=1.0, J=1.0)
+    critical = np.pi**2 / (4 * length**2)
+    loads = np.zeros((n + 1, 6))
+    loads[n, 2] = -1.0
+    loads[n, 0] = 1e-4                                      # a small lateral imperfection load
+    run = nonlinear_static(model, Supports(nodes=np.array([0]), restraints=FIXED[None]), loads,
+                           control=(n, 4), max_load_factor=1.3 * critical, max_steps=120, monitor=[(n, 0)])
+    alpha = np.radians(60.0)
+    rotation = np.abs(run.path[:, 1])
+    assert rotation.max() > alpha
+    k = np.sin(alpha / 2)
+    load = np.interp(alpha, rotation, run.path[:, 0]) / critical
+    deflection = np.interp(alpha, rotation, np.abs(run.monitored[:, 0])) / length
+    assert load == pytest.approx((2 * ellipk(k**2) / np.pi) ** 2, rel=0.01)
+    assert deflection == pytest.approx(2 * k / ellipk(k**2), rel=0.01)
+
+
+def _space_frame() -> tuple[FrameModel, Supports, np.ndarray]:
+    """A one-bay, two-storey 3D frame with a diagonal, fixed feet, loads and moments in all
+    directions."""
+    plan = np.array([[0.0, 0, 0], [4, 0, 0], [4, 3, 0], [0, 3, 0]])
+    nodes = np.vstack([plan, plan + [0, 0, 3.5], plan + [0.2, 0.1, 6.5]])
+    beams = [(i, i + 4) for i in range(4)] + [(i + 4, i + 8) for i in range(4)]
+    beams += [(4 + i, 4 + (i + 1) % 4) for i in range(4)] + [(8 + i, 8 + (i + 1) % 4) for i in range(4)] + [(0, 5)]
+    beams = np.array(beams)
+    up = np.where(np.abs(nodes[beams[:, 1], 2] - nodes[beams[:, 0], 2])[:, None] > 1.0, [1.0, 0, 0], [0, 0, 1.0])
+    model = FrameModel(nodes=nodes, beams=beams, E=E, G=G, A=A, Iy=IY, Iz=IZ, J=J, up=up, elements_per_beam=2)
+    loads = np.random.default_rng(7).normal(size=(len(nodes), 6)) * [2e3, 2e3, 5e3, 1e3, 1e3, 1e3]
+    loads[:4] = 0.0
+    return model, Supports(nodes=np.arange(4), restraints=np.ones((4, 6), bool)), loads
+
+
+def test_reactions_balance_the_loads():
+    """Statics: the reactions balance the applied forces and their moments about any point."""
+    model, supports, loads = _space_frame()
+    result = linear_static(model, supports, loads)
+    point = np.array([0.3, -1.0, 2.0])
+    arm = model.nodes - point
+    total = loads + result.reactions
+    assert np.abs(total[:, :3].sum(axis=0)).max() < 1e-9 * np.abs(loads[:, :3]).sum()
+    moments = (np.cross(arm, total[:, :3]) + total[:, 3:]).sum(axis=0)
+    assert np.abs(moments).max() < 1e-9 * np.abs(loads).sum() * 10
+    assert result.equilibrium_error < 1e-10
+    assert np.all(result.reactions[4:] == 0.0)
+
+
+def test_small_loads_follow_the_linear_solution():
+    """At a load factor far below buckling the non-linear solution is the linear one."""
+    model, supports, loads = _space_frame()
+    factor = 1e-3 * linear_buckling(model, supports, loads, n_modes=1).factors[0]
+    linear = linear_static(model, supports, loads).displacements * factor
+    run = nonlinear_static(model, supports, loads, control=(10, 0), max_load_factor=factor, max_steps=20)
+    assert run.path[-1, 0] == pytest.approx(factor)
+    assert np.abs(run.displacements - linear).max() < 2e-3 * np.abs(linear).max()
+
+
+def test_a_torsion_release_without_other_restraint_is_a_mechanism():
+    """Torsion released at the start of the last beam of a cantilever: its tip can spin freely."""
+    model = _line((1, 0, 0), 2.0, 4, (0, 0, 1))
+    releases = np.zeros((4, 2, 6), bool)
+    releases[-1, 0, 3] = True
+    released = FrameModel(nodes=model.nodes, beams=model.beams, E=E, G=G, A=A, Iy=IY, Iz=IZ, J=J,
+                          up=np.array([0.0, 0, 1]), releases=releases)
+    loads = np.zeros((5, 6))
+    loads[-1, 2] = -1.0
+    with pytest.raises(MechanismError) as info:
+        linear_static(released, Supports(nodes=np.array([0]), restraints=FIXED[None]), loads)
+    assert info.value.n_modes == 1
+
+
+def test_dead_load_held_while_the_reference_load_grows():
+    """A column carrying half its Euler load as a dead load buckles when the added load reaches the
+    other half (the mock-up's load test: permanent load held, test load increased)."""
+    length, n = 3.0, 12
+    z = np.linspace(0, length, n + 1)
+    model = FrameModel(nodes=np.c_[0.001 * length * np.sin(np.pi * z / length), np.zeros(n + 1), z],
+                       beams=np.c_[np.arange(n), np.arange(1, n + 1)], E=E, G=G, A=A, Iy=1e-6, Iz=1e-6, J=J,
+                       up=np.array([1.0, 0, 0]))
+    supports = Supports.merge([(np.array([0]), np.array([1, 1, 1, 0, 0, 1], bool)),
+                               (np.array([n]), np.array([1, 1, 0, 0, 0, 0], bool))])
+    euler = np.pi**2 * E * 1e-6 / length**2
+    dead, reference = np.zeros((n + 1, 6)), np.zeros((n + 1, 6))
+    dead[n, 2] = -0.5 * euler
+    reference[n, 2] = -1.0
+    run = nonlinear_static(model, supports, reference, initial_loads=dead, control=(n // 2, 0),
+                           max_load_factor=0.55 * euler, max_steps=80)
+    assert run.path[0, 0] == 0.0 and abs(run.path[0, 1]) > 0, "the dead load deflects before the test load"
+    lateral = np.abs(run.path[:, 1])
+    assert lateral[run.path[:, 0] < 0.1 * euler].max() < 0.01 * length
+    assert lateral[run.path[:, 0] > 0.97 * 0.5 * euler].max() > 0.05 * length
+
+
+def test_displacements_match_pyfe3d():
+    """An independent element code: pyfe3d's BeamC (Timoshenko, made shear-rigid) assembled on the
+    same frame gives the same displacements (local axes: y = up x axis in pyfe3d's terms)."""
+    pyfe3d = pytest.importorskip("pyfe3d")
+    from dataclasses import replace
+
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import spsolve
+    from pyfe3d.beamprop import BeamProp
+
+    model, supports, loads = _space_frame()
+    model = replace(model, elements_per_beam=1)
+    ours = linear_static(model, supports, loads).displacements
+    prop = BeamProp()
+    prop.A, prop.E, prop.G, prop.Iyy, prop.Izz = A, E, G, IY, IZ
+    prop.G12 = prop.G13 = 1e6 * G
+    prop.GJ = G * J
+    n, m = len(model.nodes), len(model.beams)
+    rows, cols, values = np.zeros(144 * m, np.int64), np.zeros(144 * m, np.int64), np.zeros(144 * m)
+    x = np.ascontiguousarray(model.nodes.ravel())
+    probe = pyfe3d.BeamCProbe()
+    for k, (a, b) in enumerate(model.beams):
+        beam = pyfe3d.BeamC(probe)
+        beam.n1, beam.n2, beam.c1, beam.c2, beam.init_k_KC0 = int(a), int(b), 6 * int(a), 6 * int(b), 144 * k
+        beam.update_rotation_matrix(*np.cross(model.up[k], model.nodes[b] - model.nodes[a]).tolist(), x)
+        beam.update_probe_xe(x)
+        beam.update_KC0(rows, cols, values, prop)
+    K = sp.coo_matrix((values, (rows, cols)), shape=(6 * n, 6 * n)).tocsc()
+    free = ~supports.dof_mask(n).ravel()
+    theirs = np.zeros(6 * n)
+    theirs[free] = spsolve(K[free][:, free], loads.ravel()[free])
+    assert np.allclose(ours, theirs.reshape(n, 6), rtol=0, atol=1e-6 * np.abs(ours).max())
