@@ -1,50 +1,71 @@
 """Statics-aware Voronoi remeshing: anisotropic centroidal Voronoi tessellation on the surface.
 
-(METHOD.md section 3.) The direct discrete route: the surface is refined until a cell spans
-some tens of vertices; each fine vertex belongs to the seed nearest in the guiding field's
-metric (the mean of the metrics at the vertex and at the seed, among the Euclidean-nearest
-seeds), so a cell is an ellipse of semi-axes h sqrt(a) and h / sqrt(a); over-relaxed Lloyd
-iterations move each seed to its region's centroid weighted by h^-3 (see _lloyd_step). The
-polygon grid-shell is the dual of the regions: a node where three regions meet (a fine
-triangle with three labels, placed where the metric distances balance), a beam along each
-border between two nodes, boundary nodes where a border meets the surface boundary, the
-surface's corners kept as nodes, boundary cells closed along the boundary.
-Why this route and not the deform-then-uniform-CVT one: docs/decisions.md.
+(METHOD.md section 3.) The direct discrete route, as a clustering of the surface's vertices:
+the surface is used as it is when it has at least VERTICES_PER_CELL vertices per cell and is
+refined (1-to-4) until it has otherwise. Every vertex i carries a weight w_i = area_i h_i^-p
+(p = DENSITY_POWER) and the field's metric M_i (its tangent part, h sqrt(a) along u and
+h / sqrt(a) across, plus a small normal part so that it is invertible). Seeds start on a
+hexagonal lattice over the best-fit plane, grow into connected clusters along metric edge lengths
+(multi-source Dijkstra), and the clusters then minimise sum_k sum_{i in k} w_i (x_i - c_k)^T M_i
+(x_i - c_k) by boundary-vertex moves that keep every cluster connected (engine/clustering.py, an
+anisotropic Valette-Chassery approximated CVD). The polygon grid-shell is the dual of the
+clusters: a node where three clusters meet (a triangle with three labels, placed where the metric
+distances to the clusters' centroids balance along its edges), a beam along each border between
+two nodes, boundary nodes where a border meets the surface boundary, the surface's corners kept
+as nodes, boundary cells closed along the boundary. Why this route and not the
+deform-then-uniform-CVT one, and why clustering rather than Lloyd iterations: docs/decisions.md.
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra
+from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from .errors import InputError, MeshError
 from .field import GuidingField
-from .mesh import PolyMesh, TriMesh, best_fit_plane, boundary_loops
+from .mesh import PolyMesh, TriMesh, best_fit_plane
 
 __all__ = ["RemeshSettings", "RemeshResult", "remesh", "polymesh_quality", "surface_corners"]
 
 Progress = Callable[[str, "float | None"], None]
 
-#: Fine vertices per cell the refinement aims at.
-VERTICES_PER_CELL = 45
+#: Fewest surface vertices per cell the clustering works with (the surface is refined below it).
+VERTICES_PER_CELL = 24
 #: Largest refined mesh (vertices) the remesher builds.
 MAX_FINE_VERTICES = 400_000
 #: Boundary turning angle above which a surface vertex is a corner kept as a node, degrees.
 CORNER_ANGLE_DEG = 30.0
 #: Beams shorter than this fraction of the local cell size are collapsed.
 SHORT_BEAM_FRACTION = 0.02
+#: Vertex weight w = area * h^-DENSITY_POWER (measured: gives achieved size ~ h, see tests).
+DENSITY_POWER = 2.0
+#: Normal part of the vertex metric, relative to its tangent part's mean (keeps S1 invertible).
+NORMAL_REGULARISATION = 0.1
+#: Largest number of sweeps of one clustering.
+MAX_SWEEPS = 200
+#: Lloyd steps between clusterings (re-seeding at the centroids), over-relaxed by LLOYD_RELAXATION
+#: but for the last LLOYD_PLAIN_STEPS.
+LLOYD_STEPS = 3
+LLOYD_RELAXATION = 1.7
+LLOYD_PLAIN_STEPS = 1
+#: Lloyd steps at the coarsest level.
+COARSE_LLOYD_STEPS = 20
+#: Fewest cells of the coarsest level.
+COARSEST_CELLS = 250
 
 
 @dataclass(frozen=True, kw_only=True)
 class RemeshSettings:
     """Size target: exactly one of n_cells, mean_beam_length (m) or total_length (m, L_tot,
-    met within 1 %); lloyd_iterations; seed of the random initial sampling."""
+    met within 1 %); lloyd_iterations: the largest number of clustering sweeps (the name is kept
+    from the former Lloyd scheme; a sweep is one pass over the cluster borders, and the clustering
+    stops earlier when a sweep moves no vertex); seed of the lattice's random offset."""
 
     n_cells: int | None = None
     mean_beam_length: float | None = None
@@ -63,6 +84,8 @@ class RemeshSettings:
             value = getattr(self, key)
             if value is not None and not value > 0:
                 raise InputError(f"remesh: {key} must be positive, got {value}")
+        if self.lloyd_iterations < 0:
+            raise InputError(f"remesh: lloyd_iterations (clustering sweeps) must be >= 0, got {self.lloyd_iterations}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -73,35 +96,51 @@ class RemeshResult:
     quality: dict
 
 
-# ----------------------------------------------------------------------------- refinement
+# ----------------------------------------------------------------------------- surface topology
 
-def _edges_of(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unique sorted edges (e,2) and, per face corner j, the id of edge (j, j+1) (m,3)."""
-    directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
-    key = np.sort(directed, axis=1)
-    edges, inverse = np.unique(key, axis=0, return_inverse=True)
-    return edges, inverse.reshape(len(faces), 3)
-
-
-def _subdivide(vertices: np.ndarray, faces: np.ndarray, metric: np.ndarray):
-    """One 1-to-4 midpoint subdivision; metric tensors averaged at the new vertices."""
-    edges, face_edges = _edges_of(faces)
-    n = len(vertices)
-    mid = n + face_edges
-    new_vertices = np.vstack([vertices, 0.5 * (vertices[edges[:, 0]] + vertices[edges[:, 1]])])
-    new_metric = np.concatenate([metric, 0.5 * (metric[edges[:, 0]] + metric[edges[:, 1]])])
-    a, b, c = faces[:, 0], faces[:, 1], faces[:, 2]
-    ab, bc, ca = mid[:, 0], mid[:, 1], mid[:, 2]
-    new_faces = np.concatenate([np.stack([a, ab, ca], 1), np.stack([ab, b, bc], 1), np.stack([ca, bc, c], 1),
-                                np.stack([ab, bc, ca], 1)])
-    return new_vertices, new_faces, new_metric
+def _edges_of(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unique sorted edges (e, 2), per face corner j the id of edge (j, j+1) (m, 3), and the
+    number of faces of each edge (e,)."""
+    following = np.roll(faces, -1, axis=1)
+    key = (np.minimum(faces, following) * n_vertices + np.maximum(faces, following)).ravel()
+    unique, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    edges = np.stack([unique // n_vertices, unique % n_vertices], axis=1)
+    return edges, inverse.reshape(faces.shape), counts
 
 
-def surface_corners(mesh: TriMesh, angle_deg: float = CORNER_ANGLE_DEG) -> np.ndarray:
-    """Vertex ids of boundary vertices where the boundary turns by more than ``angle_deg``."""
+def _edge_ids(edges: np.ndarray, n_vertices: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Ids of the edges (a_i, b_i) in the sorted edge list."""
+    keys = edges[:, 0] * n_vertices + edges[:, 1]
+    return np.searchsorted(keys, np.minimum(a, b) * n_vertices + np.maximum(a, b))
+
+
+def _boundary_loops(faces: np.ndarray, face_edges: np.ndarray, counts: np.ndarray) -> list[np.ndarray]:
+    """Boundary loops following the faces' orientation, longest first."""
+    border = counts[face_edges] == 1
+    start = faces[border]
+    end = np.roll(faces, -1, axis=1)[border]
+    if not len(start):
+        return []
+    successor = dict(zip(start.tolist(), end.tolist()))
+    loops, seen = [], set()
+    for first in start.tolist():
+        if first in seen:
+            continue
+        loop, current = [first], successor[first]
+        seen.add(first)
+        while current != first and current not in seen:
+            loop.append(current)
+            seen.add(current)
+            current = successor.get(current, first)
+        loops.append(np.array(loop, dtype=np.int64))
+    loops.sort(key=len, reverse=True)
+    return loops
+
+
+def _loop_corners(vertices: np.ndarray, loops: list[np.ndarray], angle_deg: float) -> np.ndarray:
     corners = []
-    for loop in mesh.boundary_loops:
-        p = mesh.vertices[loop]
+    for loop in loops:
+        p = vertices[loop]
         incoming = p - np.roll(p, 1, axis=0)
         outgoing = np.roll(p, -1, axis=0) - p
         cosine = np.einsum("ij,ij->i", incoming, outgoing) / np.maximum(
@@ -110,167 +149,76 @@ def surface_corners(mesh: TriMesh, angle_deg: float = CORNER_ANGLE_DEG) -> np.nd
     return np.array(sorted(corners), dtype=np.int64)
 
 
-def _vertex_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    area = 0.5 * np.linalg.norm(np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
-                                         vertices[faces[:, 2]] - vertices[faces[:, 0]]), axis=1)
-    out = np.zeros(len(vertices))
-    for k in range(3):
-        np.add.at(out, faces[:, k], area / 3.0)
-    return out
+def surface_corners(mesh: TriMesh, angle_deg: float = CORNER_ANGLE_DEG) -> np.ndarray:
+    """Vertex ids of boundary vertices where the boundary turns by more than ``angle_deg``."""
+    return _loop_corners(mesh.vertices, mesh.boundary_loops, angle_deg)
+
+
+def _subdivide(vertices: np.ndarray, faces: np.ndarray, per_vertex: list[np.ndarray]):
+    """One 1-to-4 midpoint subdivision; per-vertex arrays averaged at the new vertices (the old
+    vertices keep their ids)."""
+    edges, face_edges, _ = _edges_of(faces, len(vertices))
+    mid = len(vertices) + face_edges
+    new_vertices = np.vstack([vertices, 0.5 * (vertices[edges[:, 0]] + vertices[edges[:, 1]])])
+    new_arrays = [np.concatenate([a, 0.5 * (a[edges[:, 0]] + a[edges[:, 1]])]) for a in per_vertex]
+    a, b, c = faces[:, 0], faces[:, 1], faces[:, 2]
+    ab, bc, ca = mid[:, 0], mid[:, 1], mid[:, 2]
+    new_faces = np.concatenate([np.stack([a, ab, ca], 1), np.stack([ab, b, bc], 1), np.stack([ca, bc, c], 1),
+                                np.stack([ab, bc, ca], 1)])
+    return new_vertices, new_faces, new_arrays
 
 
 @dataclass
 class _Fine:
+    """The clustered mesh: the surface, refined where needed (its first vertices are the surface's)."""
+
     vertices: np.ndarray
     faces: np.ndarray
-    metric: np.ndarray
+    metric: np.ndarray       # (n, 3, 3) tangent metric + normal regularisation
+    normals: np.ndarray
+    inverse_h2: np.ndarray   # 1 / h^2 = sqrt(det) of the tangent metric
+    areas: np.ndarray
     edges: np.ndarray
     face_edges: np.ndarray
-    graph: sp.csr_matrix
-    edge_lengths: np.ndarray
-    density: np.ndarray
-    areas: np.ndarray
+    on_boundary: np.ndarray  # (e,) edge used by one face
     loops: list
-    corners: np.ndarray
-    normals: np.ndarray
-    tree: cKDTree
+    corners: np.ndarray      # vertex ids (of the surface, kept in the fine mesh)
+    n_surface_vertices: int
+    graph: sp.csr_matrix | None = None  # metric edge lengths, built on first use
 
 
 def _refine(mesh: TriMesh, field: GuidingField, n_cells: int) -> _Fine:
     vertices, faces = mesh.vertices, mesh.faces
-    metric = field.metric()
+    tangent = field.metric()
+    normals = np.asarray(field.normals, dtype=float)
     while len(vertices) < VERTICES_PER_CELL * n_cells and 4 * len(vertices) <= MAX_FINE_VERTICES:
-        vertices, faces, metric = _subdivide(vertices, faces, metric)
-    edges, face_edges = _edges_of(faces)
-    d = vertices[edges[:, 1]] - vertices[edges[:, 0]]
-    m = 0.5 * (metric[edges[:, 0]] + metric[edges[:, 1]])
-    lengths = np.sqrt(np.maximum(np.einsum("ei,eij,ej->e", d, m, d), 1e-300))
-    n = len(vertices)
-    graph = sp.csr_matrix((np.r_[lengths, lengths], (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
-                          shape=(n, n))
-    fine = TriMesh(vertices=vertices, faces=faces)
-    # Riemannian area element sqrt(det M) on the tangent plane = 1 / h^2
-    trace = np.einsum("nii->n", metric)
-    second = 0.5 * (trace**2 - np.einsum("nij,nji->n", metric, metric))
-    density = np.sqrt(np.maximum(second, 1e-300))
-    return _Fine(vertices=vertices, faces=faces, metric=metric, edges=edges, face_edges=face_edges, graph=graph,
-                 edge_lengths=lengths, density=density, areas=_vertex_areas(vertices, faces),
-                 loops=boundary_loops(faces), corners=surface_corners(mesh), normals=fine.vertex_normals,
-                 tree=cKDTree(vertices))
+        vertices, faces, (tangent, normals) = _subdivide(vertices, faces, [tangent, normals])
+    normals = normals / np.maximum(np.linalg.norm(normals, axis=1), 1e-300)[:, None]
+    # sqrt(det) of the rank-2 tangent metric (its second invariant) = 1 / h^2
+    trace = np.einsum("nii->n", tangent)
+    second = 0.5 * (trace**2 - np.einsum("nij,nji->n", tangent, tangent))
+    inverse_h2 = np.sqrt(np.maximum(second, 1e-300))
+    metric = tangent + (NORMAL_REGULARISATION * 0.5 * trace)[:, None, None] * np.einsum("ni,nj->nij", normals, normals)
+    edges, face_edges, counts = _edges_of(faces, len(vertices))
+    cross = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    face_area = 0.5 * np.linalg.norm(cross, axis=1)
+    areas = np.bincount(faces.ravel(), weights=np.repeat(face_area / 3.0, 3), minlength=len(vertices))
+    loops = _boundary_loops(faces, face_edges, counts)
+    corners = _loop_corners(vertices, loops, CORNER_ANGLE_DEG)
+    corners = corners[corners < mesh.n_vertices]
+    return _Fine(vertices=vertices, faces=faces, metric=metric, normals=normals, inverse_h2=inverse_h2, areas=areas,
+                 edges=edges, face_edges=face_edges, on_boundary=counts == 1, loops=loops, corners=corners,
+                 n_surface_vertices=mesh.n_vertices)
 
 
-# ----------------------------------------------------------------------------- CVT
-
-#: Over-relaxation of the Lloyd steps.
-LLOYD_RELAXATION = 1.7
-#: Centroid density rho = h^-power (see _lloyd_step).
-CENTROID_DENSITY_POWER = 3.0
-#: Seeds examined per vertex (Euclidean nearest first), enough for aspects up to about 5.
-CANDIDATE_SEEDS = 16
-
-
-_UPPER = (np.array([0, 1, 2, 0, 0, 1]), np.array([0, 1, 2, 1, 2, 2]))
-_TWICE = np.array([1.0, 1.0, 1.0, 2.0, 2.0, 2.0])
-
-
-def _quadratic(d: np.ndarray, components: np.ndarray) -> np.ndarray:
-    """d^T M d from the six upper components of symmetric M (broadcast over leading axes)."""
-    products = np.stack([d[..., 0] ** 2, d[..., 1] ** 2, d[..., 2] ** 2, d[..., 0] * d[..., 1],
-                         d[..., 0] * d[..., 2], d[..., 1] * d[..., 2]], axis=-1)
-    return np.einsum("...c,...c->...", products, components * _TWICE)
-
-
-def _metric_distance2(points: np.ndarray, point_metric: np.ndarray, seeds: np.ndarray,
-                      seed_metric: np.ndarray) -> np.ndarray:
-    """Squared metric distances of points (p,3) to seeds (p,k,3) under the mean of both metrics."""
-    d = points[:, None, :] - seeds
-    point_components = point_metric[:, _UPPER[0], _UPPER[1]]
-    seed_components = seed_metric[..., _UPPER[0], _UPPER[1]]
-    return 0.5 * (_quadratic(d, point_components[:, None, :]) + _quadratic(d, seed_components))
-
-
-def _regions(fine: _Fine, seeds: np.ndarray, seed_metric: np.ndarray,
-             connected: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """Label (n,) of the metric-nearest seed of every fine vertex, each region made connected
-    (skipped during Lloyd iterations, where stray vertices hardly move a centroid)."""
-    k = min(CANDIDATE_SEEDS, len(seeds))
-    _, candidates = cKDTree(seeds).query(fine.vertices, k=k)
-    candidates = candidates.reshape(len(fine.vertices), k)
-    labels = np.empty(len(candidates), dtype=np.int64)
-    nearest = np.empty(len(candidates))
-    chunk = 32768
-    for start in range(0, len(candidates), chunk):
-        part = slice(start, start + chunk)
-        distance2 = _metric_distance2(fine.vertices[part], fine.metric[part], seeds[candidates[part]],
-                                      seed_metric[candidates[part]])
-        best = np.argmin(distance2, axis=1)
-        rows = np.arange(len(best))
-        labels[part] = candidates[part][rows, best]
-        nearest[part] = distance2[rows, best]
-    if connected:
-        labels = _connected_regions(fine, labels)
-    return labels, np.sqrt(nearest)
-
-
-def _connected_regions(fine: _Fine, labels: np.ndarray) -> np.ndarray:
-    """Give stray pieces of a region (not connected to its largest piece) to a neighbouring region."""
-    from scipy.sparse.csgraph import connected_components
-
-    E = fine.edges
-    for _ in range(5):
-        same = labels[E[:, 0]] == labels[E[:, 1]]
-        n = len(labels)
-        graph = sp.csr_matrix((np.ones(same.sum()), (E[same, 0], E[same, 1])), shape=(n, n))
-        _, component = connected_components(graph, directed=False)
-        size = np.bincount(component)
-        # the main piece of each label: its largest component
-        order = np.lexsort((-size[component], labels))
-        first = np.ones(n, dtype=bool)
-        first[1:] = labels[order[1:]] != labels[order[:-1]]
-        main = np.zeros(size.shape, dtype=bool)
-        main[component[order[first]]] = True
-        stray = ~main[component]
-        if not stray.any():
-            break
-        # stray vertices take the label of a neighbour in a main piece
-        a, b = E[:, 0], E[:, 1]
-        fix = stray[a] & ~stray[b]
-        labels = labels.copy()
-        labels[a[fix]] = labels[b[fix]]
-        fix = stray[b] & ~stray[a]
-        labels[b[fix]] = labels[a[fix]]
-    return labels
-
-
-def _lloyd_step(fine: _Fine, labels: np.ndarray, n_seeds: int, seeds: np.ndarray | None = None,
-                relaxation: float = 1.0) -> np.ndarray:
-    """Each region's centroid, weighted by rho = h^-CENTROID_DENSITY_POWER, projected onto the surface.
-
-    Regions are assigned by metric distance, which already grades them; a Euclidean CVT with
-    density rho grades cells as rho^(-1/4) (Gersho). With both, the power 3 makes the achieved
-    size follow h (log-log slope near 1, measured in tests/test_voronoi.py): the metric's own
-    area element (power 2) gives a slope of about 0.5 and power 4 about 1.35."""
-    from .proximity import closest_points
-
-    weight = fine.areas * fine.density ** (CENTROID_DENSITY_POWER / 2)
-    total = np.bincount(labels, weights=weight, minlength=n_seeds)
-    centroid = np.stack([np.bincount(labels, weights=weight * fine.vertices[:, k], minlength=n_seeds)
-                         for k in range(3)], axis=1) / np.maximum(total, 1e-300)[:, None]
-    if seeds is not None and relaxation != 1.0:
-        centroid = seeds + relaxation * (centroid - seeds)
-    return closest_points(fine.vertices, fine.faces, centroid, k=8)[0]
-
-
-def _seed_metric(fine: _Fine, seeds: np.ndarray) -> np.ndarray:
-    _, nearest = fine.tree.query(seeds)
-    return fine.metric[nearest]
-
+# ----------------------------------------------------------------------------- clustering
 
 def _initial_seeds(fine: _Fine, n_cells: int, rng: np.random.Generator) -> np.ndarray:
-    """A hexagonal lattice over the surface's best-fit plane (Lloyd then starts near a honeycomb
-    and keeps few defects), thinned or topped up at random to exactly ``n_cells``; random
-    sampling by the field's density where the surface is not a height field over that plane."""
-    weight = fine.areas * fine.density
+    """Vertex ids of ``n_cells`` seeds: a hexagonal lattice over the surface's best-fit plane
+    (the clustering then starts near a honeycomb and keeps few defects), thinned or topped up at
+    random; random sampling by the field's density where the surface is not a height field over
+    that plane."""
+    weight = fine.areas * fine.inverse_h2
     probability = weight / weight.sum()
     centre, normal = best_fit_plane(fine.vertices)
     u = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
@@ -281,20 +229,21 @@ def _initial_seeds(fine: _Fine, n_cells: int, rng: np.random.Generator) -> np.nd
     edge1, edge2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
     signed = edge1[:, 0] * edge2[:, 1] - edge1[:, 1] * edge2[:, 0]
     if not (np.all(signed > 0) or np.all(signed < 0)):
-        return fine.vertices[rng.choice(len(fine.vertices), size=n_cells, replace=False, p=probability)]
+        return rng.choice(len(fine.vertices), size=n_cells, replace=False, p=probability)
     plan_area = 0.5 * np.abs(signed).sum()
     tree = cKDTree(plan)
     offset = rng.uniform(0, 1, 2)
+    lo_plan, hi_plan = plan.min(axis=0), plan.max(axis=0)
 
     def lattice(spacing: float) -> np.ndarray:
-        lo, hi = plan.min(axis=0) - spacing, plan.max(axis=0) + spacing
-        rows = np.arange(lo[1] + offset[1] * spacing, hi[1], spacing * np.sqrt(3) / 2)
-        points = []
-        for j, y in enumerate(rows):
-            xs = np.arange(lo[0] + (offset[0] + 0.5 * (j % 2)) * spacing, hi[0], spacing)
-            points.append(np.c_[xs, np.full_like(xs, y)])
-        grid = np.concatenate(points)
-        distance, nearest = tree.query(grid)
+        lo, hi = lo_plan - spacing, hi_plan + spacing
+        rows = np.arange(int((hi[1] - lo[1]) / (spacing * np.sqrt(3) / 2)) + 1)
+        columns = np.arange(int((hi[0] - lo[0]) / spacing) + 2)
+        j, i = np.meshgrid(rows, columns, indexing="ij")
+        x = lo[0] + (offset[0] + 0.5 * (j % 2) + i) * spacing
+        y = lo[1] + (offset[1] + j * np.sqrt(3) / 2) * spacing
+        grid = np.c_[x.ravel(), y.ravel()]
+        distance, nearest = tree.query(grid, distance_upper_bound=0.5 * spacing)
         return np.unique(nearest[distance < 0.5 * spacing])
 
     spacing = np.sqrt(2.0 * plan_area / (np.sqrt(3.0) * n_cells))
@@ -318,131 +267,260 @@ def _initial_seeds(fine: _Fine, n_cells: int, rng: np.random.Generator) -> np.nd
         rest = np.setdiff1d(np.arange(len(fine.vertices)), chosen)
         extra = rng.choice(rest, size=n_cells - len(chosen), replace=False, p=probability[rest] / probability[rest].sum())
         chosen = np.concatenate([chosen, extra])
-    return fine.vertices[chosen]
+    return chosen
+
+
+def _grow_clusters(fine: _Fine, seeds: np.ndarray) -> np.ndarray:
+    """Labels of the seed nearest along metric edge lengths (each cluster connected)."""
+    n = len(fine.vertices)
+    if fine.graph is None:
+        E = fine.edges
+        d = fine.vertices[E[:, 1]] - fine.vertices[E[:, 0]]
+        m = 0.5 * (fine.metric[E[:, 0]] + fine.metric[E[:, 1]])
+        lengths = np.sqrt(np.maximum(np.einsum("ei,eij,ej->e", d, m, d), 1e-300))
+        fine.graph = sp.csr_matrix((np.r_[lengths, lengths], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
+                                   shape=(n, n))
+    _, _, sources = dijkstra(fine.graph, directed=True, indices=seeds, min_only=True, return_predecessors=True)
+    if np.any(sources < 0):
+        raise MeshError("remesh: the surface has parts that no seed reaches (it is not connected)",
+                        hint="remesh each connected part of the surface on its own, or ask for more cells")
+    index = np.full(n, -1, dtype=np.int64)
+    index[seeds] = np.arange(len(seeds))
+    return index[sources]
+
+
+@dataclass
+class _Clusters:
+    labels: np.ndarray
+    centroids: np.ndarray
+    sweeps: int
+    moves: np.ndarray
+
+
+def _level_counts(n_cells: int) -> list[int]:
+    """Cell counts of the levels, coarsest first: each level's seeds are the centroids of the one
+    before and the midpoints of its neighbouring centroids, about four times as many (a hexagonal
+    lattice of N points has about 3N - 4 sqrt(N) neighbour pairs)."""
+    counts = [n_cells]
+    while True:
+        coarse = int(np.ceil(counts[-1] / 4 + np.sqrt(counts[-1]) / 2))
+        if coarse < COARSEST_CELLS or coarse >= counts[-1]:
+            break
+        counts.append(coarse)
+    return counts[::-1]
+
+
+def _refined_seeds(fine: _Fine, tree: cKDTree, labels: np.ndarray, centroids: np.ndarray, count: int,
+                   rng: np.random.Generator) -> np.ndarray:
+    """``count`` seed vertices: the centroids and the midpoints of neighbouring centroids, those
+    nearest the boundary dropped (boundary cells are cut anyway), random vertices added if short."""
+    E = fine.edges
+    la, lb = labels[E[:, 0]], labels[E[:, 1]]
+    mixed = la != lb
+    k = len(centroids)
+    pairs = np.unique(np.minimum(la[mixed], lb[mixed]) * k + np.maximum(la[mixed], lb[mixed]))
+    points = np.concatenate([centroids, 0.5 * (centroids[pairs // k] + centroids[pairs % k])])
+    seeds = np.unique(tree.query(points)[1])
+    if len(seeds) > count:
+        boundary = np.concatenate(fine.loops) if fine.loops else np.zeros(0, dtype=np.int64)
+        if len(boundary):
+            gap, _ = cKDTree(fine.vertices[boundary]).query(fine.vertices[seeds])
+            seeds = seeds[np.sort(np.argsort(gap, kind="stable")[len(seeds) - count:])]
+        else:
+            seeds = np.sort(rng.choice(seeds, size=count, replace=False))
+    elif len(seeds) < count:
+        rest = np.setdiff1d(np.arange(len(fine.vertices)), seeds)
+        weight = (fine.areas * fine.inverse_h2)[rest]
+        seeds = np.concatenate([seeds, rng.choice(rest, size=count - len(seeds), replace=False, p=weight / weight.sum())])
+    return seeds
+
+
+def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings) -> _Clusters:
+    """Coarse to fine: at each level, seeds grown into clusters, the clustering, then Lloyd steps
+    (seeds moved to the over-relaxed centroids, clusters regrown and clustered again)."""
+    from .clustering import cluster_vertices, mesh_adjacency
+
+    rng = np.random.default_rng(settings.seed)
+    adjacency = mesh_adjacency(len(fine.vertices), fine.faces, fine.edges)
+    weights = fine.areas * fine.inverse_h2 ** (DENSITY_POWER / 2)
+    tree = cKDTree(fine.vertices)
+    counts = _level_counts(n_cells)
+    sweeps = 0
+    result = None
+    for level, count in enumerate(counts):
+        if result is None:
+            seeds = _initial_seeds(fine, count, rng)
+        else:
+            seeds = _refined_seeds(fine, tree, result.labels, result.centroids, count, rng)
+        labels = _grow_clusters(fine, seeds)
+        result = cluster_vertices(fine.vertices, fine.faces, fine.edges, adjacency, fine.metric, weights, labels,
+                                  len(seeds), max_sweeps=MAX_SWEEPS)
+        sweeps += result.sweeps
+        steps = min(settings.lloyd_iterations, COARSE_LLOYD_STEPS if level == 0 else LLOYD_STEPS)
+        for step in range(1, steps + 1):
+            relaxation = LLOYD_RELAXATION if step <= steps - LLOYD_PLAIN_STEPS else 1.0
+            target = fine.vertices[seeds] + relaxation * (result.centroids - fine.vertices[seeds])
+            moved = np.unique(tree.query(target)[1])
+            seeds = moved if len(moved) == len(seeds) else seeds
+            labels = _grow_clusters(fine, seeds)
+            result = cluster_vertices(fine.vertices, fine.faces, fine.edges, adjacency, fine.metric, weights, labels,
+                                      len(seeds), max_sweeps=MAX_SWEEPS)
+            sweeps += result.sweeps
+    return _Clusters(labels=result.labels, centroids=result.centroids, sweeps=sweeps, moves=result.moves)
 
 
 # ----------------------------------------------------------------------------- extraction
 
-def _extract(fine: _Fine, labels: np.ndarray, seeds: np.ndarray, seed_metric: np.ndarray):
-    """Polygon mesh from the region labels: (nodes, cell loops, boundary mask, corner mask, cell labels)."""
+def _extract(fine: _Fine, labels: np.ndarray, centroids: np.ndarray):
+    """Polygon mesh from the cluster labels: (nodes, flat cell loops, loop offsets, cell labels,
+    boundary mask, corner mask)."""
     E, F, FE = fine.edges, fine.faces, fine.face_edges
+    n_edges = len(E)
     la, lb = labels[E[:, 0]], labels[E[:, 1]]
     mixed = la != lb
-    counts = np.bincount(FE.ravel(), minlength=len(E))
-    on_boundary = counts == 1
-    # point on each mixed edge where the metric distances to the two seeds balance (linear in between)
-    t = np.zeros(len(E))
     ids = np.flatnonzero(mixed)
-    ends = [E[ids, 0], E[ids, 1]]
-    gap = []
-    for end in ends:
-        pair = np.stack([la[ids], lb[ids]], axis=1)
-        d2 = _metric_distance2(fine.vertices[end], fine.metric[end], seeds[pair], seed_metric[pair])
-        gap.append(np.sqrt(d2[:, 0]) - np.sqrt(d2[:, 1]))
-    denominator = gap[0] - gap[1]
-    t[ids] = np.clip(np.where(np.abs(denominator) > 1e-300, gap[0] / np.where(denominator == 0, 1, denominator), 0.5),
-                     0.0, 1.0)
-    edge_points = fine.vertices[E[:, 0]] + t[:, None] * (fine.vertices[E[:, 1]] - fine.vertices[E[:, 0]])
-    face_labels = labels[F]
-    three = (face_labels[:, 0] != face_labels[:, 1]) & (face_labels[:, 1] != face_labels[:, 2]) \
-        & (face_labels[:, 0] != face_labels[:, 2])
-    # graph over points: edge points are ids 0..len(E)-1, face points len(E)+face
-    neighbours: dict[int, list[int]] = defaultdict(list)
-    n_edges = len(E)
-    for k in np.flatnonzero(three):
-        for j in range(3):
-            e = int(FE[k, j])
-            neighbours[n_edges + int(k)].append(e)
-            neighbours[e].append(n_edges + int(k))
+    # point on each mixed edge where the metric distances to the two centroids balance (linear in between)
+    gaps = []
+    for end in (E[ids, 0], E[ids, 1]):
+        x, M = fine.vertices[end], fine.metric[end]
+        to_a, to_b = x - centroids[la[ids]], x - centroids[lb[ids]]
+        gaps.append(np.sqrt(np.maximum(np.einsum("ei,eij,ej->e", to_a, M, to_a), 0.0))
+                    - np.sqrt(np.maximum(np.einsum("ei,eij,ej->e", to_b, M, to_b), 0.0)))
+    denominator = gaps[0] - gaps[1]
+    safe = np.abs(denominator) > 1e-300
+    t = np.clip(np.where(safe, gaps[0] / np.where(safe, denominator, 1.0), 0.5), 0.0, 1.0)
+    edge_points = np.zeros((n_edges, 3))
+    x0, x1 = fine.vertices[E[ids, 0]], fine.vertices[E[ids, 1]]
+    edge_points[ids] = x0 + t[:, None] * (x1 - x0)
+    FL = labels[F]
+    three = (FL[:, 0] != FL[:, 1]) & (FL[:, 1] != FL[:, 2]) & (FL[:, 0] != FL[:, 2])
     two = ~three & (mixed[FE].sum(axis=1) == 2)
-    for k in np.flatnonzero(two):
-        e1, e2 = [int(e) for e in FE[k][mixed[FE[k]]]]
-        neighbours[e1].append(e2)
-        neighbours[e2].append(e1)
-    face_points = {n_edges + int(k): edge_points[FE[k]].mean(axis=0) for k in np.flatnonzero(three)}
-
-    def position(point: int) -> np.ndarray:
-        return face_points[point] if point >= n_edges else edge_points[point]
-
-    node_of: dict[tuple, int] = {}
-    positions: list[np.ndarray] = []
-    boundary_flags: list[bool] = []
-    corner_flags: list[bool] = []
-
-    def node(key: tuple, where: np.ndarray, boundary: bool, corner: bool = False) -> int:
-        if key not in node_of:
-            node_of[key] = len(positions)
-            positions.append(where)
-            boundary_flags.append(boundary)
-            corner_flags.append(corner)
-        return node_of[key]
-
-    for point in face_points:
-        node(("p", point), face_points[point], False)
-    for e in np.flatnonzero(mixed & on_boundary):
-        node(("p", int(e)), edge_points[e], True)
-    # chains between nodes: each separates two regions
-    cell_edges: dict[int, list[tuple[int, int]]] = defaultdict(list)
-    seen: set[tuple[int, int]] = set()
-    for key, start in list(node_of.items()):
-        first_point = key[1]
-        for step in neighbours[first_point]:
-            previous, current = first_point, step
-            while ("p", current) not in node_of:
-                options = [q for q in neighbours[current] if q != previous]
-                if not options:
-                    break
-                previous, current = current, options[0]
-            if ("p", current) not in node_of:
-                continue
-            end = node_of[("p", current)]
-            marker = (min(first_point, step), max(first_point, step))
-            edge_id = step if step < n_edges else first_point
-            pair = (int(la[edge_id]), int(lb[edge_id]))
-            closing = (min(current, previous), max(current, previous))
-            if marker in seen or closing in seen:
-                continue
-            seen.add(marker)
-            seen.add(closing)
-            if end == start:
-                continue
-            for region in pair:
-                cell_edges[region].append((start, end))
+    # nodes: triple triangles, then boundary crossings, then the surface's corners
+    triple = np.flatnonzero(three)
+    crossing = np.flatnonzero(mixed & fine.on_boundary)
+    n_triple, n_crossing = len(triple), len(crossing)
+    node_of_edge = np.full(n_edges, -1, dtype=np.int64)
+    node_of_edge[crossing] = n_triple + np.arange(n_crossing)
+    corner_node = np.full(len(fine.vertices), -1, dtype=np.int64)
+    corner_node[fine.corners] = n_triple + n_crossing + np.arange(len(fine.corners))
+    nodes = np.concatenate([edge_points[FE[triple]].mean(axis=1), edge_points[crossing], fine.vertices[fine.corners]])
+    boundary = np.r_[np.zeros(n_triple, dtype=bool), np.ones(n_crossing + len(fine.corners), dtype=bool)]
+    corner = np.r_[np.zeros(n_triple + n_crossing, dtype=bool), np.ones(len(fine.corners), dtype=bool)]
+    # chains of mixed edges through two-label triangles, each a beam between two nodes
+    links = FE[two][mixed[FE[two]]].reshape(-1, 2)
+    chain_graph = sp.csr_matrix((np.ones(len(links)), (links[:, 0], links[:, 1])), shape=(n_edges, n_edges))
+    _, chain = connected_components(chain_graph, directed=False)
+    attached_chain = np.concatenate([chain[FE[triple]].ravel(), chain[crossing]])
+    attached_node = np.concatenate([np.repeat(np.arange(n_triple), 3), node_of_edge[crossing]])
+    order = np.argsort(attached_chain, kind="stable")
+    attached_chain, attached_node = attached_chain[order], attached_node[order]
+    per_chain = np.bincount(attached_chain, minlength=chain.max() + 1)
+    first = np.r_[0, np.cumsum(per_chain)[:-1]]
+    pairs = np.flatnonzero(per_chain == 2)
+    u, v = attached_node[first[pairs]], attached_node[first[pairs] + 1]
+    representative = np.zeros(chain.max() + 1, dtype=np.int64)
+    representative[chain[ids]] = ids
+    region_a, region_b = la[representative[pairs]], lb[representative[pairs]]
+    keep = u != v
+    u, v, region_a, region_b = u[keep], v[keep], region_a[keep], region_b[keep]
+    if JUNCTION_REACH > 0:
+        nodes[:n_triple] = _junctions(fine, triple, labels, centroids, nodes, u, v)
+    half_u, half_v, half_region = [u, u], [v, v], [region_a, region_b]
     # boundary beams, through the surface corners
-    corner_set = set(fine.corners.tolist())
+    is_corner = corner_node >= 0
     for loop in fine.loops:
-        sequence: list[tuple[int, int]] = []  # (node, label of the boundary part after it)
-        for i, v in enumerate(loop):
-            w = loop[(i + 1) % len(loop)]
-            if int(v) in corner_set:
-                sequence.append((node(("c", int(v)), fine.vertices[v], True, True), int(labels[v])))
-            if labels[v] != labels[w]:
-                e = _edge_id(E, int(v), int(w))
-                sequence.append((node_of[("p", e)], int(labels[w])))
-        if len(sequence) < 2:
+        following = np.roll(loop, -1)
+        at_corner = np.flatnonzero(is_corner[loop])
+        change = np.flatnonzero(labels[loop] != labels[following])
+        events = np.concatenate([corner_node[loop[at_corner]],
+                                 node_of_edge[_edge_ids(E, len(fine.vertices), loop[change], following[change])]])
+        after = np.concatenate([labels[loop[at_corner]], labels[following[change]]])
+        sequence = np.argsort(np.concatenate([2 * at_corner, 2 * change + 1]), kind="stable")
+        events, after = events[sequence], after[sequence]
+        if len(events) < 2:
             raise MeshError("a boundary loop of the surface lies inside a single cell",
                             hint="ask for more cells (or a smaller mean beam length) so that cells resolve "
                                  "every hole and boundary of the surface")
-        for i, (a, region) in enumerate(sequence):
-            b = sequence[(i + 1) % len(sequence)][0]
-            if a != b:
-                cell_edges[region].append((a, b))
-    nodes = np.array(positions)
-    loops, cell_labels = [], []
-    for region, edges in cell_edges.items():
-        loop = _cycle(edges)
-        if loop is None or len(loop) < 3:
+        nxt = np.roll(events, -1)
+        keep = events != nxt
+        half_u.append(events[keep])
+        half_v.append(nxt[keep])
+        half_region.append(after[keep])
+    half_u, half_v, half_region = np.concatenate(half_u), np.concatenate(half_v), np.concatenate(half_region)
+    flat, offsets, cell_labels = _cells(half_u, half_v, half_region, len(centroids))
+    return nodes, flat, offsets, cell_labels, boundary, corner
+
+
+#: How far (in triangle sizes) a junction node may lie from its three-label triangle.
+JUNCTION_REACH = 1.5
+
+
+def _junctions(fine: _Fine, triple: np.ndarray, labels: np.ndarray, centroids: np.ndarray, nodes: np.ndarray,
+               u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Node of each three-label triangle: the point of its plane at equal metric distance from the
+    three clusters' centroids (the anisotropic Voronoi vertex), where it lies within JUNCTION_REACH
+    triangle sizes of the triangle and turns no beam (u, v) around or shrinks it below half its
+    length; else the node as it was (the mean of the triangle's edge points)."""
+    corners = fine.faces[triple]
+    x = fine.vertices[corners]
+    M = fine.metric[corners].mean(axis=1)
+    c = centroids[labels[corners]]
+    normal = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+    A = np.zeros((len(triple), 3, 3))
+    rhs = np.zeros((len(triple), 3))
+    for row, (i, j) in enumerate(((1, 0), (2, 0))):
+        A[:, row] = 2 * np.einsum("mij,mj->mi", M, c[:, i] - c[:, j])
+        rhs[:, row] = np.einsum("mi,mij,mj->m", c[:, i], M, c[:, i]) - np.einsum("mi,mij,mj->m", c[:, j], M, c[:, j])
+    A[:, 2] = normal
+    rhs[:, 2] = np.einsum("mi,mi->m", normal, x.mean(axis=1))
+    det = np.linalg.det(A)
+    scale = np.einsum("mi,mi->m", A[:, 0], A[:, 0]) * np.einsum("mi,mi->m", A[:, 1], A[:, 1])
+    ok = np.abs(det) > 1e-9 * np.sqrt(np.maximum(scale, 1e-300))
+    fallback = nodes[:len(triple)]
+    point = fallback.copy()
+    if np.any(ok):
+        point[ok] = np.linalg.solve(A[ok], rhs[ok][:, :, None])[:, :, 0]
+    size = np.linalg.norm(x - x.mean(axis=1)[:, None], axis=2).max(axis=1)
+    near = ok & (np.linalg.norm(point - x.mean(axis=1), axis=1) <= JUNCTION_REACH * size)
+    placed = nodes.copy()
+    placed[:len(triple)][near] = point[near]
+    for _ in range(5):
+        old, new = nodes[v] - nodes[u], placed[v] - placed[u]
+        bad = np.einsum("ei,ei->e", old, new) < 0.5 * np.einsum("ei,ei->e", old, old)
+        if not np.any(bad):
+            break
+        back = np.concatenate([u[bad], v[bad]])
+        placed[back] = nodes[back]
+    return placed[:len(triple)]
+
+
+def _cells(half_u: np.ndarray, half_v: np.ndarray, half_region: np.ndarray, n_regions: int):
+    """Each region's border edges closed into one loop: (flat loops, offsets, region of each loop).
+    Compiled for regions whose border is one simple cycle, the Python walk for the others."""
+    from .clustering import simple_cycles
+
+    order = np.argsort(half_region, kind="stable")
+    half_u, half_v, half_region = half_u[order], half_v[order], half_region[order]
+    pointer = np.r_[0, np.cumsum(np.bincount(half_region, minlength=n_regions))]
+    flat, lengths, status = simple_cycles(pointer, half_u.astype(np.int64), half_v.astype(np.int64))
+    loops, regions = [], []
+    starts = np.r_[0, np.cumsum(lengths)[:-1]]
+    for region in range(n_regions):
+        if status[region] == 0:
+            loops.append(flat[starts[region]:starts[region] + lengths[region]])
+        elif status[region] == 2:
+            span = slice(pointer[region], pointer[region + 1])
+            loop = _cycle(list(zip(half_u[span].tolist(), half_v[span].tolist())))
+            if loop is None or len(loop) < 3:
+                continue
+            loops.append(np.array(loop, dtype=np.int64))
+        else:
             continue
-        loops.append(np.array(loop, dtype=np.int64))
-        cell_labels.append(region)
-    return nodes, loops, np.array(boundary_flags), np.array(corner_flags), np.array(cell_labels)
-
-
-def _edge_id(edges: np.ndarray, a: int, b: int) -> int:
-    key = (min(a, b), max(a, b))
-    lo = np.searchsorted(edges[:, 0], key[0], side="left")
-    hi = np.searchsorted(edges[:, 0], key[0], side="right")
-    return int(lo + np.searchsorted(edges[lo:hi, 1], key[1]))
+        regions.append(region)
+    offsets = np.r_[0, np.cumsum([len(loop) for loop in loops])].astype(np.int64)
+    flat = np.concatenate(loops) if loops else np.zeros(0, dtype=np.int64)
+    return flat, offsets, np.array(regions, dtype=np.int64)
 
 
 def _cycle(edges: list[tuple[int, int]]) -> list[int] | None:
@@ -488,20 +566,38 @@ def _cycle_with_branches(adjacency: dict[int, list[int]]) -> list[int] | None:
     return max(cycles, key=len) if cycles else None
 
 
-def _orient(nodes: np.ndarray, loops: list[np.ndarray], fine: _Fine, labels_of_cells: np.ndarray,
-            seeds: np.ndarray) -> list[np.ndarray]:
-    out = []
-    for loop, region in zip(loops, labels_of_cells):
-        p = nodes[loop]
-        vector_area = 0.5 * np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0)
-        normal = fine.normals[fine.tree.query(seeds[region])[1]]
-        out.append(loop if vector_area @ normal >= 0 else loop[::-1])
+def _loop_ids(offsets: np.ndarray) -> np.ndarray:
+    return np.repeat(np.arange(len(offsets) - 1), np.diff(offsets))
+
+
+def _following(offsets: np.ndarray) -> np.ndarray:
+    """Index of the next entry of the same loop, for every entry of flat loops."""
+    nxt = np.arange(1, offsets[-1] + 1)
+    nxt[offsets[1:] - 1] = offsets[:-1]
+    return nxt
+
+
+def _orient(nodes: np.ndarray, flat: np.ndarray, offsets: np.ndarray, fine: _Fine, labels: np.ndarray,
+            cell_labels: np.ndarray) -> np.ndarray:
+    """Flat loops turned so that each cell's vector area agrees with its cluster's mean normal."""
+    p, q = nodes[flat], nodes[flat[_following(offsets)]]
+    vector_area = np.add.reduceat(np.cross(p, q), offsets[:-1], axis=0)
+    weighted = fine.normals * fine.areas[:, None]
+    normal = np.stack([np.bincount(labels, weights=weighted[:, k], minlength=labels.max() + 1) for k in range(3)], 1)
+    flip = np.einsum("ij,ij->i", vector_area, normal[cell_labels]) < 0
+    out = flat.copy()
+    for i in np.flatnonzero(flip):
+        out[offsets[i]:offsets[i + 1]] = flat[offsets[i]:offsets[i + 1]][::-1]
     return out
 
 
-def _collapse_short_beams(nodes: np.ndarray, loops: list[np.ndarray], boundary: np.ndarray, corners: np.ndarray,
-                          local_size: np.ndarray) -> tuple[np.ndarray, list[np.ndarray], np.ndarray, np.ndarray]:
-    """Merge the ends of beams shorter than SHORT_BEAM_FRACTION of the local size."""
+def _collapse_short_beams(nodes: np.ndarray, flat: np.ndarray, offsets: np.ndarray, boundary: np.ndarray,
+                          corners: np.ndarray, local_size: np.ndarray):
+    """Merge the ends of beams shorter than SHORT_BEAM_FRACTION of the local size; drop cells that
+    are no longer simple polygons of three or more nodes and nodes no cell uses."""
+    a, b = flat, flat[_following(offsets)]
+    length = np.linalg.norm(nodes[a] - nodes[b], axis=1)
+    short = np.flatnonzero(length < SHORT_BEAM_FRACTION * np.minimum(local_size[a], local_size[b]))
     parent = np.arange(len(nodes))
 
     def find(i: int) -> int:
@@ -510,76 +606,86 @@ def _collapse_short_beams(nodes: np.ndarray, loops: list[np.ndarray], boundary: 
             i = parent[i]
         return i
 
-    edges = {(min(a, b), max(a, b)) for loop in loops for a, b in zip(loop, np.roll(loop, -1))}
-    for a, b in sorted(edges, key=lambda e: np.linalg.norm(nodes[e[0]] - nodes[e[1]])):
-        ra, rb = find(a), find(b)
+    for k in short[np.argsort(length[short], kind="stable")]:
+        ra, rb = find(int(a[k])), find(int(b[k]))
         if ra == rb:
             continue
-        limit = SHORT_BEAM_FRACTION * min(local_size[a], local_size[b])
-        if np.linalg.norm(nodes[ra] - nodes[rb]) >= limit:
-            continue
-        if corners[ra] and corners[rb]:
+        limit = SHORT_BEAM_FRACTION * min(local_size[a[k]], local_size[b[k]])
+        if np.linalg.norm(nodes[ra] - nodes[rb]) >= limit or (corners[ra] and corners[rb]):
             continue
         keep, drop = (ra, rb) if (corners[ra] or (boundary[ra] and not corners[rb])) else (rb, ra)
         if boundary[drop] and not boundary[keep]:
             keep, drop = drop, keep
         parent[drop] = keep
-    roots = np.array([find(i) for i in range(len(nodes))])
-    new_loops = []
-    for loop in loops:
-        mapped = roots[loop]
-        keep = np.r_[mapped[1:] != mapped[:-1], mapped[0] != mapped[-1]]
-        mapped = mapped[keep] if keep.any() else mapped[:1]
-        if len(mapped) >= 3 and len(set(mapped.tolist())) == len(mapped):
-            new_loops.append(mapped)
-    used = np.unique(np.concatenate(new_loops))
-    index = np.full(len(nodes), -1)
+    roots = np.array([find(i) for i in range(len(nodes))]) if len(short) else np.arange(len(nodes))
+    mapped = roots[flat]
+    loop_of = _loop_ids(offsets)
+    kept = mapped != mapped[_following(offsets)]
+    mapped, loop_of = mapped[kept], loop_of[kept]
+    lengths = np.bincount(loop_of, minlength=len(offsets) - 1)
+    # a simple polygon: three or more nodes, none repeated
+    order = np.lexsort((mapped, loop_of))
+    repeated = np.zeros(len(offsets) - 1, dtype=bool)
+    same = (loop_of[order][1:] == loop_of[order][:-1]) & (mapped[order][1:] == mapped[order][:-1])
+    repeated[loop_of[order][1:][same]] = True
+    good = (lengths >= 3) & ~repeated
+    mapped = mapped[good[loop_of]]
+    offsets = np.r_[0, np.cumsum(lengths[good])].astype(np.int64)
+    used = np.unique(mapped)
+    index = np.full(len(nodes), -1, dtype=np.int64)
     index[used] = np.arange(len(used))
-    return nodes[used], [index[loop] for loop in new_loops], boundary[used], corners[used]
+    return nodes[used], index[mapped], offsets, boundary[used], corners[used], good
 
 
 # ----------------------------------------------------------------------------- driver
 
+@dataclass
+class _Timing:
+    clustering_s: float = 0.0
+    extraction_s: float = 0.0
+    sweeps: int = 0
+
+
 def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: RemeshSettings,
-                support_vertices: np.ndarray | None, say) -> PolyMesh:
+                support_vertices: np.ndarray | None, say, timing: _Timing | None = None) -> PolyMesh:
+    from time import perf_counter
+
+    start = perf_counter()
     say("refining the surface", 0.0)
     fine = _refine(mesh, field, n_cells)
-    rng = np.random.default_rng(settings.seed)
-    seeds = _initial_seeds(fine, n_cells, rng)
-    typical = np.sqrt(fine.areas.sum() / n_cells)
-    for iteration in range(settings.lloyd_iterations):
-        labels, _ = _regions(fine, seeds, _seed_metric(fine, seeds), connected=False)
-        # over-relaxed Lloyd: converges several times faster; plain steps at the end settle it
-        relaxation = LLOYD_RELAXATION if iteration < 0.8 * settings.lloyd_iterations else 1.0
-        new_seeds = _lloyd_step(fine, labels, len(seeds), seeds, relaxation)
-        say(f"Lloyd iteration {iteration + 1}/{settings.lloyd_iterations}", (iteration + 1) / max(settings.lloyd_iterations, 1))
-        moved = np.linalg.norm(new_seeds - seeds, axis=1).max()
-        seeds = new_seeds
-        if moved < 1e-4 * typical:
-            break
-    seed_metric = _seed_metric(fine, seeds)
-    labels, distance = _regions(fine, seeds, seed_metric)
-    say("extracting the polygon mesh", None)
-    nodes, loops, boundary, corners, cell_labels = _extract(fine, labels, seeds, seed_metric)
-    loops = _orient(nodes, loops, fine, cell_labels, seeds)
-    region_area = np.bincount(labels, weights=fine.areas, minlength=len(seeds))
-    size_at = np.sqrt(region_area)
+    say(f"clustering {len(fine.vertices)} vertices into {n_cells} cells", 0.1)
+    clusters = _cluster(fine, n_cells, settings)
+    middle = perf_counter()
+    say(f"extracting the polygon mesh ({clusters.sweeps} sweeps)", 0.8)
+    nodes, flat, offsets, cell_labels, boundary, corners = _extract(fine, clusters.labels, clusters.centroids)
+    flat = _orient(nodes, flat, offsets, fine, clusters.labels, cell_labels)
+    region_area = np.bincount(clusters.labels, weights=fine.areas, minlength=len(clusters.centroids))
     local_size = np.full(len(nodes), np.inf)
-    for loop, region in zip(loops, cell_labels):
-        local_size[loop] = np.minimum(local_size[loop], size_at[region])
-    nodes, loops, boundary, corners = _collapse_short_beams(nodes, loops, boundary, corners, local_size)
-    supports = _support_nodes(mesh, nodes, boundary, support_vertices)
-    return PolyMesh(nodes=nodes, faces=tuple(loops), boundary=boundary, supports=supports, corners=corners)
+    np.minimum.at(local_size, flat, np.sqrt(region_area)[np.repeat(cell_labels, np.diff(offsets))])
+    nodes, flat, offsets, boundary, corners, _ = _collapse_short_beams(nodes, flat, offsets, boundary, corners,
+                                                                       local_size)
+    boundary_ids = np.unique(np.concatenate(fine.loops)) if fine.loops else np.zeros(0, dtype=np.int64)
+    boundary_ids = boundary_ids[boundary_ids < fine.n_surface_vertices]
+    supports = _support_nodes(mesh, nodes, boundary, support_vertices, boundary_ids=boundary_ids)
+    loops = tuple(np.split(flat, offsets[1:-1]))
+    polymesh = PolyMesh(nodes=nodes, faces=loops, boundary=boundary, supports=supports, corners=corners)
+    if timing is not None:
+        timing.clustering_s += middle - start
+        timing.extraction_s += perf_counter() - middle
+        timing.sweeps = clusters.sweeps
+    return polymesh
 
 
-def _support_nodes(mesh: TriMesh, nodes: np.ndarray, boundary: np.ndarray, support_vertices: np.ndarray | None) -> np.ndarray:
+def _support_nodes(mesh: TriMesh, nodes: np.ndarray, boundary: np.ndarray, support_vertices: np.ndarray | None,
+                   *, boundary_ids: np.ndarray | None = None) -> np.ndarray:
     """Boundary nodes whose nearest boundary vertex of the surface is supported, and the node
-    nearest to each supported vertex."""
+    nearest to each supported vertex (``boundary_ids``: the surface's boundary vertices, when known)."""
     supports = np.zeros(len(nodes), dtype=bool)
     if support_vertices is None or not np.any(support_vertices):
         return supports
     support_vertices = np.asarray(support_vertices, dtype=bool)
-    boundary_ids = np.flatnonzero(mesh.boundary_vertices)
+    if boundary_ids is None:
+        boundary_ids = np.flatnonzero(mesh.boundary_vertices)
     if len(boundary_ids) and np.any(boundary):
         _, nearest = cKDTree(mesh.vertices[boundary_ids]).query(nodes[boundary])
         supports[np.flatnonzero(boundary)[support_vertices[boundary_ids[nearest]]]] = True
@@ -601,7 +707,11 @@ def _cells_for_length(mesh: TriMesh, field: GuidingField, mean_beam_length: floa
 
 def remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
            support_vertices: np.ndarray | None = None, progress: Progress | None = None) -> RemeshResult:
-    """The statics-aware Voronoi grid-shell of ``mesh`` under ``field`` (see the module docstring)."""
+    """The statics-aware Voronoi grid-shell of ``mesh`` under ``field`` (see the module docstring).
+
+    The quality dict also holds ``clustering_s`` and ``extraction_s`` (seconds spent in the
+    clustering, including refinement and seeding, and in the polygon extraction, over all
+    tessellations the size target needed) and ``clustering_sweeps`` (of the last one)."""
     def say(text: str, fraction: float | None = None) -> None:
         if progress is not None:
             progress(text, fraction)
@@ -616,27 +726,28 @@ def remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
         length = settings.mean_beam_length
         if length is None:
             # first guess of the mean beam length for L_tot: a hexagonal grid has ~1.5 beams per cell
-            guess = _cells_for_length(mesh, field, np.sqrt(mesh.area) / 10.0)
             length = np.sqrt(mesh.area) / 10.0
-            n_cells = guess
-        else:
-            n_cells = _cells_for_length(mesh, field, length)
+        n_cells = _cells_for_length(mesh, field, length)
     max_cells = MAX_FINE_VERTICES // 12
     if n_cells > max_cells:
         raise InputError(f"remesh: {n_cells} cells is more than this remesher handles ({max_cells})",
                          hint="ask for fewer cells or a longer mean beam length")
-    polymesh = _tessellate(mesh, field, n_cells, settings, support_vertices, say)
+    timing = _Timing()
+    polymesh = _tessellate(mesh, field, n_cells, settings, support_vertices, say, timing)
     if settings.mean_beam_length is not None:
         for _ in range(3):
             achieved = float(polymesh.beam_lengths.mean())
-            if abs(achieved / settings.mean_beam_length - 1) < 0.02:
+            if abs(achieved / settings.mean_beam_length - 1) < 0.01:
                 break
             n_cells = max(4, int(round(n_cells * (achieved / settings.mean_beam_length) ** 2)))
-            polymesh = _tessellate(mesh, field, n_cells, settings, support_vertices, say)
+            polymesh = _tessellate(mesh, field, n_cells, settings, support_vertices, say, timing)
     if settings.total_length is not None:
-        polymesh, n_cells = _match_total_length(mesh, field, settings, support_vertices, say, polymesh, n_cells)
+        polymesh, n_cells = _match_total_length(mesh, field, settings, support_vertices, say, polymesh, n_cells,
+                                                timing)
     quality = polymesh_quality(polymesh, mesh=mesh, field=field)
-    quality.update({"n_cells_requested": int(n_cells), "field_size_ratio": ratio, "field_max_aspect": aspect})
+    quality.update({"n_cells_requested": int(n_cells), "field_size_ratio": ratio, "field_max_aspect": aspect,
+                    "clustering_s": timing.clustering_s, "extraction_s": timing.extraction_s,
+                    "clustering_sweeps": timing.sweeps})
     if settings.total_length is not None:
         quality["total_length_target_m"] = settings.total_length
         quality["total_length_error"] = polymesh.total_length / settings.total_length - 1.0
@@ -646,7 +757,7 @@ def remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
     return RemeshResult(polymesh=polymesh, quality=quality)
 
 
-def _match_total_length(mesh, field, settings, support_vertices, say, polymesh, n_cells):
+def _match_total_length(mesh, field, settings, support_vertices, say, polymesh, n_cells, timing=None):
     """Secant iteration on the cell count (L_tot ~ sqrt(cells)) to meet L_tot within 1 %."""
     target = settings.total_length
     best = (abs(polymesh.total_length / target - 1), polymesh, n_cells)
@@ -662,18 +773,16 @@ def _match_total_length(mesh, field, settings, support_vertices, say, polymesh, 
             break
         n_cells = proposal
         tried.add(n_cells)
-        polymesh = _tessellate(mesh, field, n_cells, settings, support_vertices, say)
+        polymesh = _tessellate(mesh, field, n_cells, settings, support_vertices, say, timing)
         error = abs(polymesh.total_length / target - 1)
         if error < best[0]:
             best = (error, polymesh, n_cells)
     if best[0] >= 0.01:
-        # fine adjustment: other random starts at the best cell count
+        # fine adjustment: other lattice offsets at the best cell count
         error, polymesh, n_cells = best
         for seed in range(1, 12):
-            from dataclasses import replace
-
             candidate = _tessellate(mesh, field, n_cells, replace(settings, seed=settings.seed + seed),
-                                    support_vertices, say)
+                                    support_vertices, say, timing)
             candidate_error = abs(candidate.total_length / target - 1)
             if candidate_error < best[0]:
                 best = (candidate_error, candidate, n_cells)
@@ -684,12 +793,13 @@ def _match_total_length(mesh, field, settings, support_vertices, say, polymesh, 
 
 # ----------------------------------------------------------------------------- quality
 
-def _cell_pca(points: np.ndarray) -> tuple[float, float, np.ndarray]:
-    """(size = sqrt(area of the PCA ellipse-equivalent), aspect, in-plane axes (2,3))."""
-    centred = points - points.mean(axis=0)
-    _, s, vt = np.linalg.svd(centred, full_matrices=False)
-    s = np.maximum(s[:2], 1e-300)
-    return float(s[0] * s[1]), float(s[0] / s[1]), vt[:2]
+def _face_groups(polymesh: PolyMesh):
+    """(face ids, (m, d, 3) node coordinates) for each face degree d."""
+    degrees = polymesh.face_degrees
+    for d in np.unique(degrees):
+        ids = np.flatnonzero(degrees == d)
+        loops = np.stack([polymesh.faces[i] for i in ids])
+        yield ids, polymesh.nodes[loops]
 
 
 def polymesh_quality(polymesh: PolyMesh, *, mesh: TriMesh | None = None, field: GuidingField | None = None) -> dict:
@@ -709,24 +819,33 @@ def polymesh_quality(polymesh: PolyMesh, *, mesh: TriMesh | None = None, field: 
     lengths = polymesh.beam_lengths
     mean_length = float(lengths.mean()) if len(lengths) else 0.0
     histogram = {int(d): int(c) for d, c in zip(*np.unique(degrees, return_counts=True))}
-    sizes, aspects, regularity = [], [], []
-    for face in polymesh.faces:
-        p = polymesh.nodes[face]
-        area = 0.5 * np.linalg.norm(np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0))
-        sizes.append(np.sqrt(area))
-        _, aspect, axes = _cell_pca(p)
-        aspects.append(aspect)
+    n = polymesh.n_faces
+    sizes, aspects, regularity = np.zeros(n), np.zeros(n), np.zeros(n)
+    planarity, centroids = np.zeros(n), np.zeros((n, 3))
+    smallest = 180.0
+    for ids, p in _face_groups(polymesh):
+        # (m faces, d nodes, 3)
+        following = np.roll(p, -1, axis=1)
+        sizes[ids] = np.sqrt(0.5 * np.linalg.norm(np.cross(p, following).sum(axis=1), axis=1))
+        centroids[ids] = p.mean(axis=1)
+        centred = p - centroids[ids][:, None, :]
+        _, s, vt = np.linalg.svd(centred, full_matrices=False)
+        s2 = np.maximum(s[:, :2], 1e-300)
+        aspects[ids] = s2[:, 0] / s2[:, 1]
+        if p.shape[1] > 3:
+            planarity[ids] = np.abs(np.einsum("mdi,mi->md", centred, vt[:, -1])).max(axis=1)
         # regularity: edge-length spread after un-stretching the cell's own anisotropy
-        local = (p - p.mean(axis=0)) @ axes.T
+        local = np.einsum("mdi,mki->mdk", centred, vt[:, :2])
         spread = np.sqrt(np.maximum(np.linalg.svd(local, compute_uv=False), 1e-300))
-        unstretched = local / spread * spread.mean()
-        edges = np.linalg.norm(unstretched - np.roll(unstretched, -1, axis=0), axis=1)
-        regularity.append(float(edges.std() / max(edges.mean(), 1e-300)))
-    sizes, aspects = np.array(sizes), np.array(aspects)
-    pick = interior if interior.sum() >= 4 else np.ones(len(sizes), dtype=bool)
+        unstretched = local / spread[:, None, :] * spread.mean(axis=1)[:, None, None]
+        edges = np.linalg.norm(unstretched - np.roll(unstretched, -1, axis=1), axis=2)
+        regularity[ids] = edges.std(axis=1) / np.maximum(edges.mean(axis=1), 1e-300)
+        to_previous, to_next = np.roll(p, 1, axis=1) - p, following - p
+        cosine = np.einsum("mdi,mdi->md", to_previous, to_next) / np.maximum(
+            np.linalg.norm(to_previous, axis=2) * np.linalg.norm(to_next, axis=2), 1e-300)
+        smallest = min(smallest, float(np.degrees(np.arccos(np.clip(cosine, -1, 1))).min()))
+    pick = interior if interior.sum() >= 4 else np.ones(n, dtype=bool)
     lo, hi = np.percentile(sizes[pick], [5, 95])
-    planarity = polymesh.face_planarity()
-    angles = _smallest_angles(polymesh)
     quality = {
         "n_nodes": int(polymesh.n_nodes), "n_beams": int(len(polymesh.edges)), "n_faces": int(polymesh.n_faces),
         "hexagon_share_interior": float(np.mean(degrees[interior] == 6)) if interior.any() else 0.0,
@@ -735,21 +854,20 @@ def polymesh_quality(polymesh: PolyMesh, *, mesh: TriMesh | None = None, field: 
         "achieved_size_ratio": float(hi / max(lo, 1e-300)),
         "achieved_max_aspect": float(np.percentile(aspects[pick], 95)),
         "regularity": float(np.mean(regularity)),
-        "planarity_max_m": float(planarity.max()) if len(planarity) else 0.0,
-        "planarity_p95_m": float(np.percentile(planarity, 95)) if len(planarity) else 0.0,
-        "planarity_max_mm": float(1000 * planarity.max()) if len(planarity) else 0.0,
-        "planarity_max_rel": float(planarity.max() / max(mean_length, 1e-300)) if len(planarity) else 0.0,
-        "planarity_p95_rel": float(np.percentile(planarity, 95) / max(mean_length, 1e-300)) if len(planarity) else 0.0,
+        "planarity_max_m": float(planarity.max()) if n else 0.0,
+        "planarity_p95_m": float(np.percentile(planarity, 95)) if n else 0.0,
+        "planarity_max_mm": float(1000 * planarity.max()) if n else 0.0,
+        "planarity_max_rel": float(planarity.max() / max(mean_length, 1e-300)) if n else 0.0,
+        "planarity_p95_rel": float(np.percentile(planarity, 95) / max(mean_length, 1e-300)) if n else 0.0,
         "shortest_beam_m": float(lengths.min()) if len(lengths) else 0.0,
         "mean_beam_length_m": mean_length, "total_length_m": float(lengths.sum()),
-        "smallest_angle_deg": float(angles),
+        "smallest_angle_deg": smallest,
     }
     if mesh is not None:
         distance = _distance_to_surface(mesh, polymesh.nodes)
         quality["closeness_max_rel"] = float(distance.max() / mesh.diagonal)
         quality["closeness_mean_rel"] = float(distance.mean() / mesh.diagonal)
     if mesh is not None and field is not None:
-        centroids = np.array([polymesh.nodes[f].mean(axis=0) for f in polymesh.faces])
         _, nearest = cKDTree(mesh.vertices).query(centroids)
         prescribed = field.size[nearest]
         quality["size_ratio_p5_p95"] = quality["achieved_size_ratio"]
@@ -762,17 +880,6 @@ def polymesh_quality(polymesh: PolyMesh, *, mesh: TriMesh | None = None, field: 
         else:
             quality["size_correlation"] = None
     return quality
-
-
-def _smallest_angles(polymesh: PolyMesh) -> float:
-    smallest = 180.0
-    for face in polymesh.faces:
-        p = polymesh.nodes[face]
-        a = np.roll(p, 1, axis=0) - p
-        b = np.roll(p, -1, axis=0) - p
-        cosine = np.einsum("ij,ij->i", a, b) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
-        smallest = min(smallest, float(np.degrees(np.arccos(np.clip(cosine, -1, 1))).min()))
-    return smallest
 
 
 def _distance_to_surface(mesh: TriMesh, points: np.ndarray) -> np.ndarray:
