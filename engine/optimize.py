@@ -22,6 +22,20 @@ w_p / (w_r + w_p) up to 1, and the last iterations are pure planarity + closenes
 Constraints: corners and supports are fixed (their DOFs are eliminated); a free boundary node
 moves along the tangent of the surface's boundary polyline at its start position (one DOF) and is
 projected back onto the polyline after each step (exact on straight boundary edges).
+
+For planar panels (``planar``) two more steps, both reported in the quality record:
+
+- before the iterations, boundary cells whose plane the boundary itself forces away from the
+  surface are split by new beams (:mod:`engine.boundary_splits`: cells holding a corner and
+  nodes on both of its edges; chains of cells along a straight edge, which must share one plane);
+- after them, the end game (:mod:`engine.planarise`): Gauss-Newton on nodes and planes with the
+  planarity as a growing per-cell penalty, closeness as a band, regularity as in the iterations,
+  and guards on corner angles and beam lengths, until every cell is within
+  ``planarity_tolerance`` of the mean beam length of its plane.
+
+The local/global iterations alone stall at a few per cent of the mean beam length: they are
+block-coordinate descent on the same energy, first order, and the final pull-back onto the
+closeness limit undoes part of their planarity.
 """
 
 from __future__ import annotations
@@ -34,9 +48,11 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.spatial import cKDTree
 
+from .boundary_splits import split_boundary_cells
 from .errors import InputError
 from .field import GuidingField
 from .mesh import PolyMesh, TriMesh
+from .planarise import PlanariseSettings, cell_planes, planarise
 from .proximity import closest_point_on_triangles
 
 __all__ = ["OptimizeSettings", "OptimizeResult", "optimize", "regular_targets", "planar_targets",
@@ -46,7 +62,13 @@ __all__ = ["OptimizeSettings", "OptimizeResult", "optimize", "regular_targets", 
 @dataclass(frozen=True, kw_only=True)
 class OptimizeSettings:
     """Weights of the four terms (dimensionless, relative), the number of local/global
-    iterations, and whether panels must be planar (planar False: the planarity weight is ignored)."""
+    iterations, and whether panels must be planar (planar False: the planarity weight is ignored).
+
+    With ``planar`` (and a planarity weight > 0): planarity_tolerance, the largest wanted node
+    distance from its cell's plane relative to the mean beam length; planarity_iterations, the
+    largest number of Gauss-Newton steps of the end game (0: none); split_cells, whether boundary
+    cells that the boundary holds out of plane are split by new beams first.
+    """
 
     regularity_weight: float = 1.0
     planarity_weight: float = 1.0
@@ -54,6 +76,9 @@ class OptimizeSettings:
     fairness_weight: float = 0.1
     iterations: int = 50
     planar: bool = True
+    planarity_tolerance: float = 0.005
+    planarity_iterations: int = 80
+    split_cells: bool = True
 
     def __post_init__(self) -> None:
         for name in ("regularity_weight", "planarity_weight", "closeness_weight", "fairness_weight"):
@@ -61,8 +86,13 @@ class OptimizeSettings:
             if not (np.isfinite(value) and value >= 0):
                 raise InputError(f"optimize: {name} must be a finite number >= 0, got {value}",
                                  hint="weights are relative; use 0 to switch a term off")
-        if int(self.iterations) != self.iterations or self.iterations < 0:
-            raise InputError(f"optimize: iterations must be a whole number >= 0, got {self.iterations}")
+        for name in ("iterations", "planarity_iterations"):
+            value = getattr(self, name)
+            if int(value) != value or value < 0:
+                raise InputError(f"optimize: {name} must be a whole number >= 0, got {value}")
+        if not (np.isfinite(self.planarity_tolerance) and 0 < self.planarity_tolerance < 1):
+            raise InputError(f"optimize: planarity_tolerance must be in (0, 1), got {self.planarity_tolerance}",
+                             hint="relative to the mean beam length: 0.005 is 0.5 %")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -90,6 +120,13 @@ CLOSENESS_BAND = 0.0025
 CLOSENESS_LIMIT = 0.0045
 #: Planarity share in the final iterations (1: pure planarity + closeness).
 FINAL_PLANARITY = 1.0
+#: Closeness band of the end game, relative to the diagonal (below the hard limit CLOSENESS_LIMIT).
+END_BAND = 0.004
+#: A boundary cell is split where the plane its boundary nodes force on it is farther than this
+#: share of the end game's band from one of its inner nodes (engine.boundary_splits).
+SPLIT_HOLD = 0.5
+#: Boundary nodes within this share of the planarity tolerance of a line count as on it.
+SPLIT_STRAIGHTNESS = 0.5
 
 
 def _into_band(points: np.ndarray, closest: np.ndarray, distance: np.ndarray, band: float) -> np.ndarray:
@@ -171,21 +208,33 @@ class _Surface:
 
     def __init__(self, mesh: TriMesh, candidates: int = 16):
         self.corners = mesh.vertices[mesh.faces]
+        self.normals = mesh.face_normals
         self.diagonal = float(mesh.diagonal)
         self.tree = cKDTree(self.corners.mean(axis=1))
         self.k = min(candidates, len(mesh.faces))
 
-    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(closest points (p,3), distances (p,))."""
+    def _nearest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(closest points (p,3), distances (p,), triangle ids (p,))."""
         p = len(points)
         _, cand = self.tree.query(points, k=self.k)
-        cand = np.asarray(cand).reshape(p, self.k).ravel()
+        cand = np.asarray(cand).reshape(p, self.k)
+        flat = cand.ravel()
         repeated = np.repeat(points, self.k, axis=0)
-        q = closest_point_on_triangles(repeated, self.corners[cand, 0], self.corners[cand, 1], self.corners[cand, 2])
+        q = closest_point_on_triangles(repeated, self.corners[flat, 0], self.corners[flat, 1], self.corners[flat, 2])
         distance = np.linalg.norm(q - repeated, axis=1).reshape(p, self.k)
         best = np.argmin(distance, axis=1)
         rows = np.arange(p)
-        return q.reshape(p, self.k, 3)[rows, best], distance[rows, best]
+        return q.reshape(p, self.k, 3)[rows, best], distance[rows, best], cand[rows, best]
+
+    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(closest points (p,3), distances (p,))."""
+        q, distance, _ = self._nearest(points)
+        return q, distance
+
+    def closest_normals(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(closest points (p,3), unit normals of the triangles they lie on (p,3))."""
+        q, _, triangle = self._nearest(points)
+        return q, self.normals[triangle]
 
 
 class _Boundary:
@@ -262,16 +311,26 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface
     from a cell's best-fit plane), planarity_max_rel, planarity_p95_rel (to the mean beam length),
     regularity (mean over cells of std/mean of edge lengths after un-stretching the cell's own
     anisotropy), closeness_max_rel, closeness_mean_rel (node distance to the surface / bounding-box
-    diagonal, with a mesh), shortest_beam_m, mean_beam_length_m, smallest_angle_deg."""
+    diagonal, with a mesh), shortest_beam_m, mean_beam_length_m, smallest_angle_deg,
+    nonconvex_faces (cells with a reflex corner in their best-fit plane)."""
     x = np.asarray(polymesh.nodes, dtype=float)
     lengths = polymesh.beam_lengths
     mean_length = float(lengths.mean()) if len(lengths) else 0.0
-    planarity, regularity, smallest = [], [], 180.0
+    planarity, regularity, smallest, nonconvex = [], [], 180.0, 0
     for k, faces in _groups(polymesh.faces).items():
         points = x[faces]
-        centroid, _, normal = _frames(points)
+        centroid, axes, normal = _frames(points)
         distance = np.abs(np.einsum("fki,fi->fk", points - centroid[:, None], normal)).max(axis=1)
         planarity.append(distance if k > 3 else np.zeros(len(faces)))
+        if k > 3:
+            local = np.einsum("fki,fji->fkj", points - centroid[:, None], axes)
+            edge = np.roll(local, -1, axis=1) - local
+            following = np.roll(edge, -1, axis=1)
+            turn = edge[:, :, 0] * following[:, :, 1] - edge[:, :, 1] * following[:, :, 0]
+            area = 0.5 * np.sum(local[:, :, 0] * np.roll(local[:, :, 1], -1, axis=1)
+                                - np.roll(local[:, :, 0], -1, axis=1) * local[:, :, 1], axis=1)
+            size = np.einsum("fki,fki->f", edge, edge) / k
+            nonconvex += int(np.sum(np.any(turn * np.sign(area)[:, None] < -1e-9 * size[:, None], axis=1)))
         unstretched = _unstretched(points)[0]
         edges = np.linalg.norm(unstretched - np.roll(unstretched, -1, axis=1), axis=2)
         regularity.append(edges.std(axis=1) / np.maximum(edges.mean(axis=1), 1e-300))
@@ -291,6 +350,7 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface
         "shortest_beam_m": float(lengths.min()) if len(lengths) else 0.0,
         "mean_beam_length_m": mean_length,
         "smallest_angle_deg": smallest,
+        "nonconvex_faces": nonconvex,
     }
     if mesh is not None or surface is not None:
         surface = surface or _Surface(mesh)
@@ -338,15 +398,33 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
     reference surface ``mesh``; corners and supports stay put, boundary nodes on the boundary.
 
     ``field`` is accepted for the workflow's sake (cells keep their own anisotropy).
-    ``progress(text, fraction)`` is called once per iteration. quality: "before" and "after"
-    figures (see :func:`optimize_quality`), "iterations", "converged" (the last step moved no
-    node more than 1e-4 of the mean beam length), "final_step_rel", "factorisations" (1),
-    "planar".
+    ``progress(text, fraction)`` is called once per iteration (fraction None in the end game).
+    With ``settings.iterations == 0`` the grid passes unchanged.
+
+    quality: "before" (the grid as given) and "after" figures (see :func:`optimize_quality`),
+    "iterations" (local/global), "converged" (the end game reached the tolerance, or without it
+    the last local/global step moved no node more than 1e-4 of the mean beam length),
+    "final_step_rel", "factorisations" (one for the local/global iterations plus one per trial
+    step of the end game), "planar", "accelerated_steps", "rejected_steps" (Anderson),
+    "planarity_tolerance_rel", "planarity_reached" (largest planarity error within the tolerance),
+    "corner_splits", "edge_splits", "split_beams" (node pairs of the new beams, ids of the
+    result), "split_length_m" (their total length), and "end_game" (steps, rejected_steps,
+    factorisations, planarity_weight, reached; see :mod:`engine.planarise`).
     """
     _check(polymesh, mesh)
-    n = polymesh.n_nodes
     surface = _Surface(mesh)
     before = optimize_quality(polymesh, surface=surface)
+    given = polymesh
+    planar_panels = settings.planar and settings.planarity_weight > 0 and settings.iterations > 0
+    tolerance = settings.planarity_tolerance * before["mean_beam_length_m"]
+    new_beams = np.zeros((0, 2), dtype=np.int64)
+    corner_splits = edge_splits = 0
+    if planar_panels and settings.split_cells:
+        splits = split_boundary_cells(polymesh, hold=SPLIT_HOLD * END_BAND * surface.diagonal,
+                                      straightness=SPLIT_STRAIGHTNESS * tolerance)
+        polymesh, new_beams = splits.polymesh, splits.new_beams
+        corner_splits, edge_splits = splits.corner_splits, splits.edge_splits
+    n = polymesh.n_nodes
     fixed = polymesh.corners | polymesh.supports
     boundary = _Boundary(mesh)
     sliding = polymesh.boundary & ~fixed
@@ -438,6 +516,27 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
             progress(f"optimize: iteration {done}/{len(plan)}", done / len(plan))
     if previous_plain is not None and local(x, *plan[-1])[1] > previous_energy:
         x = previous_plain  # never end on an accelerated point that raised the energy
+    report = None
+    if planar_panels and settings.planarity_iterations > 0:
+        # the tolerance on the grid as split (new beams change the mean beam length)
+        end_settings = PlanariseSettings(tolerance=settings.planarity_tolerance * float(polymesh.beam_lengths.mean()),
+                                         band=END_BAND * surface.diagonal,
+                                         limit=CLOSENESS_LIMIT * surface.diagonal,
+                                         regularity_weight=SHAPE_SCALE * settings.regularity_weight,
+                                         closeness_weight=settings.closeness_weight,
+                                         iterations=settings.planarity_iterations)
+
+        def regular(x: np.ndarray) -> np.ndarray:
+            return _stack(groups, {k: regular_targets(x[faces]) for k, faces in groups.items()})
+
+        def said(steps: int) -> None:
+            if progress is not None:
+                progress(f"optimize: planarity step {steps}", None)
+
+        x, report = planarise(x, groups, interior=interior, sliding=sliding, closest=surface.closest_normals,
+                              slide=boundary.closest, centering=C, regular=regular, beams=polymesh.edges,
+                              settings=end_settings, progress=said)
+        factorisations += report.factorisations
     if done:
         # the closeness band is a soft constraint: bring stray nodes back within the hard limit
         moving = interior | sliding
@@ -450,11 +549,21 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
     except ImportError:  # pragma: no cover
         polymesh_quality = None
     if polymesh_quality is not None:
-        for mine, grid in ((before, polymesh), (after, result)):
+        for mine, grid in ((before, given), (after, result)):
             for key, value in polymesh_quality(grid, mesh=mesh, field=field).items():
                 mine.setdefault(key, value)
+    split_length = float(np.linalg.norm(x[new_beams[:, 1]] - x[new_beams[:, 0]], axis=1).sum())
+    converged = report.reached if report is not None else bool(step <= 1e-4 * mean_length)
     quality = {"before": before, "after": after, "iterations": done,
-               "converged": bool(step <= 1e-4 * mean_length), "final_step_rel": step / mean_length,
+               "converged": bool(converged), "final_step_rel": step / mean_length,
                "factorisations": factorisations, "planar": bool(settings.planar),
-               "accelerated_steps": accepted, "rejected_steps": rejected}
+               "accelerated_steps": accepted, "rejected_steps": rejected,
+               "planarity_tolerance_rel": settings.planarity_tolerance,
+               "planarity_reached": bool(after["planarity_max_rel"] <= settings.planarity_tolerance),
+               "corner_splits": corner_splits, "edge_splits": edge_splits,
+               "split_beams": new_beams.tolist(), "split_length_m": split_length,
+               "end_game": None if report is None else {
+                   "steps": report.iterations, "rejected_steps": report.rejected_steps,
+                   "factorisations": report.factorisations, "planarity_weight": report.planarity_weight,
+                   "reached": report.reached}}
     return OptimizeResult(polymesh=result, quality=quality)

@@ -251,12 +251,20 @@ class RemeshConfig(_Section):
 
 
 class OptimizeConfig(_Section):
+    """Face optimisation (METHOD.md 4). With ``planar``: planarity_tolerance is the largest node
+    distance from its cell's plane relative to the mean beam length (the end game's goal),
+    planarity_iterations its largest number of Gauss-Newton steps (0: local/global only), and
+    split_cells whether boundary cells held out of plane by the boundary get new beams."""
+
     iterations: int = Field(50, ge=0)
     regularity_weight: float = Field(1.0, ge=0)
     planarity_weight: float = Field(1.0, ge=0)
     closeness_weight: float = Field(1.0, ge=0)
     fairness_weight: float = Field(0.1, ge=0)
     planar: bool = True
+    planarity_tolerance: float = Field(0.005, gt=0, lt=1)
+    planarity_iterations: int = Field(80, ge=0)
+    split_cells: bool = True
 
 
 class AnalysisConfig(_Section):

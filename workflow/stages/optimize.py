@@ -1,7 +1,8 @@
 """Stage ``optimize``: regular, planar cells that stay on the surface.
 
 Artifacts (05-optimize/): gridshell.obj (+ gridshell.nodes.json), optimize.json (planarity,
-regularity, closeness before and after, with the weights used) and pictures.
+regularity, closeness before and after, the boundary cells split for planar panels and the new
+beams, the end game's record, with the weights used) and pictures.
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ def optimize_settings(project: Project):
     c = project.optimize
     return OptimizeSettings(regularity_weight=c.regularity_weight, planarity_weight=c.planarity_weight,
                             closeness_weight=c.closeness_weight, fairness_weight=c.fairness_weight,
-                            iterations=c.iterations, planar=c.planar)
+                            iterations=c.iterations, planar=c.planar, planarity_tolerance=c.planarity_tolerance,
+                            planarity_iterations=c.planarity_iterations, split_cells=c.split_cells)
 
 
 def run(ctx):
@@ -32,8 +34,8 @@ def run(ctx):
     surface = ctx.result("surface")
     field = ctx.result("field")
     polymesh = ctx.result("remesh")
-    ctx.step("local/global iterations")
-    result = optimize(polymesh, surface.mesh, field, optimize_settings(project))
+    ctx.step("local/global iterations and the planarity end game")
+    result = optimize(polymesh, surface.mesh, field, optimize_settings(project), progress=ctx.step)
     write_polymesh_obj(result.polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: optimised grid-shell")
     quality = dict(result.quality)
