@@ -1,0 +1,158 @@
+"""Sparse factorisation of a frame stiffness with the beams' internal nodes condensed out.
+
+A beam split into k elements has k - 1 internal nodes that touch only that beam. Per beam, with
+its two end nodes e and its internal DOFs i (g = 6 (k - 1) of them),
+
+    K_beam = [[K_ee, K_ei],
+              [K_ie, K_ii]],
+
+so K^-1 needs only the dense inverses of the K_ii (batched over the beams) and one sparse LU of
+the Schur complement S, assembled from the condensed beams C = K_ee - K_ei K_ii^-1 K_ie on the
+end nodes only (for straight Euler-Bernoulli beams C is the one-element beam stiffness). On the
+5000-node benchmark grid-shell with 4 elements per beam S has 29 k DOF instead of 162 k: faster
+to factor, and a solve (all DOFs, internal ones included: this is exact, not a reduced model)
+takes half the time of the full LU's (docs/decisions.md, "Frame finite elements").
+
+The inertia is kept: the pivots are those of an elimination of the K_ii without row exchanges
+followed by S's LU with diagonal pivots, which are the pivots of the whole matrix eliminated in
+that order (Haynsworth), so the negative-pivot count of the co-rotational path is unchanged.
+The element matrices need not be symmetric (the co-rotational tangent is not quite).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .linalg import assemble_blocks
+
+__all__ = ["CondensedFactor", "sparse_lu"]
+
+
+def sparse_lu(matrix: sp.spmatrix):
+    """SuperLU of a structurally symmetric matrix: minimum-degree ordering on A^T + A, diagonal
+    pivots (the inertia of a symmetric matrix is read from the signs of U's diagonal)."""
+    return spla.splu(sp.csc_matrix(matrix), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                     options={"SymmetricMode": True})
+
+
+def _block_pivots(blocks: np.ndarray) -> np.ndarray:
+    """(m, g) pivots of the Gaussian elimination of each block without row exchanges (as SuperLU
+    with diagonal pivots), vectorised over the blocks (block index last, for contiguous rows)."""
+    work = np.ascontiguousarray(np.transpose(blocks, (1, 2, 0)))
+    g = work.shape[0]
+    pivots = np.empty((g, work.shape[2]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k in range(g):
+            pivots[k] = work[k, k]
+            if k + 1 < g:
+                factor = work[k + 1:, k] / work[k, k]
+                work[k + 1:, k + 1:] -= factor[:, None, :] * work[k, None, k + 1:]
+    return pivots.T
+
+
+class CondensedFactor:
+    """Solver for K x = f on the free DOFs of a frame, K given by its element matrices.
+
+    element_matrices (b k, 12, 12) in global axes on ``connectivity`` (b k, 2) of ``n_nodes``
+    nodes, beam by beam, k elements per beam, the internal nodes of beam j numbered n_original +
+    j (k - 1) + t (as
+    ``engine.frame`` builds them); ``free``: the sorted free DOFs (6 per node, node-major), every
+    internal DOF among them. ``solve(f)`` takes (n_free,) or (n_free, r). ``pivots``: the pivots
+    of the elimination (internal blocks, then the diagonal of S's U), whose signs give the inertia
+    of a symmetric K. Raises RuntimeError when K is exactly singular (an internal block or S), as
+    SuperLU does. With k = 1 it is a plain SuperLU of the assembled matrix.
+    """
+
+    def __init__(self, element_matrices: np.ndarray, connectivity: np.ndarray, n_nodes: int, n_original: int,
+                 free: np.ndarray, elements_per_beam: int) -> None:
+        k = int(elements_per_beam)
+        self.free = free
+        self.n_dofs = 6 * n_nodes
+        if k == 1:
+            K = assemble_blocks(element_matrices, connectivity, n_nodes)
+            self._lu = sparse_lu(K[free][:, free])
+            self._beams = None
+            self._block_pivots = np.zeros(0)
+            return
+        m = len(connectivity) // k                      # beams
+        g = 6 * (k - 1)
+        # per beam: internal nodes 1..k-1 (K_ii), end nodes 0 and k (K_ee); element t joins nodes
+        # t and t + 1, so only the first and the last element touch the ends
+        elements = element_matrices.reshape(m, k, 12, 12)
+        first, last = elements[:, 0], elements[:, k - 1]
+        K_ii = np.zeros((m, g, g))
+        K_ii[:, :6, :6] += first[:, 6:, 6:]
+        for t in range(1, k - 1):
+            K_ii[:, 6 * (t - 1):6 * (t + 1), 6 * (t - 1):6 * (t + 1)] += elements[:, t]
+        K_ii[:, g - 6:, g - 6:] += last[:, :6, :6]
+        block_pivots = _block_pivots(K_ii)
+        if not np.all(np.isfinite(block_pivots)) or np.any(block_pivots == 0):
+            raise RuntimeError("Factor is exactly singular (the internal nodes of a beam)")
+        try:
+            inverse = np.linalg.inv(K_ii)
+        except np.linalg.LinAlgError as exc:
+            raise RuntimeError("Factor is exactly singular (the internal nodes of a beam)") from exc
+        self._inverse = inverse
+        # W = K_ii^-1 K_ie and V = K_ei K_ii^-1 (K_ie: the first element's block on node 1 x
+        # node 0 and the last's on node k-1 x node k)
+        self._W = np.concatenate([np.matmul(inverse[:, :, :6], first[:, 6:, :6]),
+                                  np.matmul(inverse[:, :, g - 6:], last[:, :6, 6:])], axis=2)       # (m, g, 12)
+        self._V = np.concatenate([np.matmul(first[:, :6, 6:], inverse[:, :6, :]),
+                                  np.matmul(last[:, 6:, :6], inverse[:, g - 6:, :])], axis=1)       # (m, 12, g)
+        condensed = np.zeros((m, 12, 12))
+        condensed[:, :6, :6] = first[:, :6, :6]
+        condensed[:, 6:, 6:] = last[:, 6:, 6:]
+        condensed[:, :6] -= np.matmul(first[:, :6, 6:], self._W[:, :6, :])
+        condensed[:, 6:] -= np.matmul(last[:, 6:, :6], self._W[:, g - 6:, :])
+        beam_ends = np.stack([connectivity[::k, 0], connectivity[k - 1::k, 1]], axis=1)
+        S = assemble_blocks(condensed, beam_ends, n_original)
+        self._n_boundary_dofs = 6 * n_original
+        self._boundary = free[free < 6 * n_original]
+        if len(free) - len(self._boundary) != m * g:
+            raise ValueError("every internal DOF of the beams must be free")
+        self._lu = sparse_lu(S[self._boundary][:, self._boundary])
+        self._end_dofs = (6 * beam_ends[:, :, None] + np.arange(6)).reshape(m, 12)
+        # scatter of the (m, 12) end contributions onto the end-node DOFs
+        self._scatter = sp.csr_matrix((np.ones(12 * m), (self._end_dofs.ravel(), np.arange(12 * m))),
+                                      shape=(6 * n_original, 12 * m))
+        self._beams = (m, g)
+        self._block_pivots = block_pivots.ravel()
+
+    @property
+    def pivots(self) -> np.ndarray:
+        """The pivots of the elimination: the internal blocks', then the diagonal of S's U (made
+        when asked for: SuperLU builds all of U for it)."""
+        return np.concatenate([self._block_pivots, self._lu.U.diagonal()])
+
+    @property
+    def negative_pivots(self) -> int:
+        """Number of negative pivots (for a symmetric K: of negative eigenvalues)."""
+        return int(np.sum(self.pivots < 0))
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """x with K x = rhs on the free DOFs, for rhs (n_free,) or (n_free, r)."""
+        rhs = np.asarray(rhs, dtype=float)
+        if self._beams is None:
+            return self._lu.solve(rhs)
+        m, g = self._beams
+        columns = rhs.shape[1:]
+        r = int(np.prod(columns)) if columns else 1
+        full = np.zeros((self.n_dofs, r))
+        full[self.free] = rhs.reshape(len(self.free), r)
+        nb = self._n_boundary_dofs
+        f_i = full[nb:].reshape(m, g, r)
+        end_forces = np.einsum("mij,mj->mi", self._V, f_i[:, :, 0])[:, :, None] if r == 1 else np.matmul(self._V, f_i)
+        f_b = full[:nb] - self._scatter @ end_forces.reshape(12 * m, r)
+        x_b = np.zeros((nb, r))
+        x_b[self._boundary] = self._lu.solve(f_b[self._boundary]).reshape(-1, r)
+        if r == 1:                                      # einsum is faster than matmul on vectors
+            x_i = (np.einsum("mij,mj->mi", self._inverse, f_i[:, :, 0])
+                   - np.einsum("mij,mj->mi", self._W, x_b[self._end_dofs][:, :, 0]))[:, :, None]
+        else:
+            x_i = np.matmul(self._inverse, f_i) - np.matmul(self._W, x_b[self._end_dofs])
+        full[:nb] = x_b
+        full[nb:] = x_i.reshape(m * g, r)
+        out = full[self.free]
+        return out.reshape(rhs.shape)
