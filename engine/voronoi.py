@@ -56,6 +56,10 @@ LLOYD_RELAXATION = 1.7
 LLOYD_PLAIN_STEPS = 1
 #: Lloyd steps at the coarsest level.
 COARSE_LLOYD_STEPS = 20
+#: Starts (lattice offsets) tried where the clustered mesh is small: at most MAX_STARTS, and at most
+#: START_BUDGET clustered vertices in all.
+MAX_STARTS = 8
+START_BUDGET = 40_000
 #: Fewest cells of the coarsest level.
 COARSEST_CELLS = 250
 
@@ -335,6 +339,27 @@ def _refined_seeds(fine: _Fine, tree: cKDTree, labels: np.ndarray, centroids: np
     return seeds
 
 
+def _snap(tree: cKDTree, target: np.ndarray, previous: np.ndarray) -> np.ndarray:
+    """The vertex nearest each target point, all different: where two targets share a vertex, the
+    later one takes the nearest vertex not yet taken (its previous seed among the candidates)."""
+    seeds = tree.query(target)[1]
+    if len(np.unique(seeds)) == len(seeds):
+        return seeds
+    taken = set()
+    out = seeds.copy()
+    first = np.zeros(len(seeds), dtype=bool)
+    first[np.unique(seeds, return_index=True)[1]] = True
+    taken.update(seeds[first].tolist())
+    for i in np.flatnonzero(~first):
+        _, candidates = tree.query(target[i], k=min(16, tree.n))
+        free = [int(c) for c in np.atleast_1d(candidates) if int(c) not in taken]
+        out[i] = free[0] if free else int(previous[i])
+        taken.add(int(out[i]))
+    if len(np.unique(out)) != len(out):
+        return previous
+    return out
+
+
 def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings) -> _Clusters:
     """Coarse to fine: at each level, seeds grown into clusters, the clustering, then Lloyd steps
     (seeds moved to the over-relaxed centroids, clusters regrown and clustered again)."""
@@ -360,8 +385,7 @@ def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings) -> _Clusters:
         for step in range(1, steps + 1):
             relaxation = LLOYD_RELAXATION if step <= steps - LLOYD_PLAIN_STEPS else 1.0
             target = fine.vertices[seeds] + relaxation * (result.centroids - fine.vertices[seeds])
-            moved = np.unique(tree.query(target)[1])
-            seeds = moved if len(moved) == len(seeds) else seeds
+            seeds = _snap(tree, target, seeds)
             labels = _grow_clusters(fine, seeds)
             result = cluster_vertices(fine.vertices, fine.faces, fine.edges, adjacency, fine.metric, weights, labels,
                                       len(seeds), max_sweeps=MAX_SWEEPS)
@@ -648,15 +672,35 @@ class _Timing:
 
 def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: RemeshSettings,
                 support_vertices: np.ndarray | None, say, timing: _Timing | None = None) -> PolyMesh:
+    """The grid-shell of ``n_cells`` cells. Where the clustered mesh is small, several lattice
+    offsets (seeds settings.seed, +1, ...) are tried, up to START_BUDGET clustered vertices in all
+    and MAX_STARTS starts, and the grid with the largest hexagon share of interior cells is kept."""
     from time import perf_counter
 
-    start = perf_counter()
     say("refining the surface", 0.0)
     fine = _refine(mesh, field, n_cells)
-    say(f"clustering {len(fine.vertices)} vertices into {n_cells} cells", 0.1)
-    clusters = _cluster(fine, n_cells, settings)
-    middle = perf_counter()
-    say(f"extracting the polygon mesh ({clusters.sweeps} sweeps)", 0.8)
+    starts = int(max(1, min(MAX_STARTS, START_BUDGET // len(fine.vertices))))
+    best, best_share = None, -1.0
+    for start_index in range(starts):
+        start = perf_counter()
+        say(f"clustering {len(fine.vertices)} vertices into {n_cells} cells"
+            + (f" (start {start_index + 1}/{starts})" if starts > 1 else ""), 0.1 + 0.8 * start_index / starts)
+        clusters = _cluster(fine, n_cells, replace(settings, seed=settings.seed + start_index))
+        middle = perf_counter()
+        polymesh = _polygons(mesh, fine, clusters, support_vertices)
+        if timing is not None:
+            timing.clustering_s += middle - start
+            timing.extraction_s += perf_counter() - middle
+            timing.sweeps = clusters.sweeps
+        interior = ~polymesh.face_boundary
+        share = float(np.mean(polymesh.face_degrees[interior] == 6)) if interior.any() else 0.0
+        if share > best_share:
+            best, best_share = polymesh, share
+    return best
+
+
+def _polygons(mesh: TriMesh, fine: _Fine, clusters: _Clusters, support_vertices: np.ndarray | None) -> PolyMesh:
+    """The polygon grid-shell of a clustering: extraction, orientation, short beams collapsed, supports."""
     nodes, flat, offsets, cell_labels, boundary, corners = _extract(fine, clusters.labels, clusters.centroids)
     flat = _orient(nodes, flat, offsets, fine, clusters.labels, cell_labels)
     region_area = np.bincount(clusters.labels, weights=fine.areas, minlength=len(clusters.centroids))
@@ -668,12 +712,7 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
     boundary_ids = boundary_ids[boundary_ids < fine.n_surface_vertices]
     supports = _support_nodes(mesh, nodes, boundary, support_vertices, boundary_ids=boundary_ids)
     loops = tuple(np.split(flat, offsets[1:-1]))
-    polymesh = PolyMesh(nodes=nodes, faces=loops, boundary=boundary, supports=supports, corners=corners)
-    if timing is not None:
-        timing.clustering_s += middle - start
-        timing.extraction_s += perf_counter() - middle
-        timing.sweeps = clusters.sweeps
-    return polymesh
+    return PolyMesh(nodes=nodes, faces=loops, boundary=boundary, supports=supports, corners=corners)
 
 
 def _support_nodes(mesh: TriMesh, nodes: np.ndarray, boundary: np.ndarray, support_vertices: np.ndarray | None,

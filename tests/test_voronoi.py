@@ -1,5 +1,6 @@
 """Statics-aware Voronoi remeshing: hexagon share, valence, size and aspect against D and A,
-size targets, several boundary loops, corners, extreme settings."""
+size targets, several boundary loops, corners, extreme settings; the clustering's closed-form
+energy and incremental updates, connectivity of its clusters."""
 
 from __future__ import annotations
 
@@ -30,7 +31,8 @@ def _check_valid(polymesh) -> None:
         assert len(face) >= 3 and len(set(face.tolist())) == len(face), "every face is a simple node loop"
     edges = polymesh.edges
     assert len(np.unique(edges, axis=0)) == len(edges)
-    assert polymesh.beam_lengths.min() > 0
+    # no near-zero beams: those under 2 % of the local cell size are collapsed
+    assert polymesh.beam_lengths.min() > 0.01 * polymesh.beam_lengths.mean()
     # every beam is used by one or two cells and consistently oriented (opposite directions)
     directed = np.concatenate([np.stack([f, np.roll(f, -1)], axis=1) for f in polymesh.faces])
     as_set = {tuple(d) for d in directed.tolist()}
@@ -44,11 +46,16 @@ def test_voro_1_1_on_a_flat_square_is_hexagonal():
     q = result.quality
     assert q["hexagon_share_interior"] >= 0.85
     assert q["valence3_share_interior"] == 1.0
-    assert q["n_faces"] == pytest.approx(150, abs=3)
+    assert q["n_faces"] == 150
     assert q["closeness_max_rel"] < 1e-9
     # corners of the square kept as nodes
     corners = result.polymesh.nodes[result.polymesh.corners]
     assert len(corners) == 4 and np.allclose(np.sort(np.abs(corners[:, :2]).ravel()), 1.0)
+    # boundary nodes lie on the square's edges, and every node on an edge is a boundary node
+    nodes = result.polymesh.nodes
+    on_edge = np.isclose(np.abs(nodes[:, :2]).max(axis=1), 1.0)
+    assert np.array_equal(on_edge, result.polymesh.boundary)
+    assert on_edge.sum() > 4 * np.sqrt(150) / 2, "cell borders meet the boundary at nodes"
 
 
 def test_graded_anisotropic_field_reaches_D_and_A():
@@ -66,6 +73,7 @@ def test_graded_anisotropic_field_reaches_D_and_A():
     assert abs(q["achieved_size_ratio"] / D - 1) <= 0.25
     assert abs(q["achieved_max_aspect"] / A - 1) <= 0.25
     assert q["size_correlation"] > 0.8
+    assert 0.8 <= q["size_grading_slope"] <= 1.25, "achieved size follows h (log-log slope near 1)"
     # cells are elongated along the field's direction (x)
     elongation = []
     for face in result.polymesh.faces:
@@ -80,6 +88,33 @@ def test_total_length_target_met_within_one_percent():
     target = 30.0
     result = remesh(mesh, _field(mesh), RemeshSettings(total_length=target, lloyd_iterations=20))
     assert result.polymesh.total_length == pytest.approx(target, rel=0.01)
+
+
+@pytest.mark.parametrize("length", [0.2, 0.35])
+def test_mean_beam_length_target_met_within_one_percent(length):
+    mesh = _square(24, side=4.0)
+    x = mesh.vertices[:, 0]
+    field = _field(mesh, size=1.0 + (x - x.min()) / np.ptp(x), aspect=np.full(mesh.n_vertices, 2.0))
+    result = remesh(mesh, field, RemeshSettings(mean_beam_length=length))
+    assert result.polymesh.beam_lengths.mean() == pytest.approx(length, rel=0.01)
+
+
+@pytest.mark.parametrize("n_cells", [40, 333])
+def test_cell_count_target_met_within_one_percent(n_cells):
+    mesh = _square(24, side=4.0)
+    x = mesh.vertices[:, 0]
+    field = _field(mesh, size=1.0 + (x - x.min()) / np.ptp(x), aspect=np.full(mesh.n_vertices, 2.0))
+    result = remesh(mesh, field, RemeshSettings(n_cells=n_cells))
+    assert result.quality["n_faces"] == pytest.approx(n_cells, rel=0.01)
+
+
+def test_fine_surface_is_clustered_as_it_is_and_coarse_one_refined():
+    from engine.voronoi import VERTICES_PER_CELL, _refine
+
+    mesh = _square(40)  # 1681 vertices
+    field = _field(mesh)
+    assert len(_refine(mesh, field, n_cells=1681 // VERTICES_PER_CELL).vertices) == mesh.n_vertices
+    assert len(_refine(mesh, field, n_cells=1681 // VERTICES_PER_CELL + 10).vertices) == 6561
 
 
 def test_courtyard_with_two_boundary_loops():
@@ -108,3 +143,70 @@ def test_extreme_settings_give_a_valid_mesh_or_a_clear_error():
 def test_one_size_target_only():
     with pytest.raises(InputError, match="exactly one"):
         RemeshSettings(n_cells=10, total_length=3.0)
+
+
+def _clustering_problem(seed: int = 3):
+    """A curved patch with random positive weights, anisotropic metrics, 12 grown clusters."""
+    from engine.clustering import mesh_adjacency
+    from engine.voronoi import _edges_of, _refine
+
+    rng = np.random.default_rng(seed)
+    mesh = _square(16)
+    vertices = mesh.vertices + np.c_[np.zeros((mesh.n_vertices, 2)), 0.2 * mesh.vertices[:, 0] ** 2]
+    mesh = TriMesh(vertices=vertices, faces=mesh.faces)
+    field = _field(mesh, size=rng.uniform(0.5, 1.5, mesh.n_vertices), aspect=rng.uniform(1.0, 3.0, mesh.n_vertices),
+                   direction=(0.6, 0.8, 0.0))
+    fine = _refine(mesh, field, n_cells=4)
+    edges, _, _ = _edges_of(fine.faces, len(fine.vertices))
+    seeds = rng.choice(len(fine.vertices), 12, replace=False)
+    from engine.voronoi import _grow_clusters
+
+    labels = _grow_clusters(fine, seeds)
+    weights = fine.areas * rng.uniform(0.5, 2.0, len(fine.vertices))
+    return fine, edges, mesh_adjacency(len(fine.vertices), fine.faces, edges), weights, labels
+
+
+def test_cluster_energy_closed_form_is_the_minimum_over_the_centroid():
+    """S3 - S2^T S1^-1 S2 equals sum w (x - c)^T M (x - c) at c = S1^-1 S2, and no other c does better."""
+    from engine.clustering import _accumulate, centroids_of, cluster_energy, vertex_moments
+
+    fine, _, _, weights, labels = _clustering_problem()
+    energy = cluster_energy(fine.vertices, fine.metric, weights, labels, 12)
+    S, _ = _accumulate(labels, vertex_moments(fine.vertices, fine.metric, weights), 12)
+    centroids = centroids_of(S)
+    rng = np.random.default_rng(0)
+    for k in range(12):
+        members = labels == k
+        x, M, w = fine.vertices[members], fine.metric[members], weights[members]
+
+        def direct(c):
+            d = x - c
+            return float(np.sum(w * np.einsum("ni,nij,nj->n", d, M, d)))
+
+        assert energy[k] == pytest.approx(direct(centroids[k]), rel=1e-9)
+        for _ in range(5):
+            assert direct(centroids[k] + 1e-3 * rng.normal(size=3)) > energy[k]
+
+
+def test_clustering_lowers_the_energy_keeps_clusters_connected_and_its_running_moments_agree():
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from engine.clustering import cluster_energy, cluster_vertices
+
+    fine, edges, adjacency, weights, labels = _clustering_problem()
+    before = cluster_energy(fine.vertices, fine.metric, weights, labels, 12).sum()
+    result = cluster_vertices(fine.vertices, fine.faces, edges, adjacency, fine.metric, weights, labels, 12)
+    after = cluster_energy(fine.vertices, fine.metric, weights, result.labels, 12)
+    assert result.sweeps >= 2 and result.moves[0] > 0 and result.moves[-1] == 0
+    assert after.sum() < before
+    # the energies the sweeps kept up to date by O(1) moves agree with a recomputation from the labels
+    np.testing.assert_allclose(result.energy, after, rtol=1e-7, atol=1e-12 * after.sum())
+    for k in range(12):
+        members = np.flatnonzero(result.labels == k)
+        assert len(members) > 0
+        inside = np.isin(edges, members).all(axis=1)
+        n = len(fine.vertices)
+        graph = csr_matrix((np.ones(inside.sum()), (edges[inside, 0], edges[inside, 1])), shape=(n, n))
+        _, component = connected_components(graph, directed=False)
+        assert len(np.unique(component[members])) == 1, f"cluster {k} is connected"

@@ -1,0 +1,107 @@
+"""Remeshing quality on the mock-up and on every real roof surface: the real pipeline (surface with its
+supports and loads -> shell analysis -> guiding field -> remesh), with the engine functions the
+workflow stages call, Voro(D, A) with the project's defaults (D = 2, A = 2, templates/mockup.toml).
+
+    .venv/bin/python benchmarks/remesh_quality.py [--cells N] [--surfaces DIR]
+
+Per surface: cells, hexagon share of interior cells, valence-3 share of interior nodes, achieved
+size ratio and aspect (as ``polymesh_quality`` defines them) against the bounds the field spans
+(D' = its h_max / h_min <= D, A' = its largest anisotropy <= A: a field that does not reach D or A,
+as on a flat roof, is not asked to), size correlation, shortest beam, smallest angle and the remesh
+time. Supports: the file's flagged (red) vertices, the
+whole boundary where a file has none. Surfaces are read from ../shared/data/surfaces (or
+GRIDSHELL_SURFACES); the script skips them cleanly when the folder is absent.
+Targets (issue 4): >= 70 % hexagons, 100 % valence 3, size ratio and aspect within 25 % of D' and A'.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from engine.field import guiding_field  # noqa: E402
+from engine.shell import ShellMaterial, analyse_shell, shell_nodal_loads  # noqa: E402
+from engine.voronoi import remesh  # noqa: E402
+from workflow.config import load_project, project_from_surface  # noqa: E402
+from workflow.stages.field import field_settings  # noqa: E402
+from workflow.stages.remesh import remesh_settings  # noqa: E402
+from workflow.stages.shell import notional_thickness, shell_load_case  # noqa: E402
+from workflow.stages.surface import build_surface, resolve_loads, resolve_supports  # noqa: E402
+from workflow.surface_io import read_surface  # noqa: E402
+
+SURFACES = Path(os.environ.get("GRIDSHELL_SURFACES", ROOT.parent / "shared" / "data" / "surfaces"))
+
+
+def run_pipeline(project) -> tuple[dict, float, int]:
+    """(remesh quality, remesh seconds, surface vertices) of a project, as the stages compute them."""
+    mesh, _ = build_surface(project)
+    supports = resolve_supports(mesh, project.supports)
+    cases, combinations = resolve_loads(mesh, project)
+    case = shell_load_case(project, cases, combinations)
+    thickness = notional_thickness(project, mesh)
+    material = ShellMaterial(E=project.shell.E, nu=project.shell.nu, density=project.shell.density)
+    loads = shell_nodal_loads(mesh, case, thickness=thickness, density=project.shell.density)
+    shell = analyse_shell(mesh, supports, loads, thickness=thickness, material=material)
+    field = guiding_field(mesh, shell.vertex_membrane_forces, field_settings(project))
+    support_vertices = np.zeros(mesh.n_vertices, dtype=bool)
+    support_vertices[supports.nodes] = True
+    start = time.perf_counter()
+    result = remesh(mesh, field, remesh_settings(project), support_vertices=support_vertices)
+    return result.quality, time.perf_counter() - start, mesh.n_vertices
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cells", type=int, default=None, help="cell count (default: each project's own)")
+    parser.add_argument("--surfaces", type=Path, default=SURFACES)
+    args = parser.parse_args()
+    projects = [("mock-up", load_project(resources.files("templates") / "mockup.toml"))]
+    files = sorted(args.surfaces.glob("*.ply")) if args.surfaces.is_dir() else []
+    if not files:
+        print(f"(no surfaces folder at {args.surfaces}: the real surfaces are skipped)")
+    for path in files:
+        _, _, flagged = read_surface(path)
+        supports = "flagged" if flagged is not None and np.any(flagged) else "boundary"
+        projects.append((f"{path.stem} ({supports})", project_from_surface(str(path), supports)))
+    header = (f"{'surface':24s} {'verts':>6s} {'cells':>5s} {'hex %':>6s} {'val3 %':>6s} {'Dfield':>6s} "
+              f"{'size/D':>6s} {'Afield':>6s} {'asp/A':>6s} {'corr':>6s} {'short m':>8s} {'short/l':>7s} "
+              f"{'angle':>6s} {'time s':>6s}")
+    print(f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+    print(header)
+    failures = []
+    for name, project in projects:
+        if args.cells is not None:
+            project = project.model_copy(update={"remesh": project.remesh.model_copy(
+                update={"n_cells": args.cells, "mean_beam_length": None, "total_length": None})})
+        q, seconds, n_vertices = run_pipeline(project)
+        D, A = q["field_size_ratio"], q["field_max_aspect"]
+        size, aspect = q["achieved_size_ratio"] / D, q["achieved_max_aspect"] / A
+        correlation = q.get("size_correlation")
+        print(f"{name:24s} {n_vertices:6d} {q['n_faces']:5d} {100 * q['hexagon_share_interior']:6.1f} "
+              f"{100 * q['valence3_share_interior']:6.1f} {D:6.2f} {size:6.3f} {A:6.2f} {aspect:6.3f} "
+              f"{correlation if correlation is not None else float('nan'):6.3f} {q['shortest_beam_m']:8.4f} "
+              f"{q['shortest_beam_m'] / q['mean_beam_length_m']:7.3f} {q['smallest_angle_deg']:6.1f} {seconds:6.2f}")
+        missed = [label for label, ok in (("hexagons < 70 %", q["hexagon_share_interior"] >= 0.70),
+                                          ("valence 3 < 100 %", q["valence3_share_interior"] == 1.0),
+                                          ("size ratio off D' by > 25 %", abs(size - 1) <= 0.25),
+                                          ("aspect off A' by > 25 %", abs(aspect - 1) <= 0.25)) if not ok]
+        if missed:
+            failures.append(f"{name}: {', '.join(missed)}")
+    print("columns: Dfield, Afield = the field's size ratio and largest aspect (D', A', at most D = 2, A = 2); "
+          "size/D, asp/A = achieved size ratio / D', achieved largest aspect / A'; corr = correlation of achieved and "
+          "prescribed cell size; short/l = shortest beam / mean beam; angle = smallest polygon angle (deg)")
+    print("targets missed: " + ("; ".join(failures) if failures else "none"))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
