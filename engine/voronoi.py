@@ -67,9 +67,11 @@ COARSEST_CELLS = 250
 @dataclass(frozen=True, kw_only=True)
 class RemeshSettings:
     """Size target: exactly one of n_cells, mean_beam_length (m) or total_length (m, L_tot,
-    met within 1 %); lloyd_iterations: the largest number of clustering sweeps (the name is kept
-    from the former Lloyd scheme; a sweep is one pass over the cluster borders, and the clustering
-    stops earlier when a sweep moves no vertex); seed of the lattice's random offset."""
+    met within 1 %); lloyd_iterations: the most Lloyd steps (seeds moved to the over-relaxed
+    cluster centroids, clusters regrown and clustered again) at each level of the clustering; at
+    most COARSE_LLOYD_STEPS are taken at the coarsest level and LLOYD_STEPS at the finer ones, so
+    values above COARSE_LLOYD_STEPS change nothing and 0 keeps the clustering of the initial
+    lattice; seed of the lattice's random offset (small meshes also try the next seeds)."""
 
     n_cells: int | None = None
     mean_beam_length: float | None = None

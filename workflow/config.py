@@ -234,7 +234,9 @@ class FieldConfig(_Section):
 
 
 class RemeshConfig(_Section):
-    """Size target: one of n_cells, mean_beam_length, total_length (default 120 cells)."""
+    """Size target: one of n_cells, mean_beam_length, total_length (default 120 cells).
+    lloyd_iterations caps the Lloyd steps between clusterings at each level (the remesher takes at
+    most 20 at its coarsest level and 3 at finer ones; 0: the clustering of the initial lattice)."""
 
     n_cells: int | None = Field(None, ge=4)
     mean_beam_length: Length | None = None
