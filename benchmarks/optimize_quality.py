@@ -1,47 +1,139 @@
-"""Benchmark of engine.optimize (intended for benchmarks/optimize_quality.py): the mock-up remeshed
-into 60 Voronoi cells, then optimised with the default settings; prints planarity, closeness,
-regularity, time and peak memory. Also runs the spherical-cap honeycomb of tests/test_optimize.py."""
+"""Benchmark of the face optimisation against the planarity target, through the real pipeline.
 
-import resource
+For the mock-up (templates/mockup.toml) and every PLY in the real surfaces folder (with its
+flagged supports, the whole boundary where a file flags none), the stages surface -> shell ->
+field -> remesh run as ``gridshell run`` runs them (workflow.runner, into a scratch folder or
+``--cache DIR`` to reuse), then ``engine.optimize.optimize`` runs with the project's optimize
+settings (workflow.stages.optimize.optimize_settings) and, as the peer in the same process, the
+local/global iterations alone (planarity_iterations = 0, split_cells = false: the optimiser as
+it was before the end game). Printed per surface and method: planarity max and p95 (relative to
+the mean beam length, and in mm), closeness max (relative to the bounding-box diagonal),
+regularity before -> after, smallest corner angle, non-convex cells, boundary splits (corner +
+edge + repair) and the change of total beam length, the time, and whether the target is met:
+
+    largest planarity error <= 0.5 % of the mean beam length, largest node distance to the
+    surface < 0.5 % of the bounding-box diagonal.
+
+Usage: python benchmarks/optimize_quality.py [--cache DIR] [--only NAME ...] [--cells N]
+The surfaces folder is ../shared/data/surfaces next to the checkout, or $GRIDSHELL_SURFACES;
+it is skipped (with a line saying so) when absent.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
 import sys
+import tempfile
 import time
+from importlib import resources
+from pathlib import Path
 
 import numpy as np
 
-from pathlib import Path
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from engine.optimize import optimize  # noqa: E402
+from workflow.config import load_project, project_from_surface  # noqa: E402
+from workflow.progress import Progress  # noqa: E402
+from workflow.runner import run_project  # noqa: E402
+from workflow.stages import STAGES  # noqa: E402
+from workflow.stages.optimize import optimize_settings  # noqa: E402
+from workflow.surface_io import read_surface  # noqa: E402
 
-from engine.field import GuidingField
-from engine.optimize import OptimizeSettings, optimize
-from engine.parametric import mockup
-from engine.voronoi import RemeshSettings, remesh
+SURFACES = Path(os.environ.get("GRIDSHELL_SURFACES", ROOT.parent / "shared" / "data" / "surfaces"))
+PLANARITY_TARGET, CLOSENESS_TARGET = 0.005, 0.005
 
 
-def main(cells: int = 60, iterations: int = 50) -> None:
-    surface = mockup(divisions=16).mesh
-    n = surface.n_vertices
-    field = GuidingField(size=np.ones(n), anisotropy=np.ones(n), direction=np.tile([1.0, 0, 0], (n, 1)),
-                         normals=surface.vertex_normals)
-    support = np.zeros(n, dtype=bool)
-    support[surface.boundary_loops[0]] = True
-    grid = remesh(surface, field, RemeshSettings(n_cells=cells, lloyd_iterations=40), support_vertices=support).polymesh
-    print(f"mock-up, {grid.n_faces} cells, {grid.n_nodes} nodes, {iterations} iterations")
-    for label, settings in (("planar", OptimizeSettings(iterations=iterations)),
-                            ("regular only", OptimizeSettings(iterations=iterations, planar=False))):
+class _Context:
+    """Just enough of the runner's stage context to load a stage's cached result."""
+
+    def __init__(self, project, out_dir: Path, stage):
+        self.project, self.out_dir, self.folder = project, out_dir, out_dir / stage.folder
+
+    def result(self, name: str):
+        return _load(self.project, self.out_dir, name)
+
+    def step(self, *_args) -> None:
+        pass
+
+
+def _load(project, out_dir: Path, name: str):
+    stage = next(s for s in STAGES if s.name == name)
+    return stage.load(out_dir / stage.folder, _Context(project, out_dir, stage))
+
+
+def _jobs(only: list[str]) -> list[tuple[str, object]]:
+    jobs = [("mockup", load_project(resources.files("templates") / "mockup.toml"))]
+    if SURFACES.is_dir():
+        for path in sorted(SURFACES.glob("*.ply")):
+            _, _, flagged = read_surface(path)
+            supports = "flagged" if flagged is not None and np.any(flagged) else "boundary"
+            jobs.append((path.stem, project_from_surface(str(path), supports)))
+    else:
+        print(f"(no real surfaces: {SURFACES} is absent; the mock-up only)")
+    return [(name, project) for name, project in jobs if not only or name in only]
+
+
+def _row(name: str, label: str, quality: dict, seconds: float) -> str:
+    a, b = quality["after"], quality["before"]
+    met = a["planarity_max_rel"] <= PLANARITY_TARGET and a["closeness_max_rel"] < CLOSENESS_TARGET
+    added = a.get("total_length_m", np.nan) / b.get("total_length_m", np.nan) - 1
+    return (f"{name:13s} {label:10s} {b['n_faces'] if 'n_faces' in b else '':>4}->{a.get('n_faces', ''):<4} "
+            f"{100 * a['planarity_max_rel']:6.2f} {100 * a['planarity_p95_rel']:6.2f} "
+            f"{1000 * a['planarity_max_m']:7.1f} {1000 * a['planarity_p95_m']:7.1f} "
+            f"{100 * a['closeness_max_rel']:6.3f}  {b['regularity']:.3f}->{a['regularity']:.3f} "
+            f"{a['smallest_angle_deg']:6.1f} {a['nonconvex_faces']:5d} "
+            f"{quality['corner_splits']:2d}+{quality['edge_splits']:<2d}+{quality.get('repair_splits', 0):<2d} "
+            f"{100 * added:+6.1f} "
+            f"{seconds:6.2f}  {'met' if met else 'NOT met'}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--cache", type=Path, help="reuse/keep the pipeline outputs here (one folder per surface)")
+    parser.add_argument("--only", nargs="*", default=[], help="surface names (mockup, Botanic, ...)")
+    parser.add_argument("--cells", type=int, help="remesh every surface into this many cells (default: the project's)")
+    args = parser.parse_args(argv)
+    scratch = None if args.cache else tempfile.TemporaryDirectory(prefix="optimize_quality_")
+    base = args.cache or Path(scratch.name)
+    print(f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f}, {os.cpu_count()} cores; "
+          f"target: planarity <= {100 * PLANARITY_TARGET:g} % of the mean beam, closeness < "
+          f"{100 * CLOSENESS_TARGET:g} % of the diagonal")
+    print(f"{'surface':13s} {'method':10s} {'cells':>9s} {'p.max%':>6s} {'p.p95%':>6s} {'max mm':>7s} "
+          f"{'p95 mm':>7s} {'close%':>6s}  {'regularity':11s} {'angle':>6s} {'ncvx':>5s} {'splits c+e+r':12s} "
+          f"{'dL %':>6s} {'time s':>6s}  target")
+    met = total = 0
+    for name, project in _jobs(args.only):
+        if args.cells:
+            project = project.model_copy(update={"remesh": project.remesh.model_copy(update={"n_cells": args.cells})})
+        out = base / (name if not args.cells else f"{name}-{args.cells}")
         start = time.perf_counter()
-        result = optimize(grid, surface, field, settings)
-        elapsed = time.perf_counter() - start
-        q = result.quality
-        interior = ~grid.face_boundary
-        p = result.polymesh.face_planarity() / result.polymesh.beam_lengths.mean()
-        print(f"  {label:13s} {elapsed:6.2f} s  planarity max {q['before']['planarity_max_rel']:.4f} -> "
-              f"{q['after']['planarity_max_rel']:.4f} (interior cells {p[interior].max():.4f}), "
-              f"p95 {q['after']['planarity_p95_rel']:.4f}, closeness max {q['after']['closeness_max_rel']:.4f}, "
-              f"regularity {q['before']['regularity']:.3f} -> {q['after']['regularity']:.3f}, "
-              f"smallest angle {q['after']['smallest_angle_deg']:.1f} deg")
-    print(f"peak memory {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+        summary = run_project(project, out, STAGES, until="remesh", progress=Progress(enabled=False))
+        if summary.message:
+            print(f"{name:13s} pipeline stopped: {summary.message}")
+            continue
+        pipeline = time.perf_counter() - start
+        surface, field, grid = _load(project, out, "surface"), _load(project, out, "field"), _load(project, out, "remesh")
+        settings = optimize_settings(project)
+        peer = dataclasses.replace(settings, planarity_iterations=0, split_cells=False)
+        for label, chosen in (("end game", settings), ("LG only", peer)):
+            start = time.perf_counter()
+            result = optimize(grid, surface.mesh, field, chosen)
+            seconds = time.perf_counter() - start
+            print(_row(name, label, result.quality, seconds), flush=True)
+            if chosen is settings:
+                total += 1
+                a = result.quality["after"]
+                met += a["planarity_max_rel"] <= PLANARITY_TARGET and a["closeness_max_rel"] < CLOSENESS_TARGET
+        print(f"{'':13s} (pipeline to remesh {pipeline:.1f} s, {grid.n_nodes} nodes, "
+              f"{project.optimize.iterations} local/global iterations)")
+    print(f"target met on {met} of {total} surfaces with the end game")
+    if scratch is not None:
+        scratch.cleanup()
 
 
 if __name__ == "__main__":
-    main(*(int(a) for a in sys.argv[1:]))
+    main()

@@ -30,7 +30,7 @@ import numpy as np
 
 from .mesh import PolyMesh
 
-__all__ = ["BoundarySplits", "split_boundary_cells"]
+__all__ = ["BoundarySplits", "split_boundary_cells", "cut_boundary_triangles"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -217,23 +217,28 @@ def _edge_pass(x: np.ndarray, faces: list[np.ndarray], boundary: np.ndarray, cor
             else:
                 chain = [face]
             previous = face
+    return _cut_triangles(x, faces, boundary, to_cut)
+
+
+def _cut_triangles(x: np.ndarray, faces: list[np.ndarray], boundary: np.ndarray,
+                   to_cut: dict[int, set[tuple[int, int]]]) -> tuple[list[np.ndarray], list[tuple[int, int]]]:
+    """Cut off each listed cell the triangle of each listed boundary beam (u, v) and one spoke:
+    [u, v, next] (new beam u-next) or [previous, u, v] (new beam previous-v), the third node
+    an inner one, the shorter new beam of the two; the rest keeps one of u, v."""
     out, new = [], []
     for i, face in enumerate(faces):
         pieces = [face]
         for beam in sorted(to_cut.get(i, ())):
             rest = pieces.pop()
             k = len(rest)
-            if k <= 3:
-                pieces.append(rest)
-                continue
             position = {int(v): p for p, v in enumerate(rest)}
-            if beam[0] not in position or beam[1] not in position:
+            if k <= 3 or beam[0] not in position or beam[1] not in position:
                 pieces.append(rest)
                 continue
             u, v = position[beam[0]], position[beam[1]]
             if (v - u) % k != 1:
                 u, v = v, u
-            options = []  # triangle [u, v, next] (beam u-next) or [previous, u, v] (beam previous-v)
+            options = []
             if not boundary[rest[(v + 1) % k]]:
                 options.append((u, (v + 1) % k))
             if not boundary[rest[(u - 1) % k]]:
@@ -248,6 +253,26 @@ def _edge_pass(x: np.ndarray, faces: list[np.ndarray], boundary: np.ndarray, cor
             pieces += [triangle, remainder]
         out += pieces
     return out, new
+
+
+def cut_boundary_triangles(polymesh: PolyMesh, cells: np.ndarray) -> tuple[PolyMesh, np.ndarray]:
+    """Cut from each of ``cells`` (ids) that holds a boundary beam the triangle of its longest
+    one (rule of :func:`_cut_triangles`): the rest of the cell keeps one node of that beam.
+    Returns the grid-shell and the new beams (b,2); cells without a boundary beam stay."""
+    x = np.asarray(polymesh.nodes, dtype=float)
+    faces = [np.asarray(f, dtype=np.int64) for f in polymesh.faces]
+    beams = _boundary_beams(faces)
+    to_cut = {}
+    for i in np.asarray(cells, dtype=np.int64):
+        face = faces[int(i)]
+        held = [_key(int(a), int(b)) for a, b in zip(face, np.roll(face, -1)) if _key(int(a), int(b)) in beams]
+        if held and len(face) > 3:
+            to_cut[int(i)] = {max(held, key=lambda e: float(np.linalg.norm(x[e[0]] - x[e[1]])))}
+    faces, new = _cut_triangles(x, faces, polymesh.boundary, to_cut)
+    if not new:
+        return polymesh, np.zeros((0, 2), dtype=np.int64)
+    return (PolyMesh(nodes=x, faces=tuple(faces), boundary=polymesh.boundary, supports=polymesh.supports,
+                     corners=polymesh.corners), np.array(new, dtype=np.int64))
 
 
 def split_boundary_cells(polymesh: PolyMesh, *, hold: float, straightness: float) -> BoundarySplits:

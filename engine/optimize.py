@@ -48,7 +48,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.spatial import cKDTree
 
-from .boundary_splits import split_boundary_cells
+from .boundary_splits import cut_boundary_triangles, split_boundary_cells
 from .errors import InputError
 from .field import GuidingField
 from .mesh import PolyMesh, TriMesh
@@ -127,6 +127,9 @@ END_BAND = 0.004
 SPLIT_HOLD = 0.5
 #: Boundary nodes within this share of the planarity tolerance of a line count as on it.
 SPLIT_STRAIGHTNESS = 0.5
+#: Rounds in which boundary cells that the end game left beyond the tolerance lose the triangle
+#: at their boundary beam (one new beam each) before the end game resumes.
+REPAIR_ROUNDS = 2
 
 
 def _into_band(points: np.ndarray, closest: np.ndarray, distance: np.ndarray, band: float) -> np.ndarray:
@@ -516,27 +519,41 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
             progress(f"optimize: iteration {done}/{len(plan)}", done / len(plan))
     if previous_plain is not None and local(x, *plan[-1])[1] > previous_energy:
         x = previous_plain  # never end on an accelerated point that raised the energy
-    report = None
-    if planar_panels and settings.planarity_iterations > 0:
+    end = {"steps": 0, "rejected_steps": 0, "factorisations": 0, "planarity_weight": 0.0, "reached": False}
+    repair_splits = 0
+    ran_end_game = planar_panels and settings.planarity_iterations > 0
+    for attempt in range(REPAIR_ROUNDS + 1 if ran_end_game else 0):
         # the tolerance on the grid as split (new beams change the mean beam length)
-        end_settings = PlanariseSettings(tolerance=settings.planarity_tolerance * float(polymesh.beam_lengths.mean()),
-                                         band=END_BAND * surface.diagonal,
+        tolerance = settings.planarity_tolerance * float(polymesh.beam_lengths.mean())
+        end_settings = PlanariseSettings(tolerance=tolerance, band=END_BAND * surface.diagonal,
                                          limit=CLOSENESS_LIMIT * surface.diagonal,
                                          regularity_weight=SHAPE_SCALE * settings.regularity_weight,
                                          closeness_weight=settings.closeness_weight,
                                          iterations=settings.planarity_iterations)
-
-        def regular(x: np.ndarray) -> np.ndarray:
-            return _stack(groups, {k: regular_targets(x[faces]) for k, faces in groups.items()})
-
-        def said(steps: int) -> None:
-            if progress is not None:
-                progress(f"optimize: planarity step {steps}", None)
-
         x, report = planarise(x, groups, interior=interior, sliding=sliding, closest=surface.closest_normals,
-                              slide=boundary.closest, centering=C, regular=regular, beams=polymesh.edges,
-                              settings=end_settings, progress=said)
+                              slide=boundary.closest, centering=C,
+                              regular=lambda x, groups=groups: _stack(groups, {k: regular_targets(x[f])
+                                                                               for k, f in groups.items()}),
+                              beams=polymesh.edges, settings=end_settings, reference=given.nodes,
+                              progress=None if progress is None else (
+                                  lambda steps, base=end["steps"]: progress(f"optimize: planarity step {base + steps}",
+                                                                            None)))
         factorisations += report.factorisations
+        for key, value in (("steps", report.iterations), ("rejected_steps", report.rejected_steps),
+                           ("factorisations", report.factorisations)):
+            end[key] += value
+        end["planarity_weight"], end["reached"] = max(end["planarity_weight"], report.planarity_weight), report.reached
+        if report.reached or not settings.split_cells or attempt == REPAIR_ROUNDS:
+            break
+        # boundary cells the end game could not make planar lose their boundary triangle
+        current = polymesh.replace_nodes(x.copy())
+        failing = np.flatnonzero(current.face_boundary & (current.face_planarity() > tolerance))
+        current, cut = cut_boundary_triangles(current, failing)
+        if not len(cut):
+            break
+        polymesh, new_beams, repair_splits = current, np.r_[new_beams, cut], repair_splits + len(cut)
+        groups = _groups(polymesh.faces)
+        C = _centering(groups, n)
     if done:
         # the closeness band is a soft constraint: bring stray nodes back within the hard limit
         moving = interior | sliding
@@ -553,17 +570,14 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
             for key, value in polymesh_quality(grid, mesh=mesh, field=field).items():
                 mine.setdefault(key, value)
     split_length = float(np.linalg.norm(x[new_beams[:, 1]] - x[new_beams[:, 0]], axis=1).sum())
-    converged = report.reached if report is not None else bool(step <= 1e-4 * mean_length)
+    converged = end["reached"] if ran_end_game else bool(step <= 1e-4 * mean_length)
     quality = {"before": before, "after": after, "iterations": done,
                "converged": bool(converged), "final_step_rel": step / mean_length,
                "factorisations": factorisations, "planar": bool(settings.planar),
                "accelerated_steps": accepted, "rejected_steps": rejected,
                "planarity_tolerance_rel": settings.planarity_tolerance,
                "planarity_reached": bool(after["planarity_max_rel"] <= settings.planarity_tolerance),
-               "corner_splits": corner_splits, "edge_splits": edge_splits,
+               "corner_splits": corner_splits, "edge_splits": edge_splits, "repair_splits": repair_splits,
                "split_beams": new_beams.tolist(), "split_length_m": split_length,
-               "end_game": None if report is None else {
-                   "steps": report.iterations, "rejected_steps": report.rejected_steps,
-                   "factorisations": report.factorisations, "planarity_weight": report.planarity_weight,
-                   "reached": report.reached}}
+               "end_game": end if ran_end_game else None}
     return OptimizeResult(polymesh=result, quality=quality)

@@ -45,7 +45,8 @@ import scipy.sparse.linalg as spla
 
 __all__ = ["PlanariseSettings", "PlanariseReport", "planarise", "cell_planes", "corner_angles"]
 
-#: Guards enter the Gauss-Newton model (curvature only) once within this factor of their limit.
+#: Guards and the band enter the Gauss-Newton model (curvature only) once within this factor of
+#: their limit, so that the model sees a hinge before a step crosses it.
 GUARD_MARGIN = 1.3
 
 
@@ -202,7 +203,7 @@ def _basis(n: int, free: np.ndarray, slide_ids: np.ndarray, tangents: np.ndarray
 class _EndGame:
     """The energy of the module docstring, its Gauss-Newton model and the penalty weights."""
 
-    def __init__(self, x, groups, interior, sliding, closest, centering, regular, beams, settings):
+    def __init__(self, x, groups, interior, sliding, closest, centering, regular, beams, settings, reference):
         self.settings = settings
         self.n = len(x)
         self.groups = {k: f for k, f in groups.items() if k >= 4}
@@ -216,8 +217,8 @@ class _EndGame:
         self.corners = np.concatenate([np.stack([np.roll(f, 1, axis=1), f, np.roll(f, -1, axis=1)], axis=2)
                                        .reshape(-1, 3) for f in groups.values()])
         self.min_angle = np.minimum(np.radians(settings.min_angle_deg),
-                                    settings.angle_share * corner_angles(x, self.corners))
-        lengths = np.linalg.norm(x[beams[:, 1]] - x[beams[:, 0]], axis=1)
+                                    settings.angle_share * corner_angles(reference, self.corners))
+        lengths = np.linalg.norm(reference[beams[:, 1]] - reference[beams[:, 0]], axis=1)
         self.min_length = settings.min_length_share * lengths
         self.scale = float(lengths.mean()) if len(beams) else 1.0
         self.refresh()
@@ -262,8 +263,9 @@ class _EndGame:
         distance, direction = self.distances(x)
         ids = np.flatnonzero(self.moving)
         _add_rows(ids[:, None], direction[ids, None, :], distance[ids], self.w_c, parts, gradient)
-        out = ids[distance[ids] > s.band]
-        _add_rows(out[:, None], direction[out, None, :], distance[out] - s.band, self.node_weight[out], parts, gradient)
+        out = ids[distance[ids] > s.band / GUARD_MARGIN]
+        _add_rows(out[:, None], direction[out, None, :], np.maximum(distance[out] - s.band, 0.0),
+                  self.node_weight[out], parts, gradient)
         active, jacobian, residual = _angle_rows(x, self.corners, self.min_angle)
         _add_rows(self.corners[active], self.scale * jacobian, self.scale * residual,
                   s.guard_share * self.corner_weight[active], parts, gradient)
@@ -304,7 +306,7 @@ def planarise(x: np.ndarray, groups: dict[int, np.ndarray], *, interior: np.ndar
               closest: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
               slide: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
               centering: sp.csr_matrix, regular: Callable[[np.ndarray], np.ndarray],
-              beams: np.ndarray, settings: PlanariseSettings,
+              beams: np.ndarray, settings: PlanariseSettings, reference: np.ndarray | None = None,
               progress: Callable[[int], None] | None = None) -> tuple[np.ndarray, PlanariseReport]:
     """Planar cells near ``x`` (n,3) m by Gauss-Newton with the planes eliminated (module docstring).
 
@@ -313,7 +315,9 @@ def planarise(x: np.ndarray, groups: dict[int, np.ndarray], *, interior: np.ndar
     boundary (the others are fixed); closest(points) -> (closest surface points, unit surface
     normals there); slide(points) -> (closest boundary points, unit boundary tangents there);
     centering: the (rows, n) mean-free rows of the cells in ``groups`` order; regular(x) ->
-    (rows, 3) mean-free regular targets in the same order; beams: (e,2) node ids.
+    (rows, 3) mean-free regular targets in the same order; beams: (e,2) node ids; reference:
+    (n,3) the nodes whose corner angles and beam lengths set the guards' limits (default ``x``;
+    the optimiser passes the grid as it came, so that corners an earlier phase closed reopen).
     ``progress(step)`` is called after every step. Returns the new nodes and a report.
     """
     x = np.array(x, dtype=float)
@@ -323,7 +327,8 @@ def planarise(x: np.ndarray, groups: dict[int, np.ndarray], *, interior: np.ndar
     tangents = np.zeros((0, 3))
     if len(slide_ids):
         x[sliding], tangents = slide(x[sliding])
-    game = _EndGame(x, groups, interior, sliding, closest, centering, regular, beams, s)
+    game = _EndGame(x, groups, interior, sliding, closest, centering, regular, beams, s,
+                    x if reference is None else np.asarray(reference, dtype=float))
     goal = s.stop_share * s.tolerance
     steps = rejected = factorisations = 0
     damping, boost = 1e-4, 2.0
