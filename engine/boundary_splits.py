@@ -20,6 +20,8 @@ free nodes (boundary nodes stay on the boundary curve, supports and corners do n
 A cell is split only where the plane forced on it is farther than ``hold`` from one of its (or
 its chain's) inner nodes, so flat or gently curved boundaries keep their cells. Positions are
 not changed here. The new beams are returned so that the optimiser can report them.
+:func:`cut_boundary_triangles` applies the second rule's cut to given cells (the optimiser's
+repair of boundary cells its end game could not make planar).
 """
 
 from __future__ import annotations

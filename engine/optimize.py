@@ -31,7 +31,9 @@ For planar panels (``planar``) two more steps, both reported in the quality reco
 - after them, the end game (:mod:`engine.planarise`): Gauss-Newton on nodes and planes with the
   planarity as a growing per-cell penalty, closeness as a band, regularity as in the iterations,
   and guards on corner angles and beam lengths, until every cell is within
-  ``planarity_tolerance`` of the mean beam length of its plane.
+  ``planarity_tolerance`` of the mean beam length of its plane. Boundary cells it leaves beyond
+  the tolerance lose the triangle at their boundary beam (one new beam each) and the end game
+  resumes, at most REPAIR_ROUNDS times.
 
 The local/global iterations alone stall at a few per cent of the mean beam length: they are
 block-coordinate descent on the same energy, first order, and the final pull-back onto the

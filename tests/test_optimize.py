@@ -21,7 +21,7 @@ from shapely.geometry.polygon import orient
 
 import engine.optimize as optimize_module
 import engine.planarise as planarise_module
-from engine.boundary_splits import split_boundary_cells
+from engine.boundary_splits import cut_boundary_triangles, split_boundary_cells
 from engine.errors import InputError
 from engine.mesh import PolyMesh, TriMesh
 from engine.optimize import OptimizeSettings, optimize, planar_targets, regular_targets
@@ -248,6 +248,28 @@ def test_boundary_splits_on_the_mockup_cut_corners_and_straight_edge_chains(shel
                 assert np.abs(grid.nodes[face, 2]).max() <= 0.5 * band
     held = sum(1 for f in grid.faces if grid.corners[f].any() and np.abs(grid.nodes[f, 2]).max() > 0.5 * band)
     assert split.corner_splits == held
+
+
+def test_a_cut_boundary_triangle_leaves_the_rest_of_the_cell_one_node_of_the_edge(shell):
+    surface, grid = shell
+    cells = np.flatnonzero(grid.face_boundary & (grid.face_degrees > 4))[:6]
+    out, new = cut_boundary_triangles(grid, cells)
+    assert len(new) == len(cells) and out.n_faces == grid.n_faces + len(cells)
+    assert np.allclose(_vector_area(out), _vector_area(grid), atol=1e-12)
+    before = {tuple(sorted(f.tolist())) for f in grid.faces}
+    pieces = [f for f in out.faces if tuple(sorted(f.tolist())) not in before]
+    triangles = [f for f in pieces if len(f) == 3]
+    rests = [f for f in pieces if len(f) > 3]
+    assert len(triangles) == len(rests) == len(cells)
+    for cell in cells:
+        original = set(grid.faces[cell].tolist())
+        rest = next(f for f in rests if set(f.tolist()) <= original)
+        triangle = next(f for f in triangles if set(f.tolist()) <= original)
+        assert set(rest.tolist()) | set(triangle.tolist()) == original and len(set(rest) & set(triangle)) == 2
+        assert grid.boundary[triangle].sum() == 2, "a boundary beam and an inner node"
+        assert grid.boundary[rest].sum() == grid.boundary[list(original)].sum() - 1, "the rest keeps one of them"
+    untouched, none = cut_boundary_triangles(grid, np.flatnonzero(~grid.face_boundary)[:3])
+    assert untouched is grid and len(none) == 0, "cells without a boundary beam stay"
 
 
 def test_flat_boundaries_keep_their_cells():
