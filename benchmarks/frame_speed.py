@@ -6,8 +6,10 @@
 The grid-shell is a honeycomb (valence-3, Voronoi-like) grid of equal beams lifted onto a
 spherical cap (span 40 m, span/rise 7), pinned along its boundary, steel tubes 168.3 x 8 mm,
 under its self-weight plus 1 kN/m2 lumped on the nodes. Target (task brief): linear static plus
-10 modes under 10 s on 2 cores. PyNite is timed on the same linear model when it is importable
-(it is not a dependency of the project); otherwise the line says so.
+10 modes under 10 s on 2 cores. Peers, where installed (neither is a dependency of the project):
+OpenSees (openseespy) on the same element mesh, PyNite with one member per beam, optionally on a
+smaller model of the same kind
+(--pynite-nodes, default the same); each prints its linear-static time and largest deflection beside ours.
 """
 
 from __future__ import annotations
@@ -132,28 +134,108 @@ def _pyfe3d_seconds(frame: FrameModel) -> str:
     return f"pyfe3d BeamC loop, same stiffness: {time.perf_counter() - start:.2f} s"
 
 
-def _pynite_time(frame: FrameModel, supports: Supports, loads: np.ndarray) -> str:
+def _ours(frame: FrameModel, supports: Supports, loads: np.ndarray, modes: int = 0):
+    """(linear seconds, largest |u_z|, buckling seconds, first factors) of our solver, the
+    factor cache emptied first so that each run factors afresh."""
+    frame_module._last_stiffness.clear()
+    start = time.perf_counter()
+    linear = frame_module.linear_static(frame, supports, loads)
+    t_linear = time.perf_counter() - start
+    factors, t_buckling = None, None
+    if modes:
+        start = time.perf_counter()
+        factors = frame_module.linear_buckling(frame, supports, loads, n_modes=modes).factors
+        t_buckling = time.perf_counter() - start
+    return t_linear, float(np.abs(linear.displacements[:, 2]).max()), t_buckling, factors
+
+
+def _pynite(frame: FrameModel, supports: Supports, loads: np.ndarray):
+    """PyNite (MIT, ``pip install PyNiteFEA``; a benchmark peer only, never imported by the
+    product): the same beams as one member each (exact for nodal loads), linear static with its
+    sparse solver. Returns (seconds, largest |u_z|) or a sentence why not."""
     try:
         from Pynite import FEModel3D  # type: ignore
     except ImportError:
-        try:
-            from PyNite import FEModel3D  # type: ignore
-        except ImportError:
-            return "PyNite: not installed here (not a dependency; pip install PyNiteFEA to compare)"
+        return "not installed (pip install PyNiteFEA to compare)"
     start = time.perf_counter()
     fe = FEModel3D()
     fe.add_material("steel", float(frame.E[0]), float(frame.G[0]), 0.3, STEEL_DENSITY)
+    fe.add_section("tube", float(frame.A[0]), float(frame.Iy[0]), float(frame.Iz[0]), float(frame.J[0]))
     for k, p in enumerate(frame.nodes):
         fe.add_node(f"N{k}", *map(float, p))
     for k, (a, b) in enumerate(frame.beams):
-        fe.add_member(f"M{k}", f"N{a}", f"N{b}", "steel", float(frame.Iy[k]), float(frame.Iz[k]), float(frame.J[k]),
-                      float(frame.A[k]))
+        fe.add_member(f"M{k}", f"N{a}", f"N{b}", "steel", "tube")
     for node, flags in zip(supports.nodes, supports.restraints):
         fe.def_support(f"N{node}", *map(bool, flags))
     for k in np.flatnonzero(loads[:, 2]):
         fe.add_node_load(f"N{k}", "FZ", float(loads[k, 2]))
-    fe.analyze_linear(check_statics=False)
-    return f"PyNite linear static (1 element per beam): {time.perf_counter() - start:.2f} s"
+    fe.analyze_linear(log=False, check_stability=False, check_statics=False, sparse=True)
+    seconds = time.perf_counter() - start
+    largest = max(abs(node.DZ["Combo 1"]) for node in fe.nodes.values())
+    return seconds, largest
+
+
+def _opensees(frame: FrameModel, supports: Supports, loads: np.ndarray):
+    """OpenSees (openseespy; its licence forbids redistribution, so it is never a dependency:
+    imported here only when this machine has it): elasticBeamColumn elements on the same
+    element mesh as ours (the beams' internal nodes included), local x-z plane through our
+    ``up`` vector, UmfPack sparse solver. Returns (seconds, largest |u_z|) or a sentence why not."""
+    try:
+        import openseespy.opensees as ops  # type: ignore
+    except Exception:  # ImportError, or its shared libraries missing
+        return "not installed (openseespy, with libblas3 and liblapack3, to compare on this machine)"
+    el = frame_module._elements(frame)
+    start = time.perf_counter()
+    ops.wipe()
+    ops.model("basic", "-ndm", 3, "-ndf", 6)
+    for k, p in enumerate(el.nodes):
+        ops.node(k, *map(float, p))
+    for node, flags in zip(supports.nodes, supports.restraints):
+        ops.fix(int(node), *map(int, flags))
+    for k, ((a, b), up) in enumerate(zip(el.connectivity, el.up)):
+        ops.geomTransf("Linear", k + 1, *map(float, up))
+        ops.element("elasticBeamColumn", k + 1, int(a), int(b), float(el.A[k]), float(el.E[k]), float(el.G[k]),
+                    float(el.J[k]), float(el.Iy[k]), float(el.Iz[k]), k + 1)
+    ops.timeSeries("Linear", 1)
+    ops.pattern("Plain", 1, 1)
+    for k in np.flatnonzero(loads[:, 2]):
+        ops.load(int(k), 0.0, 0.0, float(loads[k, 2]), 0.0, 0.0, 0.0)
+    ops.constraints("Plain")
+    ops.numberer("RCM")
+    ops.system("UmfPack")
+    ops.algorithm("Linear")
+    ops.integrator("LoadControl", 1.0)
+    ops.analysis("Static")
+    if ops.analyze(1) != 0:
+        return "the analysis failed"
+    seconds = time.perf_counter() - start
+    largest = max(abs(ops.nodeDisp(k, 3)) for k in range(frame.nodes.shape[0]))
+    ops.wipe()
+    return seconds, largest
+
+
+def _peer_lines(frame: FrameModel, supports: Supports, loads: np.ndarray, nodes: int, elements_per_beam: int,
+                pynite_nodes: int) -> list[str]:
+    """Each peer's linear static beside ours on the same model (PyNite on a smaller model of the
+    same kind when the full one is too large for it)."""
+    lines = []
+    t_ours, u_ours, _, _ = _ours(frame, supports, loads)
+    result = _opensees(frame, supports, loads)
+    if isinstance(result, str):
+        lines.append(f"OpenSees           {result}")
+    else:
+        lines.append(f"OpenSees linear     {result[0]:7.2f} s   largest deflection {result[1] * 1e3:.4f} mm "
+                     f"(ours {t_ours:.2f} s, {u_ours * 1e3:.4f} mm; difference {abs(result[1] / u_ours - 1):.1e})")
+    small = (frame, supports, loads) if pynite_nodes >= nodes else model(pynite_nodes, elements_per_beam)
+    label = "same model" if pynite_nodes >= nodes else f"{len(small[0].nodes)}-node model of the same kind"
+    t_small, u_small, _, _ = _ours(*small)
+    result = _pynite(*small)
+    if isinstance(result, str):
+        lines.append(f"PyNite             {result}")
+    else:
+        lines.append(f"PyNite linear       {result[0]:7.2f} s   largest deflection {result[1] * 1e3:.4f} mm on the "
+                     f"{label} (ours {t_small:.2f} s, {u_small * 1e3:.4f} mm; difference {abs(result[1] / u_small - 1):.1e})")
+    return lines
 
 
 def main() -> int:
@@ -161,6 +243,9 @@ def main() -> int:
     parser.add_argument("--nodes", type=int, default=5000)
     parser.add_argument("--elements-per-beam", type=int, default=4)
     parser.add_argument("--steps", type=int, default=50)
+    parser.add_argument("--pynite-nodes", type=int, default=None,
+                        help="PyNite's model size, when the full model is too slow for it (default: the same model)")
+    parser.add_argument("--no-peers", action="store_true")
     args = parser.parse_args()
     frame, supports, loads = model(args.nodes, args.elements_per_beam)
     n_all = len(frame.nodes) + len(frame.beams) * (args.elements_per_beam - 1)
@@ -188,7 +273,10 @@ def main() -> int:
         print(f"non-linear path    {t_nonlinear:7.2f} s   {len(run.path) - 1} steps, largest load factor "
               f"{run.path[:, 0].max():.3f}, limit {limit}, converged {run.converged}")
     print(f"peak memory        {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:7.0f} MiB")
-    print(_pynite_time(frame, supports, loads))
+    if not args.no_peers:
+        pynite_nodes = args.nodes if args.pynite_nodes is None else args.pynite_nodes
+        for line in _peer_lines(frame, supports, loads, args.nodes, args.elements_per_beam, pynite_nodes):
+            print(line)
     return 0
 
 
