@@ -412,9 +412,10 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
     "final_step_rel", "factorisations" (one for the local/global iterations plus one per trial
     step of the end game), "planar", "accelerated_steps", "rejected_steps" (Anderson),
     "planarity_tolerance_rel", "planarity_reached" (largest planarity error within the tolerance),
-    "corner_splits", "edge_splits", "split_beams" (node pairs of the new beams, ids of the
-    result), "split_length_m" (their total length), and "end_game" (steps, rejected_steps,
-    factorisations, planarity_weight, reached; see :mod:`engine.planarise`).
+    "corner_splits", "edge_splits", "repair_splits" (new beams by each rule), "split_beams" (node
+    pairs of the new beams, ids of the result), "split_length_m" (their total length), and
+    "end_game" (steps, rejected_steps, factorisations, the largest relative planarity weight,
+    reached; see :mod:`engine.planarise`), None without it.
     """
     _check(polymesh, mesh)
     surface = _Surface(mesh)
@@ -532,14 +533,17 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
                                          regularity_weight=SHAPE_SCALE * settings.regularity_weight,
                                          closeness_weight=settings.closeness_weight,
                                          iterations=settings.planarity_iterations)
+
+        def regular(x: np.ndarray, groups: dict = groups) -> np.ndarray:
+            return _stack(groups, {k: regular_targets(x[faces]) for k, faces in groups.items()})
+
+        def said(steps: int, base: int = end["steps"]) -> None:
+            if progress is not None:
+                progress(f"optimize: planarity step {base + steps}", None)
+
         x, report = planarise(x, groups, interior=interior, sliding=sliding, closest=surface.closest_normals,
-                              slide=boundary.closest, centering=C,
-                              regular=lambda x, groups=groups: _stack(groups, {k: regular_targets(x[f])
-                                                                               for k, f in groups.items()}),
-                              beams=polymesh.edges, settings=end_settings, reference=given.nodes,
-                              progress=None if progress is None else (
-                                  lambda steps, base=end["steps"]: progress(f"optimize: planarity step {base + steps}",
-                                                                            None)))
+                              slide=boundary.closest, centering=C, regular=regular, beams=polymesh.edges,
+                              settings=end_settings, reference=given.nodes, progress=said)
         factorisations += report.factorisations
         for key, value in (("steps", report.iterations), ("rejected_steps", report.rejected_steps),
                            ("factorisations", report.factorisations)):
