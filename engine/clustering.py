@@ -307,3 +307,4 @@ def simple_cycles(pointer, half_u, half_v):
         out += length
     return flat[:out], lengths, status
 
+

@@ -190,7 +190,8 @@ class _Fine:
     loops: list
     corners: np.ndarray      # vertex ids (of the surface, kept in the fine mesh)
     n_surface_vertices: int
-    graph: sp.csr_matrix | None = None  # metric edge lengths, built on first use
+    adjacency: object = None                 # engine.clustering.MeshAdjacency, built on first use
+    graph: sp.csr_matrix | None = None       # metric edge lengths, same order as the adjacency
 
 
 def _refine(mesh: TriMesh, field: GuidingField, n_cells: int) -> _Fine:
@@ -276,21 +277,32 @@ def _initial_seeds(fine: _Fine, n_cells: int, rng: np.random.Generator) -> np.nd
     return chosen
 
 
-def _grow_clusters(fine: _Fine, seeds: np.ndarray) -> np.ndarray:
-    """Labels of the seed nearest along metric edge lengths (each cluster connected)."""
-    n = len(fine.vertices)
-    if fine.graph is None:
-        E = fine.edges
-        d = fine.vertices[E[:, 1]] - fine.vertices[E[:, 0]]
-        m = 0.5 * (fine.metric[E[:, 0]] + fine.metric[E[:, 1]])
+def _adjacency(fine: _Fine):
+    """The fine mesh's vertex adjacency and its graph of metric edge lengths (built on first use)."""
+    from .clustering import mesh_adjacency
+
+    if fine.adjacency is None:
+        n = len(fine.vertices)
+        adjacency = mesh_adjacency(n, fine.faces, fine.edges)
+        origin = np.repeat(np.arange(n), np.diff(adjacency.vertex_ptr))
+        other = adjacency.vertex_neighbours
+        d = fine.vertices[other] - fine.vertices[origin]
+        m = 0.5 * (fine.metric[origin] + fine.metric[other])
         lengths = np.sqrt(np.maximum(np.einsum("ei,eij,ej->e", d, m, d), 1e-300))
-        fine.graph = sp.csr_matrix((np.r_[lengths, lengths], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
-                                   shape=(n, n))
+        fine.adjacency = adjacency
+        fine.graph = sp.csr_matrix((lengths, other, adjacency.vertex_ptr), shape=(n, n))
+    return fine.adjacency
+
+
+def _grow_clusters(fine: _Fine, seeds: np.ndarray) -> np.ndarray:
+    """Labels of the seed nearest along metric edge lengths (multi-source Dijkstra: each vertex
+    takes its predecessor's label, so every cluster is connected)."""
+    _adjacency(fine)
     _, _, sources = dijkstra(fine.graph, directed=True, indices=seeds, min_only=True, return_predecessors=True)
     if np.any(sources < 0):
         raise MeshError("remesh: the surface has parts that no seed reaches (it is not connected)",
                         hint="remesh each connected part of the surface on its own, or ask for more cells")
-    index = np.full(n, -1, dtype=np.int64)
+    index = np.full(len(fine.vertices), -1, dtype=np.int64)
     index[seeds] = np.arange(len(seeds))
     return index[sources]
 
@@ -365,10 +377,10 @@ def _snap(tree: cKDTree, target: np.ndarray, previous: np.ndarray) -> np.ndarray
 def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings) -> _Clusters:
     """Coarse to fine: at each level, seeds grown into clusters, the clustering, then Lloyd steps
     (seeds moved to the over-relaxed centroids, clusters regrown and clustered again)."""
-    from .clustering import cluster_vertices, mesh_adjacency
+    from .clustering import cluster_vertices
 
     rng = np.random.default_rng(settings.seed)
-    adjacency = mesh_adjacency(len(fine.vertices), fine.faces, fine.edges)
+    adjacency = _adjacency(fine)
     weights = fine.areas * fine.inverse_h2 ** (DENSITY_POWER / 2)
     tree = cKDTree(fine.vertices)
     counts = _level_counts(n_cells)

@@ -210,3 +210,39 @@ def test_clustering_lowers_the_energy_keeps_clusters_connected_and_its_running_m
         graph = csr_matrix((np.ones(inside.sum()), (edges[inside, 0], edges[inside, 1])), shape=(n, n))
         _, component = connected_components(graph, directed=False)
         assert len(np.unique(component[members])) == 1, f"cluster {k} is connected"
+
+
+def test_vectorised_quality_figures_match_a_per_face_loop():
+    from engine.mesh import best_fit_plane
+    from engine.voronoi import polymesh_quality
+
+    mesh = _square(24, side=4.0)
+    x = mesh.vertices[:, 0]
+    field = _field(mesh, size=1.0 + (x - x.min()) / np.ptp(x), aspect=np.full(mesh.n_vertices, 2.0))
+    polymesh = remesh(mesh, field, RemeshSettings(n_cells=120)).polymesh
+    # lift the nodes off the plane so that planarity is not zero
+    nodes = polymesh.nodes.copy()
+    nodes[:, 2] = 0.05 * np.sin(3 * nodes[:, 0]) * np.cos(2 * nodes[:, 1])
+    polymesh = polymesh.replace_nodes(nodes)
+    q = polymesh_quality(polymesh)
+    aspects, planarity, angles, regularity = [], [], [], []
+    for face in polymesh.faces:
+        p = polymesh.nodes[face]
+        centred = p - p.mean(axis=0)
+        _, s, vt = np.linalg.svd(centred, full_matrices=False)
+        aspects.append(s[0] / s[1])
+        c, n = best_fit_plane(p)
+        planarity.append(np.abs((p - c) @ n).max() if len(face) > 3 else 0.0)
+        for i in range(len(face)):
+            a, b = p[i - 1] - p[i], p[(i + 1) % len(face)] - p[i]
+            angles.append(np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1, 1))))
+        local = centred @ vt[:2].T
+        spread = np.sqrt(np.linalg.svd(local, compute_uv=False))
+        unstretched = local / spread * spread.mean()
+        edges = np.linalg.norm(unstretched - np.roll(unstretched, -1, axis=0), axis=1)
+        regularity.append(edges.std() / edges.mean())
+    interior = ~polymesh.face_boundary
+    assert q["achieved_max_aspect"] == pytest.approx(np.percentile(np.array(aspects)[interior], 95), rel=1e-9)
+    assert q["planarity_max_m"] == pytest.approx(max(planarity), rel=1e-9)
+    assert q["smallest_angle_deg"] == pytest.approx(min(angles), rel=1e-9)
+    assert q["regularity"] == pytest.approx(np.mean(regularity), rel=1e-9)
