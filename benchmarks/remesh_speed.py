@@ -142,12 +142,21 @@ def main() -> int:
         clustering_object.cluster(args.cells)
         cluster_time = time.perf_counter() - start
         start = time.perf_counter()
-        clustering_object.create_mesh()
+        remeshed = clustering_object.create_mesh()
         peer_runs.append((setup, cluster_time, time.perf_counter() - start))
     setup, peer_cluster, peer_mesh = (float(np.median([r[k] for r in peer_runs])) for k in range(3))
     print(f"pyacvd: cluster() {peer_cluster:.4f} s, create_mesh() {peer_mesh:.3f} s, cluster() + create_mesh() "
           f"{peer_cluster + peer_mesh:.3f} s (median of {args.repeat}; Clustering() set-up {setup:.4f} s not counted; "
           f"isotropic, uniform, same surface and cell count)")
+    # pyacvd's mesh is the triangulation dual to its clusters: a vertex of degree 6 is a hexagonal cell
+    from engine.mesh import TriMesh
+
+    triangles = np.asarray(remeshed.faces).reshape(-1, 4)[:, 1:]
+    dual = TriMesh(vertices=np.asarray(remeshed.points), faces=triangles)
+    degree = np.bincount(dual.edges.ravel(), minlength=dual.n_vertices)
+    inner = ~dual.boundary_vertices
+    print(f"        pyacvd's clusters: {100 * np.mean(degree[inner] == 6):.1f} % of interior cells have six "
+          f"neighbours (ours {100 * q['hexagon_share_interior']:.1f} % hexagons)")
     clustering_ratio = clustering / peer_cluster
     whole_ratio = ours / (peer_cluster + peer_mesh)
     print(f"ratio ours clustering / pyacvd cluster():               {clustering_ratio:7.1f}  "
