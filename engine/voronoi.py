@@ -631,11 +631,12 @@ def _orient(nodes: np.ndarray, flat: np.ndarray, offsets: np.ndarray, fine: _Fin
 
 def _collapse_short_beams(nodes: np.ndarray, flat: np.ndarray, offsets: np.ndarray, boundary: np.ndarray,
                           corners: np.ndarray, local_size: np.ndarray):
-    """Merge the ends of beams shorter than SHORT_BEAM_FRACTION of the local size; drop cells that
-    are no longer simple polygons of three or more nodes and nodes no cell uses."""
+    """Merge the ends of beams shorter than SHORT_BEAM_FRACTION of the local size (the larger of the
+    two ends' sizes); drop cells that are no longer simple polygons of three or more nodes and
+    nodes no cell uses."""
     a, b = flat, flat[_following(offsets)]
     length = np.linalg.norm(nodes[a] - nodes[b], axis=1)
-    short = np.flatnonzero(length < SHORT_BEAM_FRACTION * np.minimum(local_size[a], local_size[b]))
+    short = np.flatnonzero(length < SHORT_BEAM_FRACTION * np.maximum(local_size[a], local_size[b]))
     parent = np.arange(len(nodes))
 
     def find(i: int) -> int:
@@ -648,7 +649,7 @@ def _collapse_short_beams(nodes: np.ndarray, flat: np.ndarray, offsets: np.ndarr
         ra, rb = find(int(a[k])), find(int(b[k]))
         if ra == rb:
             continue
-        limit = SHORT_BEAM_FRACTION * min(local_size[a[k]], local_size[b[k]])
+        limit = SHORT_BEAM_FRACTION * max(local_size[a[k]], local_size[b[k]])
         if np.linalg.norm(nodes[ra] - nodes[rb]) >= limit or (corners[ra] and corners[rb]):
             continue
         keep, drop = (ra, rb) if (corners[ra] or (boundary[ra] and not corners[rb])) else (rb, ra)
@@ -718,8 +719,9 @@ def _polygons(mesh: TriMesh, fine: _Fine, clusters: _Clusters, support_vertices:
     nodes, flat, offsets, cell_labels, boundary, corners = _extract(fine, clusters.labels, clusters.centroids)
     flat = _orient(nodes, flat, offsets, fine, clusters.labels, cell_labels)
     region_area = np.bincount(clusters.labels, weights=fine.areas, minlength=len(clusters.centroids))
-    local_size = np.full(len(nodes), np.inf)
-    np.minimum.at(local_size, flat, np.sqrt(region_area)[np.repeat(cell_labels, np.diff(offsets))])
+    # a node's size: its largest cell's (cut cells at corners are small, their neighbours are not)
+    local_size = np.zeros(len(nodes))
+    np.maximum.at(local_size, flat, np.sqrt(region_area)[np.repeat(cell_labels, np.diff(offsets))])
     nodes, flat, offsets, boundary, corners, _ = _collapse_short_beams(nodes, flat, offsets, boundary, corners,
                                                                        local_size)
     boundary_ids = np.unique(np.concatenate(fine.loops)) if fine.loops else np.zeros(0, dtype=np.int64)
