@@ -75,6 +75,7 @@ class CondensedFactor:
             self._lu = sparse_lu(K[free][:, free])
             self._beams = None
             self._block_pivots = np.zeros(0)
+            self._K_ii = None
             return
         m = len(connectivity) // k                      # beams
         g = 6 * (k - 1)
@@ -87,13 +88,13 @@ class CondensedFactor:
         for t in range(1, k - 1):
             K_ii[:, 6 * (t - 1):6 * (t + 1), 6 * (t - 1):6 * (t + 1)] += elements[:, t]
         K_ii[:, g - 6:, g - 6:] += last[:, :6, :6]
-        block_pivots = _block_pivots(K_ii)
-        if not np.all(np.isfinite(block_pivots)) or np.any(block_pivots == 0):
-            raise RuntimeError("Factor is exactly singular (the internal nodes of a beam)")
         try:
             inverse = np.linalg.inv(K_ii)
         except np.linalg.LinAlgError as exc:
             raise RuntimeError("Factor is exactly singular (the internal nodes of a beam)") from exc
+        if not np.all(np.isfinite(inverse)):
+            raise RuntimeError("Factor is exactly singular (the internal nodes of a beam)")
+        self._K_ii = K_ii
         self._inverse = inverse
         # W = K_ii^-1 K_ie and V = K_ei K_ii^-1 (K_ie: the first element's block on node 1 x
         # node 0 and the last's on node k-1 x node k)
@@ -118,12 +119,14 @@ class CondensedFactor:
         self._scatter = sp.csr_matrix((np.ones(12 * m), (self._end_dofs.ravel(), np.arange(12 * m))),
                                       shape=(6 * n_original, 12 * m))
         self._beams = (m, g)
-        self._block_pivots = block_pivots.ravel()
+        self._block_pivots = None
 
     @property
     def pivots(self) -> np.ndarray:
-        """The pivots of the elimination: the internal blocks', then the diagonal of S's U (made
-        when asked for: SuperLU builds all of U for it)."""
+        """The pivots of the elimination: the internal blocks' (without row exchanges), then the
+        diagonal of S's U (made when asked for: SuperLU builds all of U for it)."""
+        if self._block_pivots is None:
+            self._block_pivots = _block_pivots(self._K_ii).ravel()
         return np.concatenate([self._block_pivots, self._lu.U.diagonal()])
 
     @property

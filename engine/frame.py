@@ -598,7 +598,11 @@ def _rotation_vectors(R: np.ndarray) -> np.ndarray:
 
 
 class _Corotational:
-    """State and kernels of the co-rotational analysis."""
+    """State and kernels of the co-rotational analysis.
+
+    The element kernels work component-major: a vector per element is (3, m), a 3 x 3 matrix per
+    element (3, 3, m), so that every product is a few contiguous operations on length-m rows
+    (batched 3 x 3 matmuls on (m, 3, 3) stacks are several times slower)."""
 
     def __init__(self, model: FrameModel, supports: Supports):
         self.el = _elements(model)
@@ -609,59 +613,90 @@ class _Corotational:
         self.restrained = _restrained(supports, self.el.n_original, self.n_all)
         _check_rigid_modes(self.el.nodes, self.restrained)
         self.free = np.flatnonzero(~self.restrained)
-        self.R0_T = np.transpose(self.R0, (0, 2, 1))
+        self.R0_rows = np.ascontiguousarray(np.transpose(self.R0, (1, 2, 0)))        # R0[i, j] as (3, 3, m)
         self.K_local = _condense(_local_stiffness(self.L0, self.el), self.el.released)
+        self.K_rows = np.ascontiguousarray(np.transpose(self.K_local, (1, 2, 0)))    # (12, 12, m)
+        self.scatter = self.dofs.T.ravel()                                           # f (12, m) onto the DOFs
         self.step = 1e-8
         self.spins = [_rotation_matrices(self.step * np.eye(3)[k:k + 1])[0] for k in range(3)]
 
-    def _end_forces(self, xa: np.ndarray, xb: np.ndarray, Ta: np.ndarray, Tb: np.ndarray):
-        """Element end forces (m,12) in global axes from end positions (m,3) and nodal triads
-        (m,3,3); also the element frames (m,3,3) and local forces (m,12)."""
+    def _end_forces(self, xa: np.ndarray, xb: np.ndarray, Ra: np.ndarray, Rb: np.ndarray):
+        """Element end forces (12, m) in global axes from the end positions (3, m) and the nodal
+        triads times the initial element frame transposed, T R0^T (3, 3, m) (``internal_forces``)."""
         chord = xb - xa
-        length = np.linalg.norm(chord, axis=1)
-        e1 = chord / length[:, None]
+        length = np.sqrt(chord[0] ** 2 + chord[1] ** 2 + chord[2] ** 2)
+        e1 = chord / length
         # nodal triads carry the initial element frame; their mean z orients the current frame
-        Ra = Ta @ self.R0_T
-        Rb = Tb @ self.R0_T
-        R = _local_axes(e1, 0.5 * (Ra[:, :, 2] + Rb[:, :, 2]))
-        # local end rotations: nodal triad relative to the element frame
-        d = np.zeros((len(length), 12))
-        d[:, 6] = length - self.L0
-        d[:, 3:6] = _rotation_vectors(R @ Ra)
-        d[:, 9:12] = _rotation_vectors(R @ Rb)
-        f_local = np.matmul(self.K_local, d[:, :, None])[:, :, 0]
-        f_global = np.matmul(f_local.reshape(-1, 4, 3), R).reshape(-1, 12)
-        return f_global, R, f_local
+        up = 0.5 * (Ra[:, 2] + Rb[:, 2])
+        z = up - (up[0] * e1[0] + up[1] * e1[1] + up[2] * e1[2]) * e1
+        norm = np.sqrt(z[0] ** 2 + z[1] ** 2 + z[2] ** 2)
+        bad = norm < 1e-6
+        if np.any(bad):                                     # up along the chord: as _local_axes
+            z[:, bad] = _local_axes(e1[:, bad].T, up[:, bad].T)[:, 2].T
+            norm[bad] = 1.0
+        z /= norm
+        y = np.stack([z[1] * e1[2] - z[2] * e1[1], z[2] * e1[0] - z[0] * e1[2], z[0] * e1[1] - z[1] * e1[0]])
+        R = (e1, y, z)                                      # rows of the element frame
+        d = np.zeros((12, len(length)))
+        d[6] = length - self.L0
+        # local end rotations: nodal triad relative to the element frame, by the log map
+        for offset, Rn in ((3, Ra), (9, Rb)):
+            M = [[R[i][0] * Rn[0, k] + R[i][1] * Rn[1, k] + R[i][2] * Rn[2, k] for k in range(3)] for i in range(3)]
+            cosine = np.clip((M[0][0] + M[1][1] + M[2][2] - 1) / 2, -1.0, 1.0)
+            angle = np.arccos(cosine)
+            sine = np.sin(angle)
+            factor = np.where(sine > 1e-9, angle / (2 * np.where(sine > 1e-9, sine, 1.0)), 0.5)
+            d[offset] = (M[2][1] - M[1][2]) * factor
+            d[offset + 1] = (M[0][2] - M[2][0]) * factor
+            d[offset + 2] = (M[1][0] - M[0][1]) * factor
+        f_local = np.einsum("ijm,jm->im", self.K_rows, d)
+        f_global = np.empty_like(f_local)
+        for block in range(0, 12, 3):
+            f = f_local[block:block + 3]
+            for j in range(3):
+                f_global[block + j] = f[0] * R[0][j] + f[1] * R[1][j] + f[2] * R[2][j]
+        return f_global
 
     def internal_forces(self, x: np.ndarray, triads: np.ndarray) -> tuple[np.ndarray, object]:
+        """Internal forces (6 n_all,) of positions x (n,3) and nodal triads (n,3,3); also the
+        element state the tangent starts from."""
         a, b = self.el.connectivity[:, 0], self.el.connectivity[:, 1]
-        state = (x[a], x[b], triads[a], triads[b])
-        f_global, R, f_local = self._end_forces(*state)
-        out = np.zeros(6 * self.n_all)
-        np.add.at(out, self.dofs.ravel(), f_global.ravel())
+        R0 = self.R0_rows
+
+        def times_R0_T(T):                                  # T R0^T, component-major
+            T = np.transpose(T, (1, 2, 0))
+            return np.stack([np.stack([T[i, 0] * R0[k, 0] + T[i, 1] * R0[k, 1] + T[i, 2] * R0[k, 2]
+                                       for k in range(3)]) for i in range(3)])
+
+        state = (np.ascontiguousarray(x[a].T), np.ascontiguousarray(x[b].T), times_R0_T(triads[a]),
+                 times_R0_T(triads[b]))
+        f_global = self._end_forces(*state)
+        out = np.bincount(self.scatter, weights=f_global.ravel(), minlength=6 * self.n_all)
         return out, state
 
     def tangent(self, state) -> np.ndarray:
-        """Element tangent stiffnesses (m,12,12) in global axes: the derivative of the element end forces with respect to
-        the end translations and spins (applied as in ``_update``), by forward differences over
-        all elements at once (12 evaluations of the element kernel, relative accuracy ~1e-8)."""
-        xa, xb, Ta, Tb = state
-        base = self._end_forces(xa, xb, Ta, Tb)[0]
-        K = np.empty((len(xa), 12, 12))
+        """Element tangent stiffnesses (m,12,12) in global axes: the derivative of the element
+        end forces with respect to the end translations and spins (applied as in ``_update``), by
+        forward differences over all elements at once (12 evaluations of the element kernel,
+        relative accuracy ~1e-8)."""
+        xa, xb, Ra, Rb = state
+        base = self._end_forces(xa, xb, Ra, Rb)
+        K = np.empty((12, 12, xa.shape[1]))
         h_translation = self.step * self.L0
         for column in range(12):
             end, component = divmod(column, 6)
-            x_pair, t_pair = [xa, xb], [Ta, Tb]
+            x_pair, r_pair = [xa, xb], [Ra, Rb]
             if component < 3:
                 shifted = x_pair[end].copy()
-                shifted[:, component] += h_translation
+                shifted[component] += h_translation
                 x_pair[end] = shifted
-                h = h_translation[:, None]
+                h = h_translation
             else:
-                t_pair[end] = self.spins[component - 3] @ t_pair[end]
+                S, Rn = self.spins[component - 3], r_pair[end]
+                r_pair[end] = np.stack([S[i, 0] * Rn[0] + S[i, 1] * Rn[1] + S[i, 2] * Rn[2] for i in range(3)])
                 h = self.step
-            K[:, :, column] = (self._end_forces(x_pair[0], x_pair[1], t_pair[0], t_pair[1])[0] - base) / h
-        return K
+            K[:, column] = (self._end_forces(x_pair[0], x_pair[1], r_pair[0], r_pair[1]) - base) / h
+        return np.ascontiguousarray(np.transpose(K, (2, 0, 1)))
 
 
 def _update(x: np.ndarray, triads: np.ndarray, du: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

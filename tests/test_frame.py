@@ -376,3 +376,110 @@ def test_displacements_match_pyfe3d():
     theirs = np.zeros(6 * n)
     theirs[free] = spsolve(K[free][:, free], loads.ravel()[free])
     assert np.allclose(ours, theirs.reshape(n, 6), rtol=0, atol=1e-6 * np.abs(ours).max())
+
+
+def test_condensed_factor_solves_as_a_plain_lu_and_keeps_the_inertia():
+    """The beams' internal nodes condensed out of the factor (engine.condensed): the same solution
+    as SuperLU on the assembled matrix, and the same number of negative pivots on an indefinite
+    K + sigma K_G (Sylvester's inertia, which the buckling shift and the path's pivot count use)."""
+    from dataclasses import replace
+
+    import scipy.sparse.linalg as spla
+
+    from engine import frame
+    from engine.condensed import CondensedFactor
+    from engine.linalg import congruent
+
+    model, supports, loads = _space_frame()
+    for k in (1, 2, 4):
+        fine = replace(model, elements_per_beam=k)
+        state = frame._solve_linear(fine, supports, loads)
+        el, free = state.el, state.free
+        K_G = congruent(state.T, frame._geometric_stiffness(state.L, state.local_forces[:, 6], el))
+        first = linear_buckling(fine, supports, loads, n_modes=3).factors
+        rhs = np.random.default_rng(k).normal(size=(len(free), 2))
+        for sigma in (0.0, 0.5 * (first[1] + first[2])):       # positive definite; two factors below sigma
+            elements = state.K_elements + sigma * K_G
+            factor = CondensedFactor(elements, el.connectivity, len(el.nodes), el.n_original, free, k)
+            K = frame._assemble(elements, frame._dofs(el.connectivity), 6 * len(el.nodes))[free][:, free].tocsc()
+            expected = spla.spsolve(K, rhs)
+            assert np.abs(factor.solve(rhs) - expected).max() < 1e-9 * np.abs(expected).max()
+            assert np.abs(factor.solve(rhs[:, 0]) - expected[:, 0]).max() < 1e-9 * np.abs(expected).max()
+            assert factor.negative_pivots == (0 if sigma == 0 else 2)
+
+
+def test_buckling_factors_match_a_dense_eigensolver():
+    """All requested factors of the shifted sparse Lanczos against scipy's dense symmetric solver
+    on the same K and K_G (mixed tension and compression, 3 elements per beam)."""
+    from dataclasses import replace
+
+    import scipy.linalg as sla
+
+    from engine import frame
+    from engine.linalg import congruent
+
+    model, supports, loads = _space_frame()
+    model = replace(model, elements_per_beam=3)
+    ours = linear_buckling(model, supports, loads, n_modes=6).factors
+    state = frame._solve_linear(model, supports, loads)
+    el, free = state.el, state.free
+    K_G = frame._assemble(congruent(state.T, frame._geometric_stiffness(state.L, state.local_forces[:, 6], el)),
+                          frame._dofs(el.connectivity), len(state.u))
+    mu = sla.eigh(-K_G[free][:, free].toarray(), state.K[free][:, free].toarray(), eigvals_only=True)
+    dense = np.sort(1.0 / mu[mu > 1e-12 * np.abs(mu).max()])[:6]
+    assert len(ours) == 6
+    assert ours == pytest.approx(dense, rel=1e-8)
+
+
+def test_two_bar_toggle_snaps_through_at_its_closed_form_limit():
+    """The pin-jointed two-bar toggle (von Mises truss), bars pinned at both ends, apex load: with
+    the bar force N = EA (l - L0) / L0 of the co-rotational element, equilibrium of the apex is
+    P(w) = -2 N(w) (h - w) / l(w), l = sqrt(b^2 + (h - w)^2); its maximum is the limit load."""
+    from scipy.optimize import minimize_scalar
+
+    b, h, EA = 1.0, 0.1, 1e4
+    nodes = np.array([[-b, 0.0, 0.0], [0.0, 0.0, h], [b, 0.0, 0.0]])
+    releases = np.zeros((2, 2, 6), bool)
+    releases[:, :, 4:] = True                                   # no bending moment at either end
+    model = FrameModel(nodes=nodes, beams=np.array([[0, 1], [1, 2]]), E=EA, G=EA, A=1.0, Iy=1e-2, Iz=1e-2,
+                       J=1e-2, up=np.array([0.0, 1.0, 0.0]), releases=releases)
+    apex = np.array([0, 1, 0, 1, 1, 1], bool)                   # in the plane; the apex's spin held
+    supports = Supports.merge([(np.array([0, 2]), FIXED), (np.array([1]), apex)])
+    loads = np.zeros((3, 6))
+    loads[1, 2] = -1.0
+    run = nonlinear_static(model, supports, loads, control=(1, 2), max_load_factor=1e4, max_steps=100)
+    L0 = np.hypot(b, h)
+
+    def load(w):
+        length = np.hypot(b, h - w)
+        return -2 * EA * (length - L0) / L0 * (h - w) / length
+
+    peak = -minimize_scalar(lambda w: -load(w), bounds=(0.0, h), method="bounded", options={"xatol": 1e-12}).fun
+    assert run.converged and run.limit_load_factor is not None
+    assert run.limit_load_factor == pytest.approx(peak, rel=1e-3)
+    # every converged point of the path lies on the closed-form curve
+    assert run.path[:, 0] == pytest.approx(load(-run.path[:, 1]), rel=1e-5, abs=1e-9 * peak)   # residual < 1e-5
+    assert run.negative_pivots[-1] == 1, "one negative pivot past the limit point"
+
+
+def test_nonlinear_solution_is_in_equilibrium():
+    """The converged large-displacement state balances the applied loads: the co-rotational
+    internal forces of the returned displacements and rotations equal lambda F on the free DOFs
+    to 1e-6 of |lambda F| (path tolerance 1e-8)."""
+    from dataclasses import replace
+
+    from engine import frame
+
+    model, supports, loads = _space_frame()
+    model = replace(model, elements_per_beam=1)              # every node's state is returned
+    factor = 0.3 * linear_buckling(model, supports, loads, n_modes=1).factors[0]
+    run = nonlinear_static(model, supports, loads, control=(10, 0), max_load_factor=factor, max_steps=40,
+                           tolerance=1e-8)
+    assert run.path[-1, 0] == pytest.approx(factor)
+    cr = frame._Corotational(model, supports)
+    x = cr.X + run.displacements[:, :3]
+    triads = frame._rotation_matrices(run.displacements[:, 3:])
+    internal, _ = cr.internal_forces(x, triads)
+    applied = factor * loads.ravel()
+    residual = (applied - internal)[cr.free]
+    assert np.linalg.norm(residual) < 1e-6 * np.linalg.norm(applied[cr.free])
