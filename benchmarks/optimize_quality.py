@@ -116,7 +116,8 @@ def main(argv: list[str] | None = None) -> None:
             print(f"{name:13s} pipeline stopped: {summary.message}")
             continue
         pipeline = time.perf_counter() - start
-        surface, field, grid = _load(project, out, "surface"), _load(project, out, "field"), _load(project, out, "remesh")
+        surface, field = _load(project, out, "surface"), _load(project, out, "field")
+        grid = _load(project, out, "remesh")
         settings = optimize_settings(project)
         peer = dataclasses.replace(settings, planarity_iterations=0, split_cells=False)
         for label, chosen in (("end game", settings), ("LG only", peer)):

@@ -7,7 +7,8 @@ free nodes (boundary nodes stay on the boundary curve, supports and corners do n
    is the plane of those nodes. At a corner of the mock-up (edges in z = 0) that is z = 0 while
    the cell's inner nodes stand 90 mm above it. Such a cell is split by a new beam from the
    run's kink (the node farthest from the run's chord, the corner) to an inner node of the cell,
-   the one that best bisects the angle there; each part then touches one side of the kink.
+   the one whose two parts have the largest smallest corner angle; each part then touches one
+   side of the kink.
 2. Cells along a straight stretch of the boundary: each holds two nodes of the stretch, so its
    plane contains the stretch's line; two such cells also share the spoke beam at their common
    boundary node, so both planes contain that line and the spoke's inner node: they are the same
@@ -64,9 +65,11 @@ def _line_deviation(points: np.ndarray) -> float:
     return float(np.linalg.norm(off - np.outer(off @ d, d), axis=1).max())
 
 
-def _angle(a: np.ndarray, b: np.ndarray) -> float:
-    cosine = float(a @ b) / max(float(np.linalg.norm(a) * np.linalg.norm(b)), 1e-300)
-    return float(np.arccos(np.clip(cosine, -1.0, 1.0)))
+def _smallest_angle(x: np.ndarray, loop: np.ndarray) -> float:
+    """Smallest corner angle of a node loop, rad."""
+    p = x[loop]
+    u, v = np.roll(p, 1, axis=0) - p, np.roll(p, -1, axis=0) - p
+    return float(np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.einsum("ij,ij->i", u, v)).min())
 
 
 def _forced_plane_gap(x: np.ndarray, held: np.ndarray, inner: np.ndarray, straightness: float) -> float:
@@ -138,10 +141,8 @@ def _corner_pass(x: np.ndarray, faces: list[np.ndarray], boundary: np.ndarray, b
                 candidates = [q for q in range(k) if not on[q] and (q - kink) % k not in (1, k - 1)]
                 if not candidates:
                     continue
-                here = x[face[kink]]
-                before, after = x[face[(kink - 1) % k]] - here, x[face[(kink + 1) % k]] - here
-                q = max(candidates, key=lambda q: min(_angle(before, x[face[q]] - here),
-                                                      _angle(after, x[face[q]] - here)))
+                q = max(candidates, key=lambda q: min(_smallest_angle(x, part)
+                                                      for part in _split_at(face, kink, q)))
                 cut = (kink, q)
                 break
         if cut is None:
@@ -226,7 +227,8 @@ def _cut_triangles(x: np.ndarray, faces: list[np.ndarray], boundary: np.ndarray,
                    to_cut: dict[int, set[tuple[int, int]]]) -> tuple[list[np.ndarray], list[tuple[int, int]]]:
     """Cut off each listed cell the triangle of each listed boundary beam (u, v) and one spoke:
     [u, v, next] (new beam u-next) or [previous, u, v] (new beam previous-v), the third node
-    an inner one, the shorter new beam of the two; the rest keeps one of u, v."""
+    an inner one, of the two the cut whose parts have the larger smallest corner angle; the rest
+    keeps one of u, v."""
     out, new = [], []
     for i, face in enumerate(faces):
         pieces = [face]
@@ -248,7 +250,7 @@ def _cut_triangles(x: np.ndarray, faces: list[np.ndarray], boundary: np.ndarray,
             if not options:
                 pieces.append(rest)
                 continue
-            a, b = min(options, key=lambda o: float(np.linalg.norm(x[rest[o[0]]] - x[rest[o[1]]])))
+            a, b = max(options, key=lambda o: min(_smallest_angle(x, part) for part in _split_at(rest, *o)))
             first, second = _split_at(rest, a, b)
             triangle, remainder = (first, second) if len(first) == 3 else (second, first)
             new.append((int(rest[a]), int(rest[b])))
