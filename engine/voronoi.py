@@ -4,16 +4,22 @@
 the surface is used as it is when it has at least VERTICES_PER_CELL vertices per cell and is
 refined (1-to-4) until it has otherwise. Every vertex i carries a weight w_i = area_i h_i^-p
 (p = DENSITY_POWER) and the field's metric M_i (its tangent part, h sqrt(a) along u and
-h / sqrt(a) across, plus a small normal part so that it is invertible). Seeds start on a
-hexagonal lattice over the best-fit plane, grow into connected clusters along metric edge lengths
-(multi-source Dijkstra), and the clusters then minimise sum_k sum_{i in k} w_i (x_i - c_k)^T M_i
-(x_i - c_k) by boundary-vertex moves that keep every cluster connected (engine/clustering.py, an
-anisotropic Valette-Chassery approximated CVD). The polygon grid-shell is the dual of the
-clusters: a node where three clusters meet (a triangle with three labels, placed where the metric
-distances to the clusters' centroids balance along its edges), a beam along each border between
-two nodes, boundary nodes where a border meets the surface boundary, the surface's corners kept
-as nodes, boundary cells closed along the boundary. Why this route and not the
-deform-then-uniform-CVT one, and why clustering rather than Lloyd iterations: docs/decisions.md.
+h / sqrt(a) across, plus a small normal part so that it is invertible). The clusters minimise
+sum_k sum_{i in k} w_i (x_i - c_k)^T M_i (x_i - c_k) by boundary-vertex moves that keep every
+cluster connected (engine/clustering.py: an anisotropic Valette-Chassery approximated CVD).
+Seeds start on a hexagonal lattice over the best-fit plane and grow into clusters along metric
+edge lengths (multi-source Dijkstra); Lloyd steps (seeds moved to the over-relaxed centroids,
+clusters regrown and clustered again) grade the cells, which single-vertex moves cannot; above
+about four times COARSEST_CELLS cells a coarse level runs first and its centroids and the
+midpoints of neighbouring centroids seed the next. Small meshes try several lattice offsets and
+keep the grid with the most hexagons. The polygon grid-shell is the dual of the clusters: a node
+where three clusters meet (a triangle with three labels; at the anisotropic Voronoi vertex of
+the three centroids where that stays near the triangle and turns no beam round, else where the
+metric distances to the centroids balance along its edges), a beam along each border between two
+nodes, boundary nodes where a border meets the surface boundary, the surface's corners kept as
+nodes, boundary cells closed along the boundary. Why this route and not the
+deform-then-uniform-CVT one, and why clustering rather than Lloyd iterations alone:
+docs/decisions.md.
 """
 
 from __future__ import annotations
