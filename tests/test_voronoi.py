@@ -138,6 +138,10 @@ def test_extreme_settings_give_a_valid_mesh_or_a_clear_error():
         assert "lower" in (exc.hint or str(exc))
     else:
         _check_valid(result.polymesh)
+        q = result.quality
+        assert q["valence3_share_interior"] == 1.0
+        assert abs(q["achieved_size_ratio"] / 5.0 - 1) <= 0.25
+        assert abs(q["achieved_max_aspect"] / 5.0 - 1) <= 0.25
 
 
 def test_one_size_target_only():
