@@ -66,6 +66,8 @@ COARSE_LLOYD_STEPS = 20
 #: START_BUDGET clustered vertices in all.
 MAX_STARTS = 8
 START_BUDGET = 40_000
+#: Turns of the initial lattice against the plan's axes, taken by the starts in turn, degrees.
+LATTICE_TURNS_DEG = (0.0, 30.0)
 #: Fewest cells of the coarsest level.
 COARSEST_CELLS = 250
 
@@ -226,7 +228,7 @@ def _refine(mesh: TriMesh, field: GuidingField, n_cells: int) -> _Fine:
 
 # ----------------------------------------------------------------------------- clustering
 
-def _initial_seeds(fine: _Fine, n_cells: int, rng: np.random.Generator) -> np.ndarray:
+def _initial_seeds(fine: _Fine, n_cells: int, rng: np.random.Generator, turn_deg: float = 0.0) -> np.ndarray:
     """Vertex ids of ``n_cells`` seeds: a hexagonal lattice over the surface's best-fit plane
     (the clustering then starts near a honeycomb and keeps few defects), thinned or topped up at
     random; random sampling by the field's density where the surface is not a height field over
@@ -244,6 +246,8 @@ def _initial_seeds(fine: _Fine, n_cells: int, rng: np.random.Generator) -> np.nd
     if not (np.all(signed > 0) or np.all(signed < 0)):
         return rng.choice(len(fine.vertices), size=n_cells, replace=False, p=probability)
     plan_area = 0.5 * np.abs(signed).sum()
+    turn = np.radians(turn_deg)
+    plan = plan @ np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
     tree = cKDTree(plan)
     offset = rng.uniform(0, 1, 2)
     lo_plan, hi_plan = plan.min(axis=0), plan.max(axis=0)
@@ -380,7 +384,7 @@ def _snap(tree: cKDTree, target: np.ndarray, previous: np.ndarray) -> np.ndarray
     return out
 
 
-def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings) -> _Clusters:
+def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: float = 0.0) -> _Clusters:
     """Coarse to fine: at each level, seeds grown into clusters, the clustering, then Lloyd steps
     (seeds moved to the over-relaxed centroids, clusters regrown and clustered again)."""
     from .clustering import cluster_vertices
@@ -394,7 +398,7 @@ def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings) -> _Clusters:
     result = None
     for level, count in enumerate(counts):
         if result is None:
-            seeds = _initial_seeds(fine, count, rng)
+            seeds = _initial_seeds(fine, count, rng, turn_deg)
         else:
             seeds = _refined_seeds(fine, tree, result.labels, result.centroids, count, rng)
         labels = _grow_clusters(fine, seeds)
@@ -706,7 +710,8 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
         start = perf_counter()
         say(f"clustering {len(fine.vertices)} vertices into {n_cells} cells"
             + (f" (start {start_index + 1}/{starts})" if starts > 1 else ""), 0.1 + 0.8 * start_index / starts)
-        clusters = _cluster(fine, n_cells, replace(settings, seed=settings.seed + start_index))
+        clusters = _cluster(fine, n_cells, replace(settings, seed=settings.seed + start_index),
+                            LATTICE_TURNS_DEG[start_index % len(LATTICE_TURNS_DEG)])
         middle = perf_counter()
         polymesh = _polygons(mesh, fine, clusters, support_vertices)
         if timing is not None:
