@@ -7,9 +7,11 @@ The grid-shell is a honeycomb (valence-3, Voronoi-like) grid of equal beams lift
 spherical cap (span 40 m, span/rise 7), pinned along its boundary, steel tubes 168.3 x 8 mm,
 under its self-weight plus 1 kN/m2 lumped on the nodes. Target (task brief): linear static plus
 10 modes under 10 s on 2 cores. Peers, where installed (neither is a dependency of the project):
-OpenSees (openseespy) on the same element mesh, PyNite with one member per beam, optionally on a
-smaller model of the same kind
-(--pynite-nodes, default the same); each prints its linear-static time and largest deflection beside ours.
+OpenSees (openseespy) on the same element mesh and PyNite with one member per beam (optionally on
+a smaller model of the same kind, --pynite-nodes) print their linear-static time and largest
+deflection beside ours; OpenSees's co-rotational arc-length path on a smaller model
+(--path-nodes) prints its time and largest load factor beside our path's. OpenSees has no
+linear buckling analysis, so no peer prints buckling factors.
 """
 
 from __future__ import annotations
@@ -214,8 +216,51 @@ def _opensees(frame: FrameModel, supports: Supports, loads: np.ndarray):
     return seconds, largest
 
 
+def _opensees_path(frame: FrameModel, supports: Supports, loads: np.ndarray, control: int, arc: float):
+    """OpenSees's co-rotational path on the same element mesh: Corotational transformation,
+    Newton with its ArcLength integrator (arc ``arc``, displacements only), until the load factor
+    falls. Returns (seconds, largest load factor, steps) or a sentence why not."""
+    try:
+        import openseespy.opensees as ops  # type: ignore
+    except Exception:
+        return "not installed"
+    el = frame_module._elements(frame)
+    start = time.perf_counter()
+    ops.wipe()
+    ops.model("basic", "-ndm", 3, "-ndf", 6)
+    for k, p in enumerate(el.nodes):
+        ops.node(k, *map(float, p))
+    for node, flags in zip(supports.nodes, supports.restraints):
+        ops.fix(int(node), *map(int, flags))
+    for k, ((a, b), up) in enumerate(zip(el.connectivity, el.up)):
+        ops.geomTransf("Corotational", k + 1, *map(float, up))
+        ops.element("elasticBeamColumn", k + 1, int(a), int(b), float(el.A[k]), float(el.E[k]), float(el.G[k]),
+                    float(el.J[k]), float(el.Iy[k]), float(el.Iz[k]), k + 1)
+    ops.timeSeries("Linear", 1)
+    ops.pattern("Plain", 1, 1)
+    for k in np.flatnonzero(loads[:, 2]):
+        ops.load(int(k), 0.0, 0.0, float(loads[k, 2]), 0.0, 0.0, 0.0)
+    ops.constraints("Plain")
+    ops.numberer("RCM")
+    ops.system("UmfPack")
+    ops.test("NormUnbalance", 1e-6 * float(np.abs(loads).sum()), 30, 0)
+    ops.algorithm("Newton")
+    ops.integrator("ArcLength", float(arc), 0.0)
+    ops.analysis("Static")
+    factors = [0.0]
+    for _ in range(200):
+        if ops.analyze(1) != 0:
+            break
+        factors.append(ops.getLoadFactor(1))
+        if len(factors) > 3 and factors[-1] < factors[-2]:
+            break
+    seconds = time.perf_counter() - start
+    ops.wipe()
+    return seconds, max(factors), len(factors) - 1
+
+
 def _peer_lines(frame: FrameModel, supports: Supports, loads: np.ndarray, nodes: int, elements_per_beam: int,
-                pynite_nodes: int) -> list[str]:
+                pynite_nodes: int, path_nodes: int) -> list[str]:
     """Each peer's linear static beside ours on the same model (PyNite on a smaller model of the
     same kind when the full one is too large for it)."""
     lines = []
@@ -235,6 +280,24 @@ def _peer_lines(frame: FrameModel, supports: Supports, loads: np.ndarray, nodes:
     else:
         lines.append(f"PyNite linear       {result[0]:7.2f} s   largest deflection {result[1] * 1e3:.4f} mm on the "
                      f"{label} (ours {t_small:.2f} s, {u_small * 1e3:.4f} mm; difference {abs(result[1] / u_small - 1):.1e})")
+    if path_nodes:
+        # a model small enough for OpenSees's path, whose first critical point is a limit point
+        # (ours: one pivot turns negative at the maximum; on larger domes of this kind pivots turn
+        # negative while the load still rises: bifurcations, where the two paths part ways)
+        small = model(path_nodes, elements_per_beam)
+        linear = frame_module.linear_static(*small)
+        control = int(np.argmax(np.abs(linear.displacements[:, 2])))
+        start = time.perf_counter()
+        run = frame_module.nonlinear_static(*small, control=(control, 2), max_load_factor=1e9, max_steps=50)
+        t_path = time.perf_counter() - start
+        result = _opensees_path(*small, control, 20 * float(np.abs(linear.displacements).max()))
+        if isinstance(result, str):
+            lines.append(f"OpenSees path      {result}")
+        else:
+            lines.append(f"OpenSees path      {result[0]:7.2f} s   largest load factor {result[1]:.4f} in {result[2]} steps on "
+                         f"the {len(small[0].nodes)}-node model (Corotational, ArcLength; ours {t_path:.2f} s, limit "
+                         f"{run.limit_load_factor:.4f} in {len(run.path) - 1} steps; difference "
+                         f"{abs(result[1] / run.limit_load_factor - 1):.1e})")
     return lines
 
 
@@ -245,6 +308,8 @@ def main() -> int:
     parser.add_argument("--steps", type=int, default=50)
     parser.add_argument("--pynite-nodes", type=int, default=None,
                         help="PyNite's model size, when the full model is too slow for it (default: the same model)")
+    parser.add_argument("--path-nodes", type=int, default=300,
+                        help="model size for the non-linear path beside OpenSees's (0: none)")
     parser.add_argument("--no-peers", action="store_true")
     args = parser.parse_args()
     frame, supports, loads = model(args.nodes, args.elements_per_beam)
@@ -270,12 +335,17 @@ def main() -> int:
                                             max_steps=args.steps)
         t_nonlinear = time.perf_counter() - start
         limit = None if run.limit_load_factor is None else round(run.limit_load_factor, 3)
-        print(f"non-linear path    {t_nonlinear:7.2f} s   {len(run.path) - 1} steps, largest load factor "
-              f"{run.path[:, 0].max():.3f}, limit {limit}, converged {run.converged}")
+        negative = np.flatnonzero(run.negative_pivots > 0)
+        pivots = (f"first negative pivot at load factor {run.path[negative[0], 0]:.3f}" if len(negative)
+                  else "no negative pivot")
+        print(f"non-linear path    {t_nonlinear:7.2f} s   {len(run.path) - 1} steps ({int(run.iterations.sum())} "
+              f"iterations), largest load factor {run.path[:, 0].max():.3f}, limit {limit}, {pivots}, "
+              f"converged {run.converged}")
     print(f"peak memory        {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:7.0f} MiB")
     if not args.no_peers:
         pynite_nodes = args.nodes if args.pynite_nodes is None else args.pynite_nodes
-        for line in _peer_lines(frame, supports, loads, args.nodes, args.elements_per_beam, pynite_nodes):
+        for line in _peer_lines(frame, supports, loads, args.nodes, args.elements_per_beam, pynite_nodes,
+                                args.path_nodes):
             print(line)
     return 0
 
