@@ -524,7 +524,9 @@ def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_
                             maxiter=max(2000, 20 * size), return_eigenvectors=False)
         except spla.ArpackNoConvergence as exc:
             mu = exc.eigenvalues
-        if len(mu) == 0 or mu.max() <= 1e-12 * abs(minus_KG).max() / abs(K_free).max():
+            if len(mu) == 0:
+                raise ConvergenceError("linear buckling: the eigenvalue solver did not converge") from exc
+        if mu.max() <= 1e-12 * abs(minus_KG).max() / abs(K_free).max():
             return none                                          # nothing buckles in compression
         sigma = 0.95 / float(mu.max())
         shifted = None

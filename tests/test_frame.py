@@ -483,3 +483,39 @@ def test_nonlinear_solution_is_in_equilibrium():
     applied = factor * loads.ravel()
     residual = (applied - internal)[cr.free]
     assert np.linalg.norm(residual) < 1e-6 * np.linalg.norm(applied[cr.free])
+
+
+def test_a_frame_in_tension_has_no_buckling_factor():
+    """A column pulled at its top: K_G stiffens every mode (all mu = 1/lambda negative), so no
+    positive factor is returned; pushed, the same column buckles at pi^2 EI / (4 L^2)."""
+    length, n = 3.0, 8
+    model = _line((0, 0, 1), length, n, (1, 0, 0), Iy=1e-6, Iz=1e-6)
+    supports = Supports(nodes=np.array([0]), restraints=FIXED[None])
+    loads = np.zeros((n + 1, 6))
+    loads[n, 2] = 1.0
+    assert len(linear_buckling(model, supports, loads, n_modes=3).factors) == 0
+    result = linear_buckling(model, supports, -loads, n_modes=1)
+    assert result.factors[0] == pytest.approx(np.pi**2 * E * 1e-6 / (4 * length**2), rel=1e-3)
+
+
+def test_the_kept_factor_follows_the_model_and_its_supports():
+    """The last factored stiffness is reused only for the same model and supports: a stiffer
+    copy deflects half as much, a propped copy as a propped cantilever (P L^3 / (3 EI) and
+    7 P L^3 / (768 EI) under the mid-span load of test_end_release_makes_a_pin)."""
+    from dataclasses import replace
+
+    length, n, P = 2.0, 4, 500.0
+    model = _line((1, 0, 0), length, n, (0, 0, 1))
+    fixed = Supports(nodes=np.array([0]), restraints=FIXED[None])
+    loads = np.zeros((n + 1, 6))
+    loads[-1, 2] = -P
+    tip = -linear_static(model, fixed, loads).displacements[-1, 2]
+    assert tip == pytest.approx(P * length**3 / (3 * E * IY), rel=1e-9)
+    stiffer = replace(model, E=np.full(n, 2 * E))
+    assert -linear_static(stiffer, fixed, loads).displacements[-1, 2] == pytest.approx(tip / 2, rel=1e-9)
+    assert -linear_static(model, fixed, loads).displacements[-1, 2] == pytest.approx(tip, rel=1e-12)
+    propped = Supports(nodes=np.array([0, n]), restraints=np.array([FIXED, [1, 1, 1, 0, 0, 0]], bool))
+    mid = np.zeros((n + 1, 6))
+    mid[n // 2, 2] = -P
+    deflection = -linear_static(model, propped, mid).displacements[n // 2, 2]
+    assert deflection == pytest.approx(7 * P * length**3 / (768 * E * IY), rel=1e-9)
