@@ -2,7 +2,7 @@
 
 (METHOD.md section 3.) The direct discrete route, as a clustering of the surface's vertices:
 the surface is used as it is when it has at least VERTICES_PER_CELL vertices per cell and is
-refined (1-to-4) until it has otherwise. Every vertex i carries a weight w_i = area_i h_i^-p
+refined (1-to-4) until it has REFINED_VERTICES_PER_CELL otherwise. Every vertex i carries a weight w_i = area_i h_i^-p
 (p = DENSITY_POWER) and the field's metric M_i (its tangent part, h sqrt(a) along u and
 h / sqrt(a) across, plus a small normal part so that it is invertible). The clusters minimise
 sum_k sum_{i in k} w_i (x_i - c_k)^T M_i (x_i - c_k) by boundary-vertex moves that keep every
@@ -41,8 +41,10 @@ __all__ = ["RemeshSettings", "RemeshResult", "remesh", "polymesh_quality", "surf
 
 Progress = Callable[[str, "float | None"], None]
 
-#: Fewest surface vertices per cell the clustering works with (the surface is refined below it).
+#: Fewest surface vertices per cell the clustering works with; a surface with fewer is refined
+#: until it has REFINED_VERTICES_PER_CELL (node positions are then finer; refining is cheap there).
 VERTICES_PER_CELL = 24
+REFINED_VERTICES_PER_CELL = 48
 #: Largest refined mesh (vertices) the remesher builds.
 MAX_FINE_VERTICES = 400_000
 #: Boundary turning angle above which a surface vertex is a corner kept as a node, degrees.
@@ -65,7 +67,7 @@ COARSE_LLOYD_STEPS = 20
 #: Starts (lattice offsets) tried where the clustered mesh is small: at most MAX_STARTS, and at most
 #: START_BUDGET clustered vertices in all.
 MAX_STARTS = 8
-START_BUDGET = 40_000
+START_BUDGET = 100_000
 #: Turns of the initial lattice against the plan's axes, taken by the starts in turn, degrees.
 LATTICE_TURNS_DEG = (0.0, 30.0)
 #: Fewest cells of the coarsest level.
@@ -206,8 +208,9 @@ def _refine(mesh: TriMesh, field: GuidingField, n_cells: int) -> _Fine:
     vertices, faces = mesh.vertices, mesh.faces
     tangent = field.metric()
     normals = np.asarray(field.normals, dtype=float)
-    while len(vertices) < VERTICES_PER_CELL * n_cells and 4 * len(vertices) <= MAX_FINE_VERTICES:
-        vertices, faces, (tangent, normals) = _subdivide(vertices, faces, [tangent, normals])
+    if len(vertices) < VERTICES_PER_CELL * n_cells:
+        while len(vertices) < REFINED_VERTICES_PER_CELL * n_cells and 4 * len(vertices) <= MAX_FINE_VERTICES:
+            vertices, faces, (tangent, normals) = _subdivide(vertices, faces, [tangent, normals])
     normals = normals / np.maximum(np.linalg.norm(normals, axis=1), 1e-300)[:, None]
     # sqrt(det) of the rank-2 tangent metric (its second invariant) = 1 / h^2
     trace = np.einsum("nii->n", tangent)
