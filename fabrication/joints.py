@@ -6,13 +6,22 @@ around it, a pin hole across it); the bore starts at the set-back where neighbou
 the least wall. Steel joint (full size): a hub tube along the node axis with one fin plate per
 beam, in the plane of the beam and the axis, with a bolt hole. Files: joints/J0001.step (the
 solid named J0001), joints/J0001.stl (watertight), joints/joints.step (all, named).
+
+Speed (issue 6): a socket joint is one fuse (hub and sleeves) and one cut (bores and pin holes),
+in OCP, one joint per core; the id is engraved by building the pockets' faces into the hub's top
+face (fabrication.engraving) where the label is clear of bores, pin holes, sleeves and the hub's
+rim by the least wall, else by a boolean cut as before. Workers write each joint's files and its
+entities for joints.step (fabrication.step_assembly), so the parent only streams them into the
+combined file. Each joint's report records the seconds it took (``seconds``).
 """
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -21,9 +30,13 @@ import numpy as np
 from engine.mesh import PolyMesh
 
 from .files import atomic_path
+from .step_assembly import StepAssemblyWriter, step_part, write_step_part
 
 __all__ = ["JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "build_joint", "build_joints",
            "joint_name"]
+
+ENGRAVE_DEPTH_MM = 0.6
+LABEL_MARGIN_MM = 0.5  # between the label and a sleeve rising through the hub's top face
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -112,9 +125,195 @@ def _perpendicular(direction: np.ndarray, axis: np.ndarray) -> np.ndarray:
     return side / np.linalg.norm(side)
 
 
+def _cylinder(base: np.ndarray, direction: np.ndarray, radius: float, length: float):
+    """OCP solid cylinder from ``base`` along ``direction`` (unit), as build123d's Cylinder placed on
+    a plane with that normal (same seam)."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCylinder
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
+
+    frame = gp_Ax2(gp_Pnt(*map(float, base)), gp_Dir(*map(float, direction)))
+    return BRepPrimAPI_MakeCylinder(frame, float(radius), float(length)).Shape()
+
+
+def _boolean(kind: str, arguments: list, tools: list):
+    """One OCP boolean ("fuse" or "cut") of all ``tools`` with the ``arguments``, on this core
+    only (the workers use the others), merged like build123d's (same-domain faces unified)."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut, BRepAlgoAPI_Fuse
+    from OCP.ShapeUpgrade import ShapeUpgrade_UnifySameDomain
+    from OCP.TopTools import TopTools_ListOfShape
+
+    operation = BRepAlgoAPI_Fuse() if kind == "fuse" else BRepAlgoAPI_Cut()
+    for shapes, setter in ((arguments, operation.SetArguments), (tools, operation.SetTools)):
+        listed = TopTools_ListOfShape()
+        for shape in shapes:
+            listed.Append(shape)
+        setter(listed)
+    operation.SetRunParallel(False)
+    operation.Build()
+    if not operation.IsDone():
+        raise RuntimeError(f"the {kind} of a joint failed")
+    upgrader = ShapeUpgrade_UnifySameDomain(operation.Shape(), True, True, True)
+    upgrader.AllowInternalEdges(False)
+    upgrader.Build()
+    return upgrader.Shape()
+
+
+def _solids(shape) -> list:
+    from OCP.TopAbs import TopAbs_SOLID
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    out = []
+    explorer = TopExp_Explorer(shape, TopAbs_SOLID)
+    while explorer.More():
+        out.append(TopoDS.Solid_s(explorer.Current()))
+        explorer.Next()
+    return out
+
+
+def _is_valid(shape) -> bool:
+    from OCP.BRepCheck import BRepCheck_Analyzer
+
+    return bool(BRepCheck_Analyzer(shape).IsValid())
+
+
+def _segment_box_distances(a: np.ndarray, b: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """(k,) least distances between segments a[i]-b[i] and boxes [low[i], high[i]] (all (k, 3)).
+    The distance is convex along a segment, so a golden-section search finds its minimum."""
+    def distance(t: np.ndarray) -> np.ndarray:
+        p = a + t[:, None] * (b - a)
+        return np.linalg.norm(p - np.clip(p, low, high), axis=1)
+
+    ratio = (math.sqrt(5.0) - 1.0) / 2.0
+    lo, hi = np.zeros(len(a)), np.ones(len(a))
+    x1, x2 = hi - ratio * (hi - lo), lo + ratio * (hi - lo)
+    f1, f2 = distance(x1), distance(x2)
+    for _ in range(60):
+        left = f1 <= f2  # the minimum lies in [lo, x2]
+        hi, lo = np.where(left, x2, hi), np.where(left, lo, x1)
+        x1, x2 = np.where(left, hi - ratio * (hi - lo), x2), np.where(left, x1, lo + ratio * (hi - lo))
+        f1, f2 = np.where(left, distance(x1), f2), np.where(left, f1, distance(x2))
+    return np.minimum.reduce([f1, f2, distance(np.zeros(len(a))), distance(np.ones(len(a)))])
+
+
+def _label_directions(directions: np.ndarray, axis: np.ndarray) -> list[np.ndarray]:
+    """Directions on the hub's top face to write the id along, best first: the middles of the gaps
+    between the sleeves seen from above, as lines through the axis (the label reaches both ways
+    from the centre), widest gap first."""
+    e1 = np.cross([0.0, 0.0, 1.0] if abs(axis[2]) < 0.9 else [1.0, 0.0, 0.0], axis)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    flat = directions - np.outer(directions @ axis, axis)
+    flat = flat[np.linalg.norm(flat, axis=1) > 1e-6]
+    if not len(flat):
+        return [e1, e2]
+    angles = np.sort(np.mod(np.arctan2(flat @ e2, flat @ e1), np.pi))
+    gaps = np.diff(np.r_[angles, angles[0] + np.pi])
+    middles = [angles[k] + 0.5 * gaps[k] for k in np.argsort(-gaps, kind="stable")]
+    return [math.cos(m) * e1 + math.sin(m) * e2 for m in middles]
+
+
+def _label_is_clear(bounds, origin, axis, x_dir, features, hub_radius: float, clearance: float) -> bool:
+    """True when the label's pockets (its bounding rectangle ``bounds`` on the top face, sunk the
+    engraving depth) keep ``clearance`` from the hub's rim and from every bore and pin hole, and
+    no sleeve rises through the top face within LABEL_MARGIN_MM of it: then the pockets lie inside
+    the top face and every other face is at least ``clearance`` away (a sleeve rising beside the
+    label is more material, not a wall). ``features``: (kind, start, end, radius), kind "sleeve"
+    or "hole", segments in the joint's frame; sleeves and holes are tested as capsules (the
+    segment swept by a ball of the radius), which hold the cylinders."""
+    y_dir = np.cross(axis, x_dir)
+    x0, y0, x1, y1 = bounds
+    if max(math.hypot(x, y) for x in (x0 - clearance, x1 + clearance) for y in (y0 - clearance, y1 + clearance)) > hub_radius:
+        return False
+    frame = np.array([x_dir, y_dir, axis])
+    reach = max(np.linalg.norm(end) for _, _, end, _ in features) + hub_radius
+    a = np.array([frame @ (start - origin) for _, start, _, _ in features])
+    b = np.array([frame @ (end - origin) for _, _, end, _ in features])
+    sleeve = np.array([kind == "sleeve" for kind, _, _, _ in features])[:, None]
+    m, c = LABEL_MARGIN_MM, clearance
+    # holes: the pockets with the least wall around and below them; sleeves: the space above the label
+    low = np.where(sleeve, [x0 - m, y0 - m, 0.0], [x0 - c, y0 - c, -ENGRAVE_DEPTH_MM - c])
+    high = np.where(sleeve, [x1 + m, y1 + m, reach], [x1 + c, y1 + c, 0.0])
+    radius = np.array([r for _, _, _, r in features])
+    near = np.flatnonzero(_segment_box_distances(a, b, low, high) < radius)
+    # a capsule reaches a radius beyond the cylinder's flat ends: decide those with the cylinders
+    return all(_box_cylinder_distance(low[k], high[k], a[k], b[k], radius[k]) > 1e-6 for k in near)
+
+
+def _box_cylinder_distance(low: np.ndarray, high: np.ndarray, start: np.ndarray, end: np.ndarray, radius: float) -> float:
+    """Least distance (OCP BRepExtrema) between the box [low, high] and the solid cylinder of
+    ``radius`` from ``start`` to ``end``; 0 where they meet."""
+    from OCP.BRepExtrema import BRepExtrema_DistShapeShape
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+
+    size = np.maximum(high - low, 1e-6)
+    box = BRepPrimAPI_MakeBox(_gp_point(low), *map(float, size)).Shape()
+    length = float(np.linalg.norm(end - start))
+    cylinder = _cylinder(start, (end - start) / length, radius, length)
+    distance = BRepExtrema_DistShapeShape(box, cylinder)
+    return float(distance.Value()) if distance.IsDone() else 0.0
+
+
+def _gp_point(p: np.ndarray):
+    from OCP.gp import gp_Pnt
+
+    return gp_Pnt(*map(float, p))
+
+
+def _engrave_id(solid, name: str, geometry: JointGeometry, settings: JointSettings, *, top_mm: float,
+                hub_radius: float, features: list, report: dict):
+    """The socket joint with its id engraved on the hub's top face (see the module docstring)."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
+    from OCP.BRepClass import BRepClass_FaceClassifier
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakePrism
+    from OCP.gp import gp_Pnt, gp_Vec
+    from OCP.TopAbs import TopAbs_IN
+    from OCP.TopoDS import TopoDS_Compound
+
+    from .engraving import engrave_planar_face, glyph_bounds, planar_faces, text_faces, text_placement
+
+    axis = geometry.axis
+    try:
+        glyphs = text_faces(name, 0.45 * hub_radius)
+    except Exception:  # noqa: BLE001 - a font problem must not stop the joints
+        report["engraved"], report["engraving"] = False, "none"
+        return solid
+    report["engraved"] = True
+    origin = axis * top_mm
+    bounds = glyph_bounds(glyphs)
+    solids = _solids(solid)
+    candidates = planar_faces(solids[0], origin, axis) if len(solids) == 1 else []
+    directions = _label_directions(geometry.directions, axis)
+    clear = [x for x in directions if candidates and _label_is_clear(bounds, origin, axis, x, features, hub_radius,
+                                                                     settings.min_wall_mm)]
+    x_dir = (clear or directions)[0]
+    if clear:
+        centre = gp_Pnt(0.5 * (bounds[0] + bounds[2]), 0.5 * (bounds[1] + bounds[3]), 0.0).Transformed(
+            text_placement(origin, axis, x_dir))
+        for face in candidates:
+            if BRepClass_FaceClassifier(face, centre, 1e-7).State() == TopAbs_IN:
+                engraved = engrave_planar_face(solids[0], face, glyphs, origin, axis, x_dir, ENGRAVE_DEPTH_MM)
+                if _is_valid(engraved):
+                    report["engraving"], report["valid"] = "faces", True
+                    return engraved
+                break
+    # otherwise as before: a boolean cut of the glyphs swept the engraving depth
+    report["engraving"] = "boolean"
+    placement = text_placement(origin - ENGRAVE_DEPTH_MM * axis, axis, x_dir)
+    tool = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(tool)
+    for glyph in glyphs:
+        placed = BRepBuilderAPI_Transform(glyph, placement, True).Shape()
+        builder.Add(tool, BRepPrimAPI_MakePrism(placed, gp_Vec(*map(float, ENGRAVE_DEPTH_MM * axis))).Shape())
+    return _boolean("cut", [solid], [tool])
+
+
 def build_joint(geometry: JointGeometry, settings: JointSettings):
-    """(solid, report) of one joint, built at the origin (mm); the caller places it."""
-    from build123d import Align, Cylinder, Location, Text, extrude
+    """(solid, report) of one joint, built at the origin (mm); the caller places it. The report
+    carries ``valid`` (BRepCheck) when the engraving already checked the solid."""
+    from build123d import Align, Box, Cylinder, Location
 
     name = joint_name(geometry.node)
     directions, axis = geometry.directions, geometry.axis
@@ -126,7 +325,6 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
     sleeve = settings.sleeve_length_mm or 2.0 * size
     report = {"id": name, "node": geometry.node, "beams": int(len(directions)), "setback_mm": setback,
               "smallest_angle_deg": float(np.degrees(angle))}
-    base = Align.CENTER, Align.CENTER, Align.MIN
     if settings.kind == "steel":
         hub_radius = settings.hub_radius_mm or 1.2 * size
         height = 2.5 * size
@@ -135,8 +333,6 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
             side = _perpendicular(d, axis)
             normal_of_plate = side
             length = setback + sleeve
-            from build123d import Box
-
             plate = Box(length, settings.plate_thickness_mm, 0.8 * height, align=(Align.MIN, Align.CENTER, Align.CENTER))
             x_dir = d
             plate = plate.moved(Location(_plane((0, 0, 0), np.cross(x_dir, normal_of_plate), x_dir)))
@@ -147,29 +343,36 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
     else:
         hub_radius = settings.hub_radius_mm or 1.5 * outer
         hub_height = 2.0 * outer + 1.0  # taller than a sleeve: no tangent faces between hub top and sleeves
-        hub = Cylinder(hub_radius, hub_height).moved(Location(_plane((0, 0, 0), axis)))
-        sleeves = [Cylinder(outer, setback + sleeve, align=base).moved(Location(_plane((0, 0, 0), d)))
-                   for d in directions]
-        tools = []
+        hub = _cylinder(-0.5 * hub_height * axis, axis, hub_radius, hub_height)
+        sleeves, tools, features = [], [], []
         for d in directions:
+            sleeves.append(_cylinder(np.zeros(3), d, outer, setback + sleeve))
+            features.append(("sleeve", np.zeros(3), d * (setback + sleeve), outer))
+            tools.append(_cylinder(d * setback, d, bore, sleeve + 1.0))
+            features.append(("hole", d * setback, d * (setback + sleeve + 1.0), bore))
             side = _perpendicular(d, axis)
-            tools.append(Cylinder(bore, sleeve + 1.0, align=base).moved(Location(_plane(d * setback, d))))
             pin_centre = d * (setback + 0.6 * sleeve)
-            tools.append(Cylinder(0.5 * settings.pin_hole_mm, 4 * outer).moved(Location(_plane(pin_centre, side))))
-        if settings.engrave:
-            try:
-                label = Text(name, font_size=0.45 * hub_radius, align=(Align.CENTER, Align.CENTER))
-                tools.append(extrude(label, amount=0.6).moved(Location(_plane(axis * (0.5 * hub_height - 0.6), axis))))
-                report["engraved"] = True
-            except Exception:  # noqa: BLE001 - a font problem must not stop the joints
-                report["engraved"] = False
+            tools.append(_cylinder(pin_centre - 2 * outer * side, side, 0.5 * settings.pin_hole_mm, 4 * outer))
+            features.append(("hole", pin_centre - 2 * outer * side, pin_centre + 2 * outer * side,
+                             0.5 * settings.pin_hole_mm))
         # one fuse and one cut with all tools: faster than a boolean per feature
-        solid = hub.fuse(*sleeves).cut(*tools)
+        shape = _boolean("cut", [_boolean("fuse", [hub], sleeves)], tools)
+        if settings.engrave:
+            shape = _engrave_id(shape, name, geometry, settings, top_mm=0.5 * hub_height, hub_radius=hub_radius,
+                                features=features, report=report)
+        solid = _as_build123d(shape)
         # wall left between neighbouring bores at their start
         wall_between = 2 * setback * np.sin(0.5 * angle) - 2 * bore if len(directions) > 1 else settings.wall_mm
         report["min_wall_mm"] = float(min(settings.wall_mm, wall_between))
     report["clashes"] = _clashes(directions, outer, setback, sleeve)
     return solid, report
+
+
+def _as_build123d(shape):
+    from build123d import Compound, Solid
+
+    solids = _solids(shape)
+    return Solid(solids[0]) if len(solids) == 1 else Compound(shape)
 
 
 def _clashes(directions: np.ndarray, outer: float, setback: float, sleeve: float) -> list[list]:
@@ -208,12 +411,45 @@ def _axis_errors_deg(solid, directions: np.ndarray, bore_radius: float) -> float
     return worst
 
 
+def _tessellate(shape, tolerance: float, angular_tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (n, 3), triangles (m, 3)) of an OCP shape's triangulation, as build123d's
+    ``tessellate(tolerance, angular_tolerance)`` gives them (same mesher settings, same order),
+    read into numpy without a Python object per vertex."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepMesh import BRepMesh_IncrementalMesh
+    from OCP.BRepTools import BRepTools
+    from OCP.TopAbs import TopAbs_FACE, TopAbs_REVERSED
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopLoc import TopLoc_Location
+    from OCP.TopoDS import TopoDS
+
+    if not BRepTools.Triangulation_s(shape, tolerance):
+        BRepMesh_IncrementalMesh(shape, tolerance, True, angular_tolerance, False)
+    vertices, triangles, offset = [], [], 0
+    explorer = TopExp_Explorer(shape, TopAbs_FACE)
+    while explorer.More():
+        face = TopoDS.Face_s(explorer.Current())
+        explorer.Next()
+        location = TopLoc_Location()
+        poly = BRep_Tool.Triangulation_s(face, location)
+        if poly is None:
+            continue
+        nodes = np.array([poly.Node(i).Coord() for i in range(1, poly.NbNodes() + 1)])
+        trsf = location.Transformation()
+        matrix = np.array([[trsf.Value(r, c) for c in range(1, 5)] for r in range(1, 4)])
+        vertices.append(nodes @ matrix[:, :3].T + matrix[:, 3])
+        t = np.array([poly.Triangle(i).Get() for i in range(1, poly.NbTriangles() + 1)], dtype=np.int64) - 1 + offset
+        triangles.append(t[:, [0, 2, 1]] if face.Orientation() == TopAbs_REVERSED else t)
+        offset += poly.NbNodes()
+    return np.vstack(vertices), np.vstack(triangles)
+
+
 def _watertight_stl(solid, path: Path) -> bool:
     """Tessellate, weld and write an STL; True when trimesh finds it watertight."""
     import trimesh
 
-    vertices, triangles = solid.tessellate(0.05, 0.3)
-    mesh = trimesh.Trimesh(np.array([tuple(v) for v in vertices]), np.array(triangles), process=True)
+    vertices, triangles = _tessellate(solid.wrapped, 0.05, 0.3)
+    mesh = trimesh.Trimesh(vertices, triangles, process=True)
     mesh.merge_vertices(digits_vertex=5)
     mesh.update_faces(mesh.nondegenerate_faces())
     if not mesh.is_watertight:
@@ -224,62 +460,88 @@ def _watertight_stl(solid, path: Path) -> bool:
     return bool(mesh.is_watertight)
 
 
-def _build_and_write(job: tuple[JointGeometry, JointSettings, str, str]) -> dict:
-    geometry, settings, folder, brep_folder = job
-    from build123d import Location, export_brep, export_step
+def _build_and_write(job: tuple) -> dict:
+    """Build, check and write one joint (J0001.step, J0001.stl) and its entities for joints.step."""
+    geometry, settings, folder, parts_folder, first_id, last_id = job
+    from build123d import Location, export_step
 
+    started = time.perf_counter()
     solid, report = build_joint(geometry, settings)
+    built = time.perf_counter()
     bore = 0.5 * geometry.beam_size_mm + settings.clearance_mm
     report["max_axis_error_deg"] = _axis_errors_deg(solid, geometry.directions, bore) if settings.kind == "socket" else 0.0
     report["single_solid"] = len(solid.solids()) == 1
-    report["valid"] = bool(solid.is_valid)
+    report["valid"] = bool(report["valid"]) if "valid" in report else _is_valid(solid.wrapped)
     placed = solid.moved(Location(tuple(map(float, geometry.position_mm))))
     placed.label = report["id"]
     folder = Path(folder)
-    with atomic_path(folder / f"{report['id']}.step") as tmp:
+    step_path = folder / f"{report['id']}.step"
+    with atomic_path(step_path) as tmp:
         export_step(placed, str(tmp))
+    part = step_part(step_path.read_text(encoding="utf-8"), first_id)
+    # a part too big for its id range is renumbered by the parent, above every range
+    report["_part"] = str(write_step_part(part, Path(parts_folder) / f"{report['id']}.part")) \
+        if part.last_id <= last_id else None
+    written = time.perf_counter()
     report["watertight"] = _watertight_stl(placed, folder / f"{report['id']}.stl")
-    export_brep(placed, str(Path(brep_folder) / f"{report['id']}.brep"))
     error = report["max_axis_error_deg"]
     report["wall_ok"] = report["min_wall_mm"] >= settings.min_wall_mm - 1e-9
     report["ok"] = bool(report["valid"] and report["single_solid"] and report["watertight"] and report["wall_ok"]
                         and not report["clashes"] and (np.isnan(error) or error <= 0.1))
+    finished = time.perf_counter()
+    report["seconds"] = {"build": round(built - started, 4), "check_and_step": round(written - built, 4),
+                         "stl": round(finished - written, 4)}
     return report
+
+
+def _id_ranges(n_joints: int) -> list[tuple[int, int]]:
+    """Disjoint STEP entity id ranges, one per joint (a socket joint has some 10 000 entities),
+    leaving room above them below 2**30 (readers keep ids in 32 bits)."""
+    stride = max(1000, min(100_000, 2**29 // max(n_joints, 1)))
+    first = StepAssemblyWriter.FIRST_ID
+    return [(first + k * stride, first + (k + 1) * stride - 1) for k in range(n_joints)]
 
 
 def build_joints(polymesh: PolyMesh, normals: np.ndarray, beam_size_mm: float, settings: JointSettings, folder: Path,
                  *, workers: int | None = None, progress=None) -> list[dict]:
-    """Build, check and write every joint (see the module docstring); returns one report per joint."""
-    from build123d import Compound, export_step, import_brep
+    """Build, check and write every joint (see the module docstring); returns one report per joint,
+    in node order. Joints with most beams go first, so that both cores stay busy to the end."""
+    import build123d  # noqa: F401 - imported once here, before the workers fork, not once per worker
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     geometries = joint_geometry(polymesh, normals, beam_size_mm)
     workers = workers or os.cpu_count() or 1
+    ranges = _id_ranges(len(geometries))
     reports: list[dict] = []
-    with tempfile.TemporaryDirectory(dir=folder.parent) as brep_folder:
-        jobs = [(g, settings, str(folder), brep_folder) for g in geometries]
+    with tempfile.TemporaryDirectory(dir=folder.parent) as parts_folder, \
+            atomic_path(folder / "joints.step") as combined_path, open(combined_path, "w", encoding="utf-8") as combined:
+        writer = StepAssemblyWriter(combined, "joints")
+        jobs = [(g, settings, str(folder), parts_folder, *ranges[k]) for k, g in enumerate(geometries)]
+        order = sorted(range(len(jobs)), key=lambda k: -len(geometries[k].directions))
+
+        def collect(report: dict) -> None:
+            part = report.pop("_part")
+            if part is None:
+                text = (folder / f"{report['id']}.step").read_text(encoding="utf-8")
+                writer.add(step_part(text, max(writer.next_free_id, ranges[-1][1] + 1)))
+            else:
+                writer.add_file(Path(part))
+                Path(part).unlink()
+            reports.append(report)
+            if progress is not None and (len(reports) % 10 == 0 or len(reports) == len(jobs)):
+                progress(f"joints {len(reports)}/{len(jobs)}", len(reports) / len(jobs))
+
         if workers > 1 and len(jobs) > 4:
             with ProcessPoolExecutor(max_workers=workers) as pool:
-                for i, report in enumerate(pool.map(_build_and_write, jobs, chunksize=4)):
-                    reports.append(report)
-                    if progress is not None and i % 10 == 0:
-                        progress(f"joints {i + 1}/{len(jobs)}", (i + 1) / len(jobs))
+                for future in as_completed([pool.submit(_build_and_write, jobs[k]) for k in order]):
+                    collect(future.result())
         else:
-            for i, job in enumerate(jobs):
-                reports.append(_build_and_write(job))
-                if progress is not None:
-                    progress(f"joints {i + 1}/{len(jobs)}", (i + 1) / len(jobs))
-        solids = []
-        for report in reports:
-            solid = import_brep(str(Path(brep_folder) / f"{report['id']}.brep"))
-            solid.label = report["id"]
-            solids.append(solid)
-        assembly = Compound(children=solids)
-        assembly.label = "joints"
-        with atomic_path(folder / "joints.step") as tmp:
-            export_step(assembly, str(tmp))
-    return [{k: v for k, v in r.items()} for r in reports]
+            for k in order:
+                collect(_build_and_write(jobs[k]))
+        writer.finish([joint_name(g.node) for g in geometries])
+    reports.sort(key=lambda r: r["node"])
+    return reports
 
 
 def settings_dict(settings: JointSettings) -> dict:

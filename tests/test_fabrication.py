@@ -1,4 +1,6 @@
-"""Fabrication files of a whole small run, each re-read by a reader other than its writer."""
+"""Fabrication files of a whole small run, each re-read by a reader other than its writer; and
+the joint solids' fast paths (engraving by faces, tessellation, the assembly STEP written from
+part files) against the slower ways they replace."""
 
 from __future__ import annotations
 
@@ -7,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.slow
+slow = pytest.mark.slow
 
 
 def _polymesh(out):
@@ -16,6 +18,7 @@ def _polymesh(out):
     return read_polymesh_obj(out / "05-optimize" / "gridshell.obj")
 
 
+@slow
 def test_joints_are_named_valid_watertight_solids(small_run):
     import trimesh
     from OCP.IFSelect import IFSelect_RetDone
@@ -42,8 +45,13 @@ def test_joints_are_named_valid_watertight_solids(small_run):
         assert mesh.volume > 0
     combined = (folder / "joints.step").read_text(errors="ignore")
     assert all(f"'{name}'" in combined for name in names)
+    top, parts = _read_assembly(folder / "joints.step")
+    assert top == "joints" and [p[0] for p in parts] == names
+    for name, solid in parts[:3]:
+        assert _volume_and_box(solid) == pytest.approx(_volume_and_box(_read_step(folder / f"{name}.step")), abs=1e-6)
 
 
+@slow
 def test_cut_list_matches_the_geometry_and_the_bars_fit(small_run):
     import pandas as pd
 
@@ -72,6 +80,7 @@ def test_cut_list_matches_the_geometry_and_the_bars_fit(small_run):
     assert len(bars) >= lower_bound
 
 
+@slow
 def test_panel_dxfs_reread_with_ezdxf(small_run):
     import ezdxf
     from shapely.geometry import Polygon
@@ -93,6 +102,7 @@ def test_panel_dxfs_reread_with_ezdxf(small_run):
         assert area > 0
 
 
+@slow
 def test_sheets_hold_every_panel_without_overlap(small_run):
     import ezdxf
     from shapely.geometry import Polygon
@@ -113,6 +123,7 @@ def test_sheets_hold_every_panel_without_overlap(small_run):
     assert seen == panel_count
 
 
+@slow
 def test_plan_drawings_and_whole_model(small_run):
     import ezdxf
     import rhino3dm
@@ -133,6 +144,7 @@ def test_plan_drawings_and_whole_model(small_run):
     assert "'J0001'" in step and "'B0001'" in step
 
 
+@slow
 def test_assembly_places_every_beam_once(small_run):
     import pandas as pd
 
@@ -143,3 +155,160 @@ def test_assembly_places_every_beam_once(small_run):
     beams = [p for p in parts if p.startswith("B")]
     assert sorted(beams) == sorted(f"B{k + 1:04d}" for k in range(len(polymesh.edges)))
     assert len(set(beams)) == len(beams)
+
+
+# ----------------------------------------------------------------------------- joint solids, fast paths
+
+def _joint_geometry(tilt_deg: float = 0.0, beams: int = 3, node: int = 6):
+    """A node of ``beams`` beams at equal angles, tilted ``tilt_deg`` up from the hub's top plane."""
+    from fabrication.joints import JointGeometry
+
+    t = np.radians(tilt_deg)
+    turns = 2 * np.pi * np.arange(beams) / beams
+    directions = np.stack([np.cos(turns) * np.cos(t), np.sin(turns) * np.cos(t), np.full(beams, np.sin(t))], axis=1)
+    return JointGeometry(node=node, position_mm=np.array([120.0, -80.0, 310.0]), directions=directions,
+                         axis=np.array([0.0, 0.0, 1.0]), beam_size_mm=12.0)
+
+
+def _volume(shape) -> float:
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    props = GProp_GProps()
+    BRepGProp.VolumeProperties_s(shape, props, 1e-9)
+    return props.Mass()
+
+
+def _volume_and_box(shape) -> list[float]:
+    from OCP.Bnd import Bnd_Box
+    from OCP.BRepBndLib import BRepBndLib
+
+    box = Bnd_Box()
+    BRepBndLib.Add_s(shape, box)
+    return [_volume(shape), *box.Get()]
+
+
+def _read_step(path):
+    from OCP.IFSelect import IFSelect_RetDone
+    from OCP.STEPControl import STEPControl_Reader
+
+    reader = STEPControl_Reader()
+    assert reader.ReadFile(str(path)) == IFSelect_RetDone
+    reader.TransferRoots()
+    return reader.OneShape()
+
+
+def _read_assembly(path):
+    """(name of the top product, [(component name, its shape)]) read with OCCT's XCAF reader."""
+    from OCP.STEPCAFControl import STEPCAFControl_Reader
+    from OCP.TCollection import TCollection_ExtendedString
+    from OCP.TDataStd import TDataStd_Name
+    from OCP.TDF import TDF_LabelSequence
+    from OCP.TDocStd import TDocStd_Document
+    from OCP.XCAFApp import XCAFApp_Application
+    from OCP.XCAFDoc import XCAFDoc_DocumentTool, XCAFDoc_ShapeTool
+
+    def name(label) -> str:
+        attribute = TDataStd_Name()
+        return attribute.Get().ToExtString() if label.FindAttribute(TDataStd_Name.GetID_s(), attribute) else ""
+
+    document = TDocStd_Document(TCollection_ExtendedString("XmlOcaf"))
+    XCAFApp_Application.GetApplication_s().NewDocument(TCollection_ExtendedString("MDTV-XCAF"), document)
+    reader = STEPCAFControl_Reader()
+    reader.SetNameMode(True)
+    reader.ReadFile(str(path))
+    assert reader.Transfer(document)
+    tool = XCAFDoc_DocumentTool.ShapeTool_s(document.Main())
+    free = TDF_LabelSequence()
+    tool.GetFreeShapes(free)
+    assert free.Length() == 1, "one top product"
+    components = TDF_LabelSequence()
+    XCAFDoc_ShapeTool.GetComponents_s(free.Value(1), components)
+    parts = [(name(components.Value(i)), XCAFDoc_ShapeTool.GetShape_s(components.Value(i)))
+             for i in range(1, components.Length() + 1)]
+    return name(free.Value(1)), parts
+
+
+def test_engraving_by_faces_removes_the_glyphs_times_the_depth(monkeypatch):
+    """The pockets built face by face are the boolean cut of the glyph prisms: same volume, and the
+    volume removed is the glyphs' area (OCCT's surface integral) times the engraving depth."""
+    from dataclasses import replace
+
+    from fabrication import joints
+    from fabrication.engraving import pocket_volume, text_faces
+
+    geometry, settings = _joint_geometry(), joints.JointSettings()
+    solid, report = joints.build_joint(geometry, settings)
+    assert report["engraving"] == "faces" and report["valid"]
+    assert len(solid.solids()) == 1
+    plain, _ = joints.build_joint(geometry, replace(settings, engrave=False))
+    hub_radius = 1.5 * (6.0 + settings.clearance_mm + settings.wall_mm)
+    removed = pocket_volume(text_faces("J0007", 0.45 * hub_radius), joints.ENGRAVE_DEPTH_MM)
+    assert _volume(plain.wrapped) - _volume(solid.wrapped) == pytest.approx(removed, rel=1e-7)
+    monkeypatch.setattr(joints, "_label_is_clear", lambda *args, **kwargs: False)
+    cut, report = joints.build_joint(geometry, settings)
+    assert report["engraving"] == "boolean"
+    assert _volume(cut.wrapped) == pytest.approx(_volume(solid.wrapped), rel=1e-9)
+    assert len(cut.faces()) == len(solid.faces())
+
+
+def test_a_label_over_rising_sleeves_falls_back_to_the_boolean_cut():
+    """Sleeves tilted 20 degrees up break through the hub's top face: the label is cut as before
+    and the joint is still one valid solid."""
+    from fabrication import joints
+
+    solid, report = joints.build_joint(_joint_geometry(tilt_deg=20.0), joints.JointSettings())
+    assert report["engraving"] == "boolean"
+    assert len(solid.solids()) == 1 and solid.is_valid
+
+
+def test_tessellation_is_build123d_s():
+    """The numpy read of the triangulation gives build123d's tessellate() vertices and triangles."""
+    import copy
+
+    from fabrication import joints
+
+    solid, _ = joints.build_joint(_joint_geometry(), joints.JointSettings())
+    vertices, triangles = joints._tessellate(copy.deepcopy(solid).wrapped, 0.05, 0.3)
+    reference_vertices, reference_triangles = copy.deepcopy(solid).tessellate(0.05, 0.3)
+    assert np.array_equal(triangles, np.array(reference_triangles))
+    assert np.allclose(vertices, np.array([tuple(v) for v in reference_vertices]), atol=1e-9)
+
+
+def test_label_clearance_distances_are_least_distances():
+    """Segment-to-box distances by golden section against a dense sampling of each segment."""
+    from fabrication.joints import _segment_box_distances
+
+    rng = np.random.default_rng(3)
+    a, b = 5 * rng.normal(size=(300, 3)), 5 * rng.normal(size=(300, 3))
+    low = rng.normal(size=(300, 3))
+    high = low + 3 * rng.random((300, 3))
+    t = np.linspace(0.0, 1.0, 20001)[None, :, None]
+    points = a[:, None] + t * (b - a)[:, None]
+    sampled = np.linalg.norm(points - np.clip(points, low[:, None], high[:, None]), axis=2).min(axis=1)
+    found = _segment_box_distances(a, b, low, high)
+    assert np.all(found <= sampled + 1e-12)
+    assert np.allclose(found, sampled, atol=1e-3)
+
+
+def test_assembly_step_from_part_files_reads_back(tmp_path):
+    """joints.step written from the parts' own STEP files: OCCT's XCAF reader finds one product
+    "joints" holding each part by its id, each the same solid (volume, box) as in its own file."""
+    from fabrication import joints
+    from fabrication.step_assembly import StepAssemblyWriter
+
+    ranges = joints._id_ranges(3)
+    names = []
+    with open(tmp_path / "joints.step", "w", encoding="utf-8") as combined:
+        writer = StepAssemblyWriter(combined, "joints")
+        for k, (tilt, beams) in enumerate([(0.0, 3), (2.0, 4), (-3.0, 2)]):
+            job = (_joint_geometry(tilt, beams, node=k), joints.JointSettings(), str(tmp_path), str(tmp_path), *ranges[k])
+            report = joints._build_and_write(job)
+            assert report["ok"], report
+            names.append(report["id"])
+            writer.add_file(report["_part"])
+        writer.finish(names)
+    top, parts = _read_assembly(tmp_path / "joints.step")
+    assert top == "joints" and [name for name, _ in parts] == names
+    for name, solid in parts:
+        assert _volume_and_box(solid) == pytest.approx(_volume_and_box(_read_step(tmp_path / f"{name}.step")), abs=1e-6)
