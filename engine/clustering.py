@@ -213,7 +213,7 @@ def _accumulate(labels, P, n_clusters):
 
 def centroids_of(S: np.ndarray) -> np.ndarray:
     """(k, 3) minimisers c = S1^-1 S2 of the cluster energies from moments (k, 10)."""
-    M = np.empty((len(S), 3, 3))
+    M = np.zeros((len(S), 3, 3))
     M[:, 0, 0], M[:, 1, 1], M[:, 2, 2] = S[:, 0], S[:, 1], S[:, 2]
     M[:, 0, 1] = M[:, 1, 0] = S[:, 3]
     M[:, 0, 2] = M[:, 2, 0] = S[:, 4]
