@@ -108,8 +108,8 @@ def main() -> int:
     print(f"ours:   {ours:7.3f} s warm remesh() (median of {args.repeat}): clustering {clustering:.3f} s "
           f"({q['clustering_sweeps']} sweeps), extraction {extraction:.3f} s, quality figures "
           f"{ours - clustering - extraction:.3f} s")
-    print(f"        first call {first:.2f} s: JIT compile {first - ours:.2f} s (fresh cache); "
-          f"a later process loads the compiled kernels in {cache_load:.2f} s")
+    print(f"        first call {first:.2f} s: JIT compile {first - ours:.2f} s (fresh cache); in a later process "
+          f"the first call costs {cache_load:.2f} s more than a warm one (numba import, kernels from the cache)")
     print(f"        peak memory: process {peak:.0f} MiB (max RSS so far, numba and numpy included), "
           f"numpy arrays of one remesh() {numpy_peak:.0f} MiB (tracemalloc)")
     print(f"        cells {q['n_faces']}, hexagons {100 * q['hexagon_share_interior']:.1f} % of interior cells, "
