@@ -205,6 +205,9 @@ class _Fine:
 
 
 def _refine(mesh: TriMesh, field: GuidingField, n_cells: int) -> _Fine:
+    """The mesh to cluster: the surface when it has VERTICES_PER_CELL vertices per cell, else
+    subdivided until it has REFINED_VERTICES_PER_CELL (within MAX_FINE_VERTICES); vertex metrics
+    (tangent + normal regularisation), 1 / h^2, areas, edges, boundary loops and corners."""
     vertices, faces = mesh.vertices, mesh.faces
     tangent = field.metric()
     normals = np.asarray(field.normals, dtype=float)
@@ -701,7 +704,7 @@ class _Timing:
 def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: RemeshSettings,
                 support_vertices: np.ndarray | None, say, timing: _Timing | None = None) -> PolyMesh:
     """The grid-shell of ``n_cells`` cells. Where the clustered mesh is small, several lattice
-    offsets (seeds settings.seed, +1, ...) are tried, up to START_BUDGET clustered vertices in all
+    offsets (seeds settings.seed, +1, ...; odd starts turned by LATTICE_TURNS_DEG) are tried, up to START_BUDGET clustered vertices in all
     and MAX_STARTS starts, and the grid with the largest hexagon share of interior cells is kept."""
     from time import perf_counter
 
