@@ -704,8 +704,9 @@ class _Timing:
 def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: RemeshSettings,
                 support_vertices: np.ndarray | None, say, timing: _Timing | None = None) -> PolyMesh:
     """The grid-shell of ``n_cells`` cells. Where the clustered mesh is small, several lattice
-    offsets (seeds settings.seed, +1, ...; odd starts turned by LATTICE_TURNS_DEG) are tried, up to START_BUDGET clustered vertices in all
-    and MAX_STARTS starts, and the grid with the largest hexagon share of interior cells is kept."""
+    offsets (seeds settings.seed, +1, ...; the lattice turned by LATTICE_TURNS_DEG in turn) are
+    tried, up to START_BUDGET clustered vertices in all and MAX_STARTS starts, and the grid with the
+    largest hexagon share of interior cells is kept."""
     from time import perf_counter
 
     say("refining the surface", 0.0)
