@@ -519,3 +519,163 @@ def test_the_kept_factor_follows_the_model_and_its_supports():
     mid[n // 2, 2] = -P
     deflection = -linear_static(model, propped, mid).displacements[n // 2, 2]
     assert deflection == pytest.approx(7 * P * length**3 / (768 * E * IY), rel=1e-9)
+
+
+def _extensible_elastica_toggle(half_span: float, rise: float, EA: float, EI: float):
+    """Apex load P(w) of a symmetric clamped toggle from the extensible elastica of one member.
+
+    The member runs from the clamped support (0, 0) to the apex (b, h); by symmetry the apex moves
+    straight down by w and does not rotate. Along the undeformed arc length s, with the constant
+    end force F = (Fx, Fz) on the member at the apex and the moment m_A at the support:
+    EI theta' = m_A - (x Fz - z Fx), (x', z') = (1 + N / EA)(cos theta, sin theta),
+    N = Fx cos theta + Fz sin theta. Shooting on (Fx, Fz, m_A) meets x = b, z = h - w and
+    theta = theta_0 at the apex; P = -2 Fz. An exact solution of the Euler-Bernoulli rod problem
+    by a method that shares nothing with the co-rotational elements."""
+    from scipy.integrate import solve_ivp
+    from scipy.optimize import fsolve
+
+    angle, length = np.arctan2(rise, half_span), np.hypot(half_span, rise)
+
+    def apex(unknowns):
+        fx, fz, moment = unknowns
+
+        def rod(s, y):
+            x, z, theta = y
+            stretch = 1.0 + (fx * np.cos(theta) + fz * np.sin(theta)) / EA
+            return [stretch * np.cos(theta), stretch * np.sin(theta), (moment - (x * fz - z * fx)) / EI]
+
+        return solve_ivp(rod, (0.0, length), [0.0, 0.0, angle], method="DOP853", rtol=1e-11, atol=1e-13).y[:, -1]
+
+    state = {"guess": np.zeros(3)}
+
+    def load(w: float) -> float:
+        def mismatch(unknowns):
+            x, z, theta = apex(unknowns)
+            return [x - half_span, z - (rise - w), (theta - angle) * length]
+
+        state["guess"] = fsolve(mismatch, state["guess"], xtol=1e-13)
+        return -2.0 * state["guess"][1]
+
+    return load
+
+
+def test_williams_toggle_limit_load():
+    """Williams' toggle (Williams 1964): two members of half span 12.943 in and rise 0.386 in,
+    clamped at both supports and rigidly joined at the apex, E 10.3e6 psi, A 0.18 in^2,
+    I 0.0009 in^4, apex load. Reference: the limit load of the extensible elastica of the same
+    frame (shooting, _extensible_elastica_toggle), about 33.6 lbf at an apex deflection near
+    0.23 in; the co-rotational beams converge to it under mesh refinement."""
+    from scipy.optimize import minimize_scalar
+
+    half_span, rise, E_psi, A_in2, I_in4 = 12.943, 0.386, 10.3e6, 0.18, 0.0009
+    load = _extensible_elastica_toggle(half_span, rise, E_psi * A_in2, E_psi * I_in4)
+    coarse = [(w, load(w)) for w in np.linspace(0.02, 0.36, 18)]
+    k = int(np.argmax([p for _, p in coarse]))
+    assert 0 < k < len(coarse) - 1, "the elastica has a limit point inside the traced range"
+    load(coarse[k - 1][0])
+    peak = minimize_scalar(lambda w: -load(w), bounds=(coarse[k - 1][0], coarse[k + 1][0]), method="bounded",
+                           options={"xatol": 1e-7})
+    reference = -peak.fun
+
+    def frame_limit(n: int) -> tuple[float, np.ndarray]:
+        t = np.linspace(0.0, 1.0, n + 1)
+        nodes = np.vstack([np.c_[half_span * t, np.zeros(n + 1), rise * t],
+                           np.c_[half_span * (1 + t[1:]), np.zeros(n), rise * (1 - t[1:])]])
+        model = FrameModel(nodes=nodes, beams=np.c_[np.arange(2 * n), np.arange(1, 2 * n + 1)], E=E_psi,
+                           G=E_psi / 2.6, A=A_in2, Iy=I_in4, Iz=I_in4, J=2 * I_in4, up=np.array([0.0, 1.0, 0.0]))
+        in_plane = np.array([0, 1, 0, 1, 0, 1], bool)
+        supports = Supports.merge([(np.array([0, 2 * n]), FIXED), (np.arange(1, 2 * n), in_plane)])
+        loads = np.zeros((2 * n + 1, 6))
+        loads[n, 2] = -1.0
+        run = nonlinear_static(model, supports, loads, control=(n, 2), max_load_factor=200.0, max_steps=150)
+        assert run.converged and run.limit_load_factor is not None
+        return run.limit_load_factor, run.negative_pivots
+
+    coarse_limit, _ = frame_limit(8)
+    fine_limit, pivots = frame_limit(16)
+    assert fine_limit == pytest.approx(reference, rel=0.01)
+    assert abs(fine_limit - reference) < 0.5 * abs(coarse_limit - reference), "converges under refinement"
+    assert pivots[-1] == 1, "one negative pivot past the limit point"
+
+
+#: Levy & Spillers, Analysis of Geometrically Nonlinear Structures (2nd ed., 2003), section 2.4.2:
+#: the 24-member star dome (space truss), coordinates in inches, supports pinned at the outer ring.
+STAR_DOME_NODES = np.array([
+    [0.0, 0.0, 3.2346],
+    [4.92125, 8.5239, 2.4472], [-4.92125, 8.5239, 2.4472], [-9.8425, 0.0, 2.4472],
+    [-4.92125, -8.5239, 2.4472], [4.92125, -8.5239, 2.4472], [9.8425, 0.0, 2.4472],
+    [0.0, 19.685, 0.0], [-17.0472, 9.8425, 0.0], [-17.0472, -9.8425, 0.0],
+    [0.0, -19.685, 0.0], [17.0472, -9.8425, 0.0], [17.0472, 9.8425, 0.0]])
+STAR_DOME_MEMBERS = np.array([
+    [0, 1], [0, 2], [0, 3], [0, 4], [0, 5], [0, 6], [5, 11], [6, 11], [6, 12], [1, 12], [1, 7], [2, 7],
+    [2, 8], [3, 8], [3, 9], [4, 9], [4, 10], [5, 10], [1, 2], [2, 3], [3, 4], [4, 5], [5, 6], [6, 1]])
+
+
+def _star_dome_symmetric_limit(E_psi: float, A_in2: float) -> float:
+    """Limit load of the star dome's symmetric path from a reduced model: crown down by w, the six
+    ring nodes out by u and down by v, bar forces N = EA (l - L) / L as in the co-rotational
+    element; for each w the ring is in equilibrium (two equations) and P(w) is the crown's
+    generalised force; the maximum of P over w is found by bounded scalar search."""
+    from scipy.optimize import fsolve, minimize_scalar
+
+    ring = np.arange(1, 7)
+    radial = STAR_DOME_NODES[ring, :2] / np.linalg.norm(STAR_DOME_NODES[ring, :2], axis=1)[:, None]
+    rest = np.linalg.norm(STAR_DOME_NODES[STAR_DOME_MEMBERS[:, 1]] - STAR_DOME_NODES[STAR_DOME_MEMBERS[:, 0]], axis=1)
+
+    def forces(w, u, v):
+        x = STAR_DOME_NODES.copy()
+        x[0, 2] -= w
+        x[ring, :2] += u * radial
+        x[ring, 2] -= v
+        d = x[STAR_DOME_MEMBERS[:, 1]] - x[STAR_DOME_MEMBERS[:, 0]]
+        length = np.linalg.norm(d, axis=1)
+        pull = (E_psi * A_in2 * (length - rest) / rest / length)[:, None] * d
+        nodal = np.zeros_like(x)
+        np.add.at(nodal, STAR_DOME_MEMBERS[:, 0], pull)
+        np.add.at(nodal, STAR_DOME_MEMBERS[:, 1], -pull)
+        # the bars' forces on the nodes, as generalised forces of (w, u, v): the crown's balances P,
+        # the ring's (no load there) vanish
+        return np.array([nodal[0, 2], np.einsum("ij,ij->", nodal[ring, :2], radial), nodal[ring, 2].sum()])
+
+    state = {"ring": np.zeros(2)}
+
+    def crown_load(w: float) -> float:
+        state["ring"] = fsolve(lambda uv: forces(w, *uv)[1:], state["ring"], xtol=1e-9)
+        return forces(w, *state["ring"])[0]
+
+    ws = np.linspace(0.01, 0.6, 60)
+    loads = [crown_load(w) for w in ws]
+    k = int(np.argmax(loads))
+    state["ring"] = np.zeros(2)
+    for w in ws[:k]:
+        crown_load(w)
+    peak = minimize_scalar(lambda w: -crown_load(w), bounds=(ws[k - 1], ws[k + 1]), method="bounded",
+                           options={"xatol": 1e-8})
+    return -peak.fun
+
+
+def test_star_dome_linear_deflection_and_limit_load():
+    """The 24-member star dome (a shallow space truss; Levy & Spillers 2003, section 2.4.2), E 30e6 psi,
+    A 0.0155 in^2, crown load 220.46 lbf: published linear crown deflection 0.20641184 in; the
+    non-linear path meets its limit point at the maximum of the symmetric path of a reduced
+    three-unknown model of the same bars (about 0.666 of that load, well below 1, as the book says).
+    The bars are beams with both bending moments and one end's torsion released, every node's
+    rotations held."""
+    E_psi, A_in2, P = 30e6, 0.0155, 220.46
+    n_members = len(STAR_DOME_MEMBERS)
+    releases = np.zeros((n_members, 2, 6), bool)
+    releases[:, :, 4:] = True
+    releases[:, 1, 3] = True
+    model = FrameModel(nodes=STAR_DOME_NODES, beams=STAR_DOME_MEMBERS, E=E_psi, G=E_psi / 2.6, A=A_in2,
+                       Iy=1e-4, Iz=1e-4, J=1e-4, up=np.array([0.0, 0.0, 1.0]), releases=releases)
+    rotations = np.array([0, 0, 0, 1, 1, 1], bool)
+    supports = Supports.merge([(np.arange(7, 13), FIXED), (np.arange(0, 7), rotations)])
+    loads = np.zeros((13, 6))
+    loads[0, 2] = -P
+    linear = linear_static(model, supports, loads)
+    assert linear.displacements[0, 2] == pytest.approx(-0.20641184, rel=1e-5)
+    run = nonlinear_static(model, supports, loads, control=(0, 2), max_load_factor=5.0, max_steps=200)
+    assert run.converged and run.limit_load_factor is not None
+    assert run.limit_load_factor * P == pytest.approx(_star_dome_symmetric_limit(E_psi, A_in2), rel=1e-3)
+    assert run.limit_load_factor < 0.7
+    assert run.negative_pivots[-1] == 1, "a limit point: one negative pivot past it"
