@@ -40,17 +40,24 @@ def main() -> int:
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="gridshell-e2e-")) / "mockup"
     shutil.rmtree(out, ignore_errors=True)
     base = ([args.project] if args.project else []) + ["--out", str(out), "--quiet"]
+    load_before = os.getloadavg()
     cold, cold_peak, code = _run(["run", *base])
     if code != 0:
         print(f"cold run failed with exit code {code}")
         return 1
     cold_stages = json.loads((out / "manifest.json").read_text())["stages"]
+    fabrication = out / "07-fabrication" / "fabrication.json"
+    steps = json.loads(fabrication.read_text()).get("step_seconds", {}) if fabrication.is_file() else {}
+    load_after_cold = os.getloadavg()
     cached, cached_peak, code = _run(["run", *base])
     manifest = json.loads((out / "manifest.json").read_text())
     stages = {s["name"]: (s["status"], s.get("duration_s", 0.0)) for s in manifest["stages"]}
     print(f"cores: {os.cpu_count()}  output: {out}")
+    print(f"load average before / after the cold run: {load_before[0]:.2f} / {load_after_cold[0]:.2f}")
     print("stage durations of the cold run (s): "
           + ", ".join(f"{s['name']} {s.get('duration_s', 0.0):.1f}" for s in cold_stages))
+    if steps:
+        print("fabrication steps of the cold run (s): " + ", ".join(f"{k} {v:.1f}" for k, v in steps.items()))
     print(f"{'run':<8}{'time s':>10}{'target s':>10}{'peak MiB':>10}")
     print(f"{'cold':<8}{cold:>10.1f}{120:>10}{cold_peak:>10.0f}")
     print(f"{'cached':<8}{cached:>10.2f}{5:>10}{cached_peak:>10.0f}")

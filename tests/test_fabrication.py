@@ -262,6 +262,29 @@ def test_a_label_over_rising_sleeves_falls_back_to_the_boolean_cut():
     assert len(solid.solids()) == 1 and solid.is_valid
 
 
+def test_a_node_with_collinear_beams_is_built_and_its_chips_reported(tmp_path):
+    """A boundary node of the mock-up with two collinear beams and a 33 degree pair, whose clean-up
+    after the booleans (ShapeUpgrade_UnifySameDomain) ran out of memory: it is built, and where
+    the pin holes of the close pair cut chips off each other's sleeve, the joint is reported as
+    not one solid (and not ok)."""
+    from fabrication import joints
+
+    directions = np.array([[-0.1875702600849381, -0.8247855237947891, 0.533428755571186],
+                           [-0.6962349513440719, -0.6115078859454885, 0.37591887150473996],
+                           [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    axis = np.array([-0.00747914515050758, 0.5407323879219, 0.8411614274561676])
+    geometry = joints.JointGeometry(node=111, position_mm=np.zeros(3), directions=directions, axis=axis,
+                                    beam_size_mm=12.0)
+    report = joints._build_and_write((geometry, joints.JointSettings(), str(tmp_path), str(tmp_path),
+                                      *joints._id_ranges(1)[0]))
+    solid, _ = joints.build_joint(geometry, joints.JointSettings())
+    pieces = sorted(solid.solids(), key=lambda p: p.volume)
+    assert pieces[-1].is_valid and pieces[-1].volume > 0.99 * sum(p.volume for p in pieces)
+    assert report["single_solid"] == (len(pieces) == 1)
+    assert len(pieces) == 1 or not report["ok"]
+    assert report["max_axis_error_deg"] < 1e-6
+
+
 def test_tessellation_is_build123d_s():
     """The numpy read of the triangulation gives build123d's tessellate() vertices and triangles."""
     import copy

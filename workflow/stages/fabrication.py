@@ -3,13 +3,15 @@
 Artifacts (07-fabrication/): joints/ (J0001.step, J0001.stl ..., joints.step), beams/
 (cutlist.csv, cutlist.xlsx, bars.csv, beams.step), panels/ (P0001.dxf ..., sheets/S01.dxf
 ..., panels.csv), assembly/ (sequence.csv, steps/*.png), drawings/ (plan.dxf, plan.pdf),
-gridshell.step, gridshell.3dm and fabrication.json (counts and checks). Lengths in mm.
+gridshell.step, gridshell.3dm and fabrication.json (counts and checks, and the seconds each step
+took, ``step_seconds``). Lengths in mm.
 """
 
 from __future__ import annotations
 
 import importlib
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -31,8 +33,29 @@ def beam_outer_size_mm(project: Project) -> float:
     return MM * (s.diameter if s.diameter is not None else max(s.height or 0.0, s.width or 0.0))
 
 
+class _StepClock:
+    """Seconds per named step of the stage: each ``start`` ends the step before."""
+
+    def __init__(self, ctx) -> None:
+        self._ctx = ctx
+        self.seconds: dict[str, float] = {}
+        self._name: str | None = None
+        self._started = 0.0
+
+    def start(self, name: str) -> None:
+        self.stop()
+        self._ctx.step(name)
+        self._name, self._started = name, time.perf_counter()
+
+    def stop(self) -> None:
+        if self._name is not None:
+            self.seconds[self._name] = round(self.seconds.get(self._name, 0.0) + time.perf_counter() - self._started, 3)
+            self._name = None
+
+
 def run(ctx):
     project: Project = ctx.project
+    clock = _StepClock(ctx)
     config = project.fabrication
     surface = ctx.result("surface")
     polymesh = ctx.result("optimize")
@@ -50,13 +73,14 @@ def run(ctx):
         "hub_radius_mm": None if j.hub_radius is None else MM * j.hub_radius,
         "sleeve_length_mm": None if j.sleeve_length is None else MM * j.sleeve_length,
         "plate_thickness_mm": MM * j.plate_thickness, "bolt_hole_mm": MM * j.bolt_hole}.items() if v is not None})
-    ctx.step("joints")
+    clock.start("joints")
     joint_reports = build_joints(polymesh, normals, size_mm, joint_settings, folder / "joints",
                                  workers=config.workers, progress=ctx.step)
     summary["joints"] = len(joint_reports)
-    summary["joint_problems"] = [r for r in joint_reports if not r.get("ok", True)]
+    summary["joint_problems"] = [{k: v for k, v in r.items() if k != "seconds"} for r in joint_reports
+                                 if not r.get("ok", True)]
 
-    ctx.step("beams")
+    clock.start("beams: cut list")
     beams = require("fabrication", "fabrication.beams", "BeamSettings", "cut_list", "write_cut_list", "write_beams_step")
     BeamSettings, cut_list, write_cut_list, write_beams_step = beams
     nest_bars = require("fabrication", "fabrication.nesting_bars", "nest_bars")
@@ -69,8 +93,10 @@ def run(ctx):
                                  area_m2=section.A, outer_size_mm=size_mm)
     table = cut_list(polymesh, normals, beam_settings, joint_settings)
     write_cut_list(table, folder / "beams")
+    clock.start("beams: bar nesting")
     nesting = nest_bars(table["cut_length_mm"].to_numpy(), table["id"].tolist(), MM * b.stock_length, MM * b.kerf)
     _write_bars(nesting, folder / "beams" / "bars.csv")
+    clock.start("beams: beams.step")
     write_beams_step(polymesh, table, folder / "beams" / "beams.step", outer_size_mm=size_mm)
     summary.update({"bars_used": int(nesting.bars_used), "bars_lower_bound": int(nesting.lower_bound),
                     "bar_nesting_method": getattr(nesting, "method", ""), "bar_waste_mm": float(nesting.waste_mm),
@@ -79,7 +105,7 @@ def run(ctx):
 
     panels = []
     if config.panels.enabled:
-        ctx.step("panels")
+        clock.start("panels: flatten and DXFs")
         (PanelSettings, flatten_panels, write_panel_dxfs, write_panels_csv) = require(
             "fabrication", "fabrication.panels", "PanelSettings", "flatten_panels", "write_panel_dxfs", "write_panels_csv")
         SheetSettings, nest_sheets, write_sheet_dxfs = require("fabrication", "fabrication.nesting_sheets", "SheetSettings",
@@ -91,9 +117,11 @@ def run(ctx):
                                        split_nonplanar=p.split_nonplanar)
         panels = flatten_panels(polymesh, panel_settings)
         write_panel_dxfs(panels, folder / "panels", panel_settings)
+        clock.start("panels: sheet nesting")
         sheet_nesting = nest_sheets(panels, SheetSettings(width_mm=MM * s.width, height_mm=MM * s.height,
                                                           spacing_mm=MM * s.spacing, margin_mm=MM * s.margin,
                                                           rotations=s.rotations))
+        clock.start("panels: sheet DXFs, picture, CSV")
         write_sheet_dxfs(sheet_nesting, panels, folder / "panels" / "sheets")
         picture = getattr(importlib.import_module("fabrication.nesting_sheets"), "write_sheets_picture", None)
         if picture is not None:
@@ -106,24 +134,29 @@ def run(ctx):
                         "sheet_utilisation": float(getattr(sheet_nesting, "utilisation", 0.0)),
                         "panels_over_planarity_tolerance": [getattr(x, "id", "") for x in panels if getattr(x, "nonplanar", False)]})
 
-    ctx.step("drawings and model")
+    clock.start("drawings")
     write_plan_drawings = require("fabrication", "fabrication.drawings", "write_plan_drawings")
     write_plan_drawings(polymesh, folder / "drawings", project_name=project.project.name,
                         support_nodes=np.flatnonzero(polymesh.supports))
+    clock.start("model: gridshell.step")
     write_gridshell_step, write_gridshell_3dm = require("fabrication", "fabrication.model3d", "write_gridshell_step",
                                                         "write_gridshell_3dm")
     joint_radius_mm = getattr(joint_settings, "hub_radius_mm", None) or 1.5 * size_mm
     write_gridshell_step(polymesh, panels, size_mm / 2, joint_radius_mm, folder / "gridshell.step")
+    clock.start("model: gridshell.3dm")
     write_gridshell_3dm(polymesh, panels, size_mm / 2, joint_radius_mm, folder / "gridshell.3dm")
 
-    ctx.step("assembly sequence")
+    clock.start("assembly sequence: plan")
     plan_assembly, write_assembly = require("fabrication", "fabrication.assembly", "plan_assembly", "write_assembly")
     beam = {"E": props.E, "G": props.G, "A": props.A, "Iy": props.Iy, "Iz": props.Iz, "J": props.J,
             "mass_per_length": props.mass_per_length}
     sequence = plan_assembly(polymesh, np.flatnonzero(polymesh.supports), beam,
                              deflection_limit_m=config.assembly.deflection_limit)
+    clock.start("assembly sequence: files")
     written = write_assembly(sequence, polymesh, folder / "assembly")
     summary["assembly"] = written if isinstance(written, dict) else {"steps": len(getattr(sequence, "steps", []))}
+    clock.stop()
+    summary["step_seconds"] = clock.seconds
     write_text_atomic(folder / "fabrication.json", json.dumps(summary, indent=1, default=_jsonable))
     return summary
 
