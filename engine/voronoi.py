@@ -11,8 +11,11 @@ Seeds start on a hexagonal lattice over the best-fit plane and grow into cluster
 edge lengths (multi-source Dijkstra); Lloyd steps (seeds moved to the over-relaxed centroids,
 clusters regrown and clustered again) grade the cells, which single-vertex moves cannot; above
 about four times COARSEST_CELLS cells a coarse level runs first and its centroids and the
-midpoints of neighbouring centroids seed the next. Small meshes try several lattice offsets and
-keep the grid with the most hexagons. The polygon grid-shell is the dual of the clusters: a node
+midpoints of neighbouring centroids seed the next. At a few cells across, over-relaxed Lloyd
+steps carry the clusters among equally graded local minima whose hexagon shares differ by up to
+20 points, so the clusterings met along the finest level's steps are candidates; small meshes also
+try several lattice offsets, and the grid kept has every interior node of valence 3 and the most
+hexagons. The polygon grid-shell is the dual of the clusters: a node
 where three clusters meet (a triangle with three labels; at the anisotropic Voronoi vertex of
 the three centroids where that stays near the triangle and turns no beam round, else where the
 metric distances to the centroids balance along its edges), a beam along each border between two
@@ -72,6 +75,10 @@ START_BUDGET = 100_000
 LATTICE_TURNS_DEG = (0.0, 30.0)
 #: Fewest cells of the coarsest level.
 COARSEST_CELLS = 250
+#: Lloyd steps of the finest level after which its clusterings are candidates for the grid (the
+#: cells are graded from the second step on), and candidates per start whose polygons are made.
+FIRST_CANDIDATE_STEP = 2
+CANDIDATES_PER_START = 3
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -200,6 +207,7 @@ class _Fine:
     loops: list
     corners: np.ndarray      # vertex ids (of the surface, kept in the fine mesh)
     n_surface_vertices: int
+    boundary_vertices: np.ndarray            # ids of the vertices on the boundary loops
     adjacency: object = None                 # engine.clustering.MeshAdjacency, built on first use
     graph: sp.csr_matrix | None = None       # metric edge lengths, same order as the adjacency
 
@@ -229,7 +237,8 @@ def _refine(mesh: TriMesh, field: GuidingField, n_cells: int) -> _Fine:
     corners = corners[corners < mesh.n_vertices]
     return _Fine(vertices=vertices, faces=faces, metric=metric, normals=normals, inverse_h2=inverse_h2, areas=areas,
                  edges=edges, face_edges=face_edges, on_boundary=counts == 1, loops=loops, corners=corners,
-                 n_surface_vertices=mesh.n_vertices)
+                 n_surface_vertices=mesh.n_vertices,
+                 boundary_vertices=np.unique(np.concatenate(loops)) if loops else np.zeros(0, dtype=np.int64))
 
 
 # ----------------------------------------------------------------------------- clustering
@@ -390,9 +399,28 @@ def _snap(tree: cKDTree, target: np.ndarray, previous: np.ndarray) -> np.ndarray
     return out
 
 
-def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: float = 0.0) -> _Clusters:
+def _interior_hexagon_share(fine: _Fine, labels: np.ndarray, n_clusters: int) -> float:
+    """Share of interior clusters (no vertex on the boundary) with six neighbouring clusters: the
+    grid's hexagon share of interior cells, but where extraction collapses a short beam."""
+    E = fine.edges
+    la, lb = labels[E[:, 0]], labels[E[:, 1]]
+    mixed = la != lb
+    pairs = np.unique(np.minimum(la[mixed], lb[mixed]) * n_clusters + np.maximum(la[mixed], lb[mixed]))
+    degree = np.bincount(pairs // n_clusters, minlength=n_clusters) + np.bincount(pairs % n_clusters,
+                                                                                 minlength=n_clusters)
+    interior = np.ones(n_clusters, dtype=bool)
+    interior[labels[fine.boundary_vertices]] = False
+    return float(np.mean(degree[interior] == 6)) if interior.any() else 0.0
+
+
+def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: float = 0.0,
+             keep: int = 1) -> list[_Clusters]:
     """Coarse to fine: at each level, seeds grown into clusters, the clustering, then Lloyd steps
-    (seeds moved to the over-relaxed centroids, clusters regrown and clustered again)."""
+    (seeds moved to the over-relaxed centroids, clusters regrown and clustered again). Returns the
+    ``keep`` clusterings of the finest level with the largest interior hexagon share
+    (ties: the lower energy), from FIRST_CANDIDATE_STEP Lloyd steps on, best first: at a few cells
+    across, over-relaxed Lloyd steps move the clusters among equally graded local minima of the
+    energy whose hexagon shares differ by up to 20 points."""
     from .clustering import cluster_vertices
 
     rng = np.random.default_rng(settings.seed)
@@ -402,6 +430,7 @@ def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: floa
     counts = _level_counts(n_cells)
     sweeps = 0
     result = None
+    candidates: list[tuple[float, float, _Clusters]] = []
     for level, count in enumerate(counts):
         if result is None:
             seeds = _initial_seeds(fine, count, rng, turn_deg)
@@ -412,15 +441,26 @@ def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: floa
                                   len(seeds), max_sweeps=MAX_SWEEPS)
         sweeps += result.sweeps
         steps = min(settings.lloyd_iterations, COARSE_LLOYD_STEPS if level == 0 else LLOYD_STEPS)
-        for step in range(1, steps + 1):
-            relaxation = LLOYD_RELAXATION if step <= steps - LLOYD_PLAIN_STEPS else 1.0
-            target = fine.vertices[seeds] + relaxation * (result.centroids - fine.vertices[seeds])
-            seeds = _snap(tree, target, seeds)
-            labels = _grow_clusters(fine, seeds)
-            result = cluster_vertices(fine.vertices, fine.faces, fine.edges, adjacency, fine.metric, weights, labels,
-                                      len(seeds), max_sweeps=MAX_SWEEPS)
-            sweeps += result.sweeps
-    return _Clusters(labels=result.labels, centroids=result.centroids, sweeps=sweeps, moves=result.moves)
+        last = level == len(counts) - 1
+        for step in range(0, steps + 1):
+            if step > 0:
+                relaxation = LLOYD_RELAXATION if step <= steps - LLOYD_PLAIN_STEPS else 1.0
+                target = fine.vertices[seeds] + relaxation * (result.centroids - fine.vertices[seeds])
+                seeds = _snap(tree, target, seeds)
+                labels = _grow_clusters(fine, seeds)
+                result = cluster_vertices(fine.vertices, fine.faces, fine.edges, adjacency, fine.metric, weights,
+                                          labels, len(seeds), max_sweeps=MAX_SWEEPS)
+                sweeps += result.sweeps
+            if last and step >= min(FIRST_CANDIDATE_STEP, steps):
+                share = _interior_hexagon_share(fine, result.labels, len(seeds))
+                candidates.append((share, -float(result.energy.sum()),
+                                   _Clusters(labels=result.labels, centroids=result.centroids, sweeps=sweeps,
+                                             moves=result.moves)))
+                candidates.sort(key=lambda c: (c[0], c[1]), reverse=True)
+                del candidates[keep:]
+    for _, _, clusters in candidates:
+        clusters.sweeps = sweeps
+    return [clusters for _, _, clusters in candidates]
 
 
 # ----------------------------------------------------------------------------- extraction
@@ -705,31 +745,43 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
                 support_vertices: np.ndarray | None, say, timing: _Timing | None = None) -> PolyMesh:
     """The grid-shell of ``n_cells`` cells. Where the clustered mesh is small, several lattice
     offsets (seeds settings.seed, +1, ...; the lattice turned by LATTICE_TURNS_DEG in turn) are
-    tried, up to START_BUDGET clustered vertices in all and MAX_STARTS starts, and the grid with the
-    largest hexagon share of interior cells is kept."""
+    tried, up to START_BUDGET clustered vertices in all and MAX_STARTS starts, each giving its
+    CANDIDATES_PER_START best clusterings (a single start gives one); the grid kept is the
+    candidate's with the best _grid_score (valence 3, then hexagons)."""
     from time import perf_counter
 
     say("refining the surface", 0.0)
     fine = _refine(mesh, field, n_cells)
     starts = int(max(1, min(MAX_STARTS, START_BUDGET // len(fine.vertices))))
-    best, best_share = None, -1.0
+    best, best_score = None, (-1.0, -1.0)
     for start_index in range(starts):
         start = perf_counter()
         say(f"clustering {len(fine.vertices)} vertices into {n_cells} cells"
             + (f" (start {start_index + 1}/{starts})" if starts > 1 else ""), 0.1 + 0.8 * start_index / starts)
-        clusters = _cluster(fine, n_cells, replace(settings, seed=settings.seed + start_index),
-                            LATTICE_TURNS_DEG[start_index % len(LATTICE_TURNS_DEG)])
+        candidates = _cluster(fine, n_cells, replace(settings, seed=settings.seed + start_index),
+                              LATTICE_TURNS_DEG[start_index % len(LATTICE_TURNS_DEG)],
+                              keep=CANDIDATES_PER_START if starts > 1 else 1)
         middle = perf_counter()
-        polymesh = _polygons(mesh, fine, clusters, support_vertices)
+        for clusters in candidates:
+            polymesh = _polygons(mesh, fine, clusters, support_vertices)
+            score = _grid_score(polymesh)
+            if score > best_score:
+                best, best_score = polymesh, score
         if timing is not None:
             timing.clustering_s += middle - start
             timing.extraction_s += perf_counter() - middle
-            timing.sweeps = clusters.sweeps
-        interior = ~polymesh.face_boundary
-        share = float(np.mean(polymesh.face_degrees[interior] == 6)) if interior.any() else 0.0
-        if share > best_share:
-            best, best_share = polymesh, share
+            timing.sweeps = candidates[0].sweeps
     return best
+
+
+def _grid_score(polymesh: PolyMesh) -> tuple[float, float]:
+    """What the choice among candidate grids maximises: the share of interior nodes of valence 3
+    (a short beam collapsed where four cells nearly meet leaves a valence-4 node), then the
+    hexagon share of interior cells."""
+    interior_nodes = ~polymesh.boundary
+    valence3 = float(np.mean(polymesh.valence[interior_nodes] == 3)) if interior_nodes.any() else 1.0
+    interior = ~polymesh.face_boundary
+    return valence3, float(np.mean(polymesh.face_degrees[interior] == 6)) if interior.any() else 0.0
 
 
 def _polygons(mesh: TriMesh, fine: _Fine, clusters: _Clusters, support_vertices: np.ndarray | None) -> PolyMesh:
