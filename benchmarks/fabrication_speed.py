@@ -1,14 +1,18 @@
 """Fabrication speed: joints of a 500-node grid-shell (time per joint, both cores), and 1000
 panel DXFs with sheet nesting (benchmarks/_bench_panels.py).
 
-    .venv/bin/python benchmarks/fabrication_speed.py [--nodes 500] [--workers 2]
+    .venv/bin/python benchmarks/fabrication_speed.py [--nodes 500] [--workers 2] [--peers 12] [--skip-panels]
 
 Targets (issue 6): under 1 s per joint on average on 2 cores; 1000 panels with nesting under 30 s.
+Peers, measured in the same run on the first ``--peers`` joints, one process, CPU seconds: the id
+engraved by a boolean cut (as before the face-built pockets), and joints.step written by OCCT
+from all the solids held in one process (as before the part files streamed by the parent).
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
 import os
 import resource
 import sys
@@ -25,33 +29,101 @@ from engine.field import GuidingField  # noqa: E402
 from engine.parametric import mockup  # noqa: E402
 from engine.structure import node_normals  # noqa: E402
 from engine.voronoi import RemeshSettings, remesh  # noqa: E402
+from fabrication import joints  # noqa: E402
 from fabrication.joints import JointSettings, build_joints  # noqa: E402
 
 
-def bench_joints(nodes: int, workers: int) -> None:
+def _grid(nodes: int):
     surface = mockup().mesh
     n = surface.n_vertices
     field = GuidingField(size=np.ones(n), anisotropy=np.ones(n), direction=np.tile([1.0, 0, 0], (n, 1)),
                          normals=surface.vertex_normals)
     grid = remesh(surface, field, RemeshSettings(n_cells=max(8, nodes // 2), lloyd_iterations=20)).polymesh
-    normals = node_normals(grid, surface)
+    return grid, node_normals(grid, surface)
+
+
+def bench_joints(nodes: int, workers: int) -> None:
+    grid, normals = _grid(nodes)
+    load = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as folder:
         start = time.perf_counter()
         reports = build_joints(grid, normals, 12.0, JointSettings(), Path(folder) / "joints", workers=workers)
         seconds = time.perf_counter() - start
+        size_mb = (Path(folder) / "joints" / "joints.step").stat().st_size / 1e6
     ok = sum(r["ok"] for r in reports)
     print(f"joints: {len(reports)} on {workers} worker(s) in {seconds:.1f} s = {seconds / len(reports):.2f} s per joint "
           f"(target < 1 s); {ok} pass every check; peak {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB "
-          f"(parent)")
+          f"(parent); joints.step {size_mb:.0f} MB; load average {load:.2f} before, {os.getloadavg()[0]:.2f} after")
+    phases = {k: np.mean([r["seconds"][k] for r in reports]) for k in reports[0]["seconds"]}
+    print("  per joint in a worker (s, wall): " + ", ".join(f"{k} {v:.3f}" for k, v in phases.items())
+          + f"; engraving: {dict(collections.Counter(r.get('engraving') for r in reports))}")
+
+
+def bench_peers(nodes: int, count: int) -> None:
+    """CPU seconds per joint of the id engraved by faces against a boolean cut, and of joints.step
+    streamed from part files against OCCT writing it from the solids, on the same joints."""
+    from build123d import Compound, Location, export_step
+
+    from fabrication.files import atomic_path
+    from fabrication.step_assembly import StepAssemblyWriter
+
+    grid, normals = _grid(nodes)
+    geometries = joints.joint_geometry(grid, normals, 12.0)[:count]
+    settings = JointSettings()
+
+    def build_all() -> tuple[float, list]:
+        started = time.process_time()
+        solids = [joints.build_joint(g, settings)[0] for g in geometries]
+        return (time.process_time() - started) / len(geometries), solids
+
+    faces, solids = build_all()
+    clear = joints._label_is_clear
+    joints._label_is_clear = lambda *args, **kwargs: False
+    try:
+        boolean, _ = build_all()
+    finally:
+        joints._label_is_clear = clear
+    print(f"peer, engraving ({count} joints, CPU s per joint, whole build): faces {faces:.3f}, boolean cut {boolean:.3f} "
+          f"({boolean / faces:.1f}x)")
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(folder)
+        ranges = joints._id_ranges(len(geometries))
+        reports = [joints._build_and_write((g, settings, str(folder), str(folder), *ranges[k]))
+                   for k, g in enumerate(geometries)]
+        started = time.process_time()
+        with atomic_path(folder / "joints.step") as tmp, open(tmp, "w", encoding="utf-8") as combined:
+            writer = StepAssemblyWriter(combined, "joints")
+            for report in reports:
+                writer.add_file(Path(report["_part"]))
+            writer.finish([r["id"] for r in reports])
+        streamed = time.process_time() - started
+        started = time.process_time()
+        placed = []
+        for g, solid, report in zip(geometries, solids, reports):
+            part = solid.moved(Location(tuple(map(float, g.position_mm))))
+            part.label = report["id"]
+            placed.append(part)
+        assembly = Compound(children=placed)
+        assembly.label = "joints"
+        export_step(assembly, str(folder / "occt.step"))
+        occt = time.process_time() - started
+        # the part files themselves are written in the workers (STEP of each joint, then renumbered)
+        prepared = np.mean([r["seconds"]["check_and_step"] for r in reports])
+    print(f"peer, joints.step ({count} joints, parent CPU s per joint): streamed from part files {streamed / count:.4f}, "
+          f"OCCT from the solids {occt / count:.3f} ({occt / max(streamed, 1e-9):.0f}x); the workers spend "
+          f"{prepared:.3f} s per joint on checks, STEP and its part file")
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--nodes", type=int, default=500)
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--peers", type=int, default=12, help="joints for the peer figures (0: none)")
     parser.add_argument("--skip-panels", action="store_true")
     args = parser.parse_args()
     bench_joints(args.nodes, args.workers)
+    if args.peers:
+        bench_peers(args.nodes, args.peers)
     if not args.skip_panels:
         from _bench_panels import bench_panels
 

@@ -33,7 +33,7 @@ from .files import atomic_path
 from .step_assembly import StepAssemblyWriter, step_part, write_step_part
 
 __all__ = ["JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "build_joint", "build_joints",
-           "joint_name"]
+           "JointsInBackground", "joint_name"]
 
 ENGRAVE_DEPTH_MM = 0.6
 LABEL_MARGIN_MM = 0.5  # between the label and a sleeve rising through the hub's top face
@@ -501,47 +501,132 @@ def _id_ranges(n_joints: int) -> list[tuple[int, int]]:
     return [(first + k * stride, first + (k + 1) * stride - 1) for k in range(n_joints)]
 
 
+class JointsInBackground:
+    """Builds, checks and writes every joint in worker processes while the caller does other work
+    (the parent is otherwise idle while the joints take both cores)::
+
+        with JointsInBackground(polymesh, normals, beam_size_mm, settings, folder) as joints:
+            ...                    # the workers build; a thread streams their parts into joints.step
+            joints.wait(progress)  # optional: wait here, passing on the joints' progress
+        joints.reports             # one report per joint, in node order
+
+    The workers fork when the block is entered, before the caller's work starts. With one worker
+    (or a handful of joints) everything is built in this process when the block ends. Joints
+    with most beams go first, so that both cores stay busy to the end; ``seconds`` is the time
+    from entering the block to the last joint written."""
+
+    def __init__(self, polymesh: PolyMesh, normals: np.ndarray, beam_size_mm: float, settings: JointSettings,
+                 folder: Path, *, workers: int | None = None, progress=None) -> None:
+        self.folder = Path(folder)
+        self.geometries = joint_geometry(polymesh, normals, beam_size_mm)
+        self.settings = settings
+        self.workers = workers or os.cpu_count() or 1
+        self.progress = progress
+        self.reports: list[dict] = []
+        self.seconds = 0.0
+        self._ranges = _id_ranges(len(self.geometries))
+        self._latest: tuple[str, float] | None = None
+        self._error: BaseException | None = None
+        self._thread = None
+        self._pool = None
+        self._futures: list = []
+
+    def __enter__(self) -> JointsInBackground:
+        import contextlib
+        import threading
+
+        import build123d  # noqa: F401 - imported once here, before the workers fork, not once per worker
+        import trimesh  # noqa: F401 - likewise
+
+        self._started = time.perf_counter()
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self._stack = contextlib.ExitStack()
+        try:
+            parts = self._stack.enter_context(tempfile.TemporaryDirectory(dir=self.folder.parent))
+            path = self._stack.enter_context(atomic_path(self.folder / "joints.step"))
+            self._writer = StepAssemblyWriter(self._stack.enter_context(open(path, "w", encoding="utf-8")), "joints")
+            self._jobs = [(g, self.settings, str(self.folder), parts, *self._ranges[k])
+                          for k, g in enumerate(self.geometries)]
+            self._order = sorted(range(len(self._jobs)), key=lambda k: -len(self.geometries[k].directions))
+            if self.workers > 1 and len(self._jobs) > 4:
+                self._pool = self._stack.enter_context(ProcessPoolExecutor(max_workers=self.workers))
+                self._futures = [self._pool.submit(_build_and_write, self._jobs[k]) for k in self._order]
+                self._thread = threading.Thread(target=self._collect_all, name="joints", daemon=True)
+                self._thread.start()
+        except BaseException:
+            self._stack.close()
+            raise
+        return self
+
+    def _collect(self, report: dict) -> None:
+        part = report.pop("_part")
+        if part is None:
+            text = (self.folder / f"{report['id']}.step").read_text(encoding="utf-8")
+            self._writer.add(step_part(text, max(self._writer.next_free_id, self._ranges[-1][1] + 1)))
+        else:
+            self._writer.add_file(Path(part))
+            Path(part).unlink()
+        self.reports.append(report)
+        n, total = len(self.reports), len(self._jobs)
+        if n % 10 == 0 or n == total:
+            self._latest = (f"joints {n}/{total}", n / total)
+            if self.progress is not None:
+                self.progress(*self._latest)
+
+    def _collect_all(self) -> None:
+        try:
+            for future in as_completed(self._futures):
+                self._collect(future.result())
+        except BaseException as error:  # noqa: BLE001 - raised again in the caller's thread
+            self._error = error
+            for future in self._futures:
+                future.cancel()
+
+    def wait(self, progress=None, poll_s: float = 0.5) -> None:
+        """Wait for the workers, passing the latest progress message to ``progress`` meanwhile."""
+        while self._thread is not None and self._thread.is_alive():
+            self._thread.join(poll_s)
+            if progress is not None and self._latest is not None:
+                progress(*self._latest)
+
+    def __exit__(self, kind, value, traceback) -> bool:
+        error = value
+        if error is None:
+            try:
+                if self._thread is None:
+                    for k in self._order:
+                        self._collect(_build_and_write(self._jobs[k]))
+                self.wait()
+                if self._error is not None:
+                    raise self._error
+                self._writer.finish([joint_name(g.node) for g in self.geometries])
+                self.seconds = time.perf_counter() - self._started
+            except BaseException as failure:  # noqa: BLE001 - raised below, after the clean-up
+                error = failure
+        else:
+            for future in self._futures:
+                future.cancel()
+            self.wait()
+        if error is None:
+            self._stack.close()  # joints.step renamed into place, part files removed, workers ended
+        else:
+            for future in self._futures:
+                future.cancel()
+            self._stack.__exit__(type(error), error, error.__traceback__)  # joints.step left as it was
+            if value is None:
+                raise error
+        self.reports.sort(key=lambda r: r["node"])
+        return False
+
+
 def build_joints(polymesh: PolyMesh, normals: np.ndarray, beam_size_mm: float, settings: JointSettings, folder: Path,
                  *, workers: int | None = None, progress=None) -> list[dict]:
-    """Build, check and write every joint (see the module docstring); returns one report per joint,
-    in node order. Joints with most beams go first, so that both cores stay busy to the end."""
-    import build123d  # noqa: F401 - imported once here, before the workers fork, not once per worker
-    import trimesh  # noqa: F401 - likewise
-
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    geometries = joint_geometry(polymesh, normals, beam_size_mm)
-    workers = workers or os.cpu_count() or 1
-    ranges = _id_ranges(len(geometries))
-    reports: list[dict] = []
-    with tempfile.TemporaryDirectory(dir=folder.parent) as parts_folder, \
-            atomic_path(folder / "joints.step") as combined_path, open(combined_path, "w", encoding="utf-8") as combined:
-        writer = StepAssemblyWriter(combined, "joints")
-        jobs = [(g, settings, str(folder), parts_folder, *ranges[k]) for k, g in enumerate(geometries)]
-        order = sorted(range(len(jobs)), key=lambda k: -len(geometries[k].directions))
-
-        def collect(report: dict) -> None:
-            part = report.pop("_part")
-            if part is None:
-                text = (folder / f"{report['id']}.step").read_text(encoding="utf-8")
-                writer.add(step_part(text, max(writer.next_free_id, ranges[-1][1] + 1)))
-            else:
-                writer.add_file(Path(part))
-                Path(part).unlink()
-            reports.append(report)
-            if progress is not None and (len(reports) % 10 == 0 or len(reports) == len(jobs)):
-                progress(f"joints {len(reports)}/{len(jobs)}", len(reports) / len(jobs))
-
-        if workers > 1 and len(jobs) > 4:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                for future in as_completed([pool.submit(_build_and_write, jobs[k]) for k in order]):
-                    collect(future.result())
-        else:
-            for k in order:
-                collect(_build_and_write(jobs[k]))
-        writer.finish([joint_name(g.node) for g in geometries])
-    reports.sort(key=lambda r: r["node"])
-    return reports
+    """Build, check and write every joint (see the module docstring and JointsInBackground);
+    returns one report per joint, in node order."""
+    with JointsInBackground(polymesh, normals, beam_size_mm, settings, folder, workers=workers,
+                            progress=progress) as joints:
+        pass
+    return joints.reports
 
 
 def settings_dict(settings: JointSettings) -> dict:

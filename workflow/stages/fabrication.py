@@ -65,7 +65,8 @@ def run(ctx):
     size_mm = beam_outer_size_mm(project)
     summary: dict = {"nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces}
 
-    JointSettings, build_joints = require("fabrication", "fabrication.joints", "JointSettings", "build_joints")
+    JointSettings, JointsInBackground = require("fabrication", "fabrication.joints", "JointSettings",
+                                                "JointsInBackground")
     j = config.joints
     joint_settings = JointSettings(**{k: v for k, v in {
         "kind": j.kind, "clearance_mm": MM * j.clearance, "wall_mm": MM * j.wall, "min_wall_mm": MM * j.min_wall,
@@ -73,13 +74,32 @@ def run(ctx):
         "hub_radius_mm": None if j.hub_radius is None else MM * j.hub_radius,
         "sleeve_length_mm": None if j.sleeve_length is None else MM * j.sleeve_length,
         "plate_thickness_mm": MM * j.plate_thickness, "bolt_hole_mm": MM * j.bolt_hole}.items() if v is not None})
-    clock.start("joints")
-    joint_reports = build_joints(polymesh, normals, size_mm, joint_settings, folder / "joints",
-                                 workers=config.workers, progress=ctx.step)
+    summary.update({"joints": 0, "joint_problems": []})
+    # the joints take both cores in worker processes; the other steps run here meanwhile
+    clock.start("joints: start")
+    with JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
+                            workers=config.workers) as joints:
+        _beams_panels_drawings_assembly(ctx, clock, polymesh, normals, joint_settings, summary)
+        clock.start("joints: waiting")
+        joints.wait(ctx.step)
+    clock.stop()
+    clock.seconds["joints (alongside the other steps)"] = round(joints.seconds, 3)
+    joint_reports = joints.reports
     summary["joints"] = len(joint_reports)
     summary["joint_problems"] = [{k: v for k, v in r.items() if k != "seconds"} for r in joint_reports
                                  if not r.get("ok", True)]
+    summary["step_seconds"] = clock.seconds
+    write_text_atomic(folder / "fabrication.json", json.dumps(summary, indent=1, default=_jsonable))
+    return summary
 
+
+def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: np.ndarray, joint_settings,
+                                    summary: dict) -> None:
+    """Every step but the joints (they run meanwhile); fills ``summary``."""
+    project: Project = ctx.project
+    config = project.fabrication
+    folder: Path = ctx.folder
+    size_mm = beam_outer_size_mm(project)
     clock.start("beams: cut list")
     beams = require("fabrication", "fabrication.beams", "BeamSettings", "cut_list", "write_cut_list", "write_beams_step")
     BeamSettings, cut_list, write_cut_list, write_beams_step = beams
@@ -155,10 +175,6 @@ def run(ctx):
     clock.start("assembly sequence: files")
     written = write_assembly(sequence, polymesh, folder / "assembly")
     summary["assembly"] = written if isinstance(written, dict) else {"steps": len(getattr(sequence, "steps", []))}
-    clock.stop()
-    summary["step_seconds"] = clock.seconds
-    write_text_atomic(folder / "fabrication.json", json.dumps(summary, indent=1, default=_jsonable))
-    return summary
 
 
 def _jsonable(value):
