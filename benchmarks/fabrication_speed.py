@@ -51,9 +51,10 @@ def bench_joints(nodes: int, workers: int) -> None:
         seconds = time.perf_counter() - start
         size_mb = (Path(folder) / "joints" / "joints.step").stat().st_size / 1e6
     ok = sum(r["ok"] for r in reports)
-    print(f"joints: {len(reports)} on {workers} worker(s) in {seconds:.1f} s = {seconds / len(reports):.2f} s per joint "
-          f"(target < 1 s); {ok} pass every check; peak {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB "
-          f"(parent); joints.step {size_mb:.0f} MB; load average {load:.2f} before, {os.getloadavg()[0]:.2f} after")
+    peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"joints: {len(reports)} on {workers} worker(s) in {seconds:.1f} s = {seconds / len(reports):.2f} s "
+          f"per joint (target < 1 s); {ok} pass every check; peak {peak_mib:.0f} MiB (parent); joints.step {size_mb:.0f} MB; "
+          f"load average {load:.2f} before, {os.getloadavg()[0]:.2f} after")
     phases = {k: np.mean([r["seconds"][k] for r in reports]) for k in reports[0]["seconds"]}
     print("  per joint in a worker (s, wall): " + ", ".join(f"{k} {v:.3f}" for k, v in phases.items())
           + f"; engraving: {dict(collections.Counter(r.get('engraving') for r in reports))}")
@@ -83,7 +84,8 @@ def bench_peers(nodes: int, count: int) -> None:
         boolean, _ = build_all()
     finally:
         joints._label_is_clear = clear
-    print(f"peer, engraving ({count} joints, CPU s per joint, whole build): faces {faces:.3f}, boolean cut {boolean:.3f} "
+    print(f"peer, engraving ({count} joints, CPU s per joint, whole build): faces {faces:.3f}, "
+          f"boolean cut {boolean:.3f} "
           f"({boolean / faces:.1f}x)")
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
@@ -109,7 +111,8 @@ def bench_peers(nodes: int, count: int) -> None:
         occt = time.process_time() - started
         # the part files themselves are written in the workers (STEP of each joint, then renumbered)
         prepared = np.mean([r["seconds"]["check_and_step"] for r in reports])
-    print(f"peer, joints.step ({count} joints, parent CPU s per joint): streamed from part files {streamed / count:.4f}, "
+    print(f"peer, joints.step ({count} joints, parent CPU s per joint): "
+          f"streamed from part files {streamed / count:.4f}, "
           f"OCCT from the solids {occt / count:.3f} ({occt / max(streamed, 1e-9):.0f}x); the workers spend "
           f"{prepared:.3f} s per joint on checks, STEP and its part file")
 

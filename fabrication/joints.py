@@ -1,4 +1,4 @@
-"""Joint solids, one per node, built with build123d (mm).
+"""Joint solids, one per node, built with build123d and OCP (mm).
 
 Socket joint (3D printing): a cylindrical hub along the node axis (surface normal) with the
 node id engraved on its top face, one sleeve per beam (bore = beam size + 2 clearance, a wall
@@ -7,12 +7,13 @@ the least wall. Steel joint (full size): a hub tube along the node axis with one
 beam, in the plane of the beam and the axis, with a bolt hole. Files: joints/J0001.step (the
 solid named J0001), joints/J0001.stl (watertight), joints/joints.step (all, named).
 
-Speed (issue 6): a socket joint is one fuse (hub and sleeves) and one cut (bores and pin holes),
-in OCP, one joint per core; the id is engraved by building the pockets' faces into the hub's top
-face (fabrication.engraving) where the label is clear of bores, pin holes, sleeves and the hub's
-rim by the least wall, else by a boolean cut as before. Workers write each joint's files and its
-entities for joints.step (fabrication.step_assembly), so the parent only streams them into the
-combined file. Each joint's report records the seconds it took (``seconds``).
+Speed (issue 6): a socket joint is one fuse (hub and sleeves) and one cut (bores and pin holes)
+in OCP, one joint per core; the id is written between the sleeves and engraved by building the
+pockets' faces into the hub's top face (fabrication.engraving) where the label is clear of bores,
+pin holes and the hub's rim by the least wall and no sleeve rises through the face over it, else
+by a boolean cut as before. Workers write each joint's files and its entities for joints.step
+(fabrication.step_assembly); the parent streams them into the combined file and is free for other
+work meanwhile (JointsInBackground). Each joint's report records its seconds (``seconds``).
 """
 
 from __future__ import annotations
@@ -222,7 +223,8 @@ def _label_is_clear(bounds, origin, axis, x_dir, features, hub_radius: float, cl
     segment swept by a ball of the radius), which hold the cylinders."""
     y_dir = np.cross(axis, x_dir)
     x0, y0, x1, y1 = bounds
-    if max(math.hypot(x, y) for x in (x0 - clearance, x1 + clearance) for y in (y0 - clearance, y1 + clearance)) > hub_radius:
+    corners = [(x, y) for x in (x0 - clearance, x1 + clearance) for y in (y0 - clearance, y1 + clearance)]
+    if max(math.hypot(x, y) for x, y in corners) > hub_radius:
         return False
     frame = np.array([x_dir, y_dir, axis])
     reach = max(np.linalg.norm(end) for _, _, end, _ in features) + hub_radius
@@ -239,7 +241,8 @@ def _label_is_clear(bounds, origin, axis, x_dir, features, hub_radius: float, cl
     return all(_box_cylinder_distance(low[k], high[k], a[k], b[k], radius[k]) > 1e-6 for k in near)
 
 
-def _box_cylinder_distance(low: np.ndarray, high: np.ndarray, start: np.ndarray, end: np.ndarray, radius: float) -> float:
+def _box_cylinder_distance(low: np.ndarray, high: np.ndarray, start: np.ndarray, end: np.ndarray,
+                           radius: float) -> float:
     """Least distance (OCP BRepExtrema) between the box [low, high] and the solid cylinder of
     ``radius`` from ``start`` to ``end``; 0 where they meet."""
     from OCP.BRepExtrema import BRepExtrema_DistShapeShape

@@ -325,7 +325,8 @@ def test_assembly_step_from_part_files_reads_back(tmp_path):
     with open(tmp_path / "joints.step", "w", encoding="utf-8") as combined:
         writer = StepAssemblyWriter(combined, "joints")
         for k, (tilt, beams) in enumerate([(0.0, 3), (2.0, 4), (-3.0, 2)]):
-            job = (_joint_geometry(tilt, beams, node=k), joints.JointSettings(), str(tmp_path), str(tmp_path), *ranges[k])
+            job = (_joint_geometry(tilt, beams, node=k), joints.JointSettings(), str(tmp_path), str(tmp_path),
+                   *ranges[k])
             report = joints._build_and_write(job)
             assert report["ok"], report
             names.append(report["id"])
