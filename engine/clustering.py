@@ -24,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-__all__ = ["MeshAdjacency", "ClusteringResult", "mesh_adjacency", "vertex_moments", "cluster_vertices",
+__all__ = ["MeshAdjacency", "ClusteringResult", "mesh_adjacency", "vertex_moments", "centred_moments",
+           "cluster_vertices",
            "cluster_energy", "centroids_of", "simple_cycles"]
 
 #: Relative energy drop below which a move is not made (round-off guard).
@@ -229,13 +230,20 @@ def cluster_energy(vertices: np.ndarray, metric: np.ndarray, weights: np.ndarray
     return S[:, 9] - np.einsum("ki,ki->k", S[:, 6:9], c)
 
 
+def centred_moments(vertices: np.ndarray, metric: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """The vertex moments cluster_vertices works with: those of the vertices less their mean (less
+    round-off in S3 - S2^T S1^-1 S2); computed once, they serve every clustering of the same mesh."""
+    return vertex_moments(vertices - vertices.mean(axis=0), metric, weights)
+
+
 def cluster_vertices(vertices: np.ndarray, faces: np.ndarray, edges: np.ndarray, adjacency: MeshAdjacency,
                      metric: np.ndarray, weights: np.ndarray, labels: np.ndarray, n_clusters: int, *,
-                     max_sweeps: int = 200) -> ClusteringResult:
+                     max_sweeps: int = 200, moments: np.ndarray | None = None) -> ClusteringResult:
     """Minimise the total cluster energy from the initial ``labels`` (each cluster connected) by
-    boundary-vertex moves (see the module docstring); stops when a sweep moves nothing."""
+    boundary-vertex moves (see the module docstring); stops when a sweep moves nothing.
+    ``moments``: centred_moments(vertices, metric, weights), when already at hand."""
     centre = vertices.mean(axis=0)
-    P = vertex_moments(vertices - centre, metric, weights)  # centred: less round-off in S3 - S2^T S1^-1 S2
+    P = centred_moments(vertices, metric, weights) if moments is None else moments
     labels = np.array(labels, dtype=np.int64)
     S, count = _accumulate(labels, P, n_clusters)
     if np.any(count == 0):

@@ -210,6 +210,8 @@ class _Fine:
     boundary_vertices: np.ndarray            # ids of the vertices on the boundary loops
     adjacency: object = None                 # engine.clustering.MeshAdjacency, built on first use
     graph: sp.csr_matrix | None = None       # metric edge lengths, same order as the adjacency
+    moments: np.ndarray | None = None        # centred vertex moments of the clustering, on first use
+    tree: cKDTree | None = None              # of the vertices, on first use
 
 
 def _refine(mesh: TriMesh, field: GuidingField, n_cells: int) -> _Fine:
@@ -421,12 +423,17 @@ def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: floa
     (ties: the lower energy), from FIRST_CANDIDATE_STEP Lloyd steps on, best first: at a few cells
     across, over-relaxed Lloyd steps move the clusters among equally graded local minima of the
     energy whose hexagon shares differ by up to 20 points."""
-    from .clustering import cluster_vertices
+    from .clustering import centred_moments, cluster_vertices
 
     rng = np.random.default_rng(settings.seed)
     adjacency = _adjacency(fine)
     weights = fine.areas * fine.inverse_h2 ** (DENSITY_POWER / 2)
-    tree = cKDTree(fine.vertices)
+    if fine.moments is None:
+        fine.moments = centred_moments(fine.vertices, fine.metric, weights)
+    moments = fine.moments
+    if fine.tree is None:
+        fine.tree = cKDTree(fine.vertices)
+    tree = fine.tree
     counts = _level_counts(n_cells)
     sweeps = 0
     result = None
@@ -438,7 +445,7 @@ def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: floa
             seeds = _refined_seeds(fine, tree, result.labels, result.centroids, count, rng)
         labels = _grow_clusters(fine, seeds)
         result = cluster_vertices(fine.vertices, fine.faces, fine.edges, adjacency, fine.metric, weights, labels,
-                                  len(seeds), max_sweeps=MAX_SWEEPS)
+                                  len(seeds), max_sweeps=MAX_SWEEPS, moments=moments)
         sweeps += result.sweeps
         steps = min(settings.lloyd_iterations, COARSE_LLOYD_STEPS if level == 0 else LLOYD_STEPS)
         last = level == len(counts) - 1
@@ -449,7 +456,7 @@ def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: floa
                 seeds = _snap(tree, target, seeds)
                 labels = _grow_clusters(fine, seeds)
                 result = cluster_vertices(fine.vertices, fine.faces, fine.edges, adjacency, fine.metric, weights,
-                                          labels, len(seeds), max_sweeps=MAX_SWEEPS)
+                                          labels, len(seeds), max_sweeps=MAX_SWEEPS, moments=moments)
                 sweeps += result.sweeps
             if last and step >= min(FIRST_CANDIDATE_STEP, steps):
                 share = _interior_hexagon_share(fine, result.labels, len(seeds))
