@@ -155,6 +155,10 @@ def test_assembly_places_every_beam_once(small_run):
     beams = [p for p in parts if p.startswith("B")]
     assert sorted(beams) == sorted(f"B{k + 1:04d}" for k in range(len(polymesh.edges)))
     assert len(set(beams)) == len(beams)
+    summary = json.loads((out / "07-fabrication" / "fabrication.json").read_text())
+    # the summary names the sequence inside the finished stage folder, not the temporary one it was written in
+    assert summary["assembly"]["csv"] == "assembly/sequence.csv"
+    assert (out / "07-fabrication" / summary["assembly"]["csv"]).is_file()
 
 
 # ----------------------------------------------------------------------------- joint solids, fast paths

@@ -173,8 +173,10 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     sequence = plan_assembly(polymesh, np.flatnonzero(polymesh.supports), beam,
                              deflection_limit_m=config.assembly.deflection_limit)
     clock.start("assembly sequence: files")
-    written = write_assembly(sequence, polymesh, folder / "assembly")
-    summary["assembly"] = written if isinstance(written, dict) else {"steps": len(getattr(sequence, "steps", []))}
+    written = dict(write_assembly(sequence, polymesh, folder / "assembly"))
+    # the stage folder is a temporary one until the stage succeeds: name the file from the stage's folder
+    written["csv"] = Path(written["csv"]).relative_to(folder).as_posix()
+    summary["assembly"] = written
 
 
 def _jsonable(value):
