@@ -340,6 +340,8 @@ class _Clusters:
     centroids: np.ndarray
     sweeps: int
     moves: np.ndarray
+    hexagon_share: float = 0.0   # of interior clusters (_interior_hexagon_share)
+    energy: float = 0.0
 
 
 def _level_counts(n_cells: int) -> list[int]:
@@ -437,7 +439,7 @@ def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: floa
     counts = _level_counts(n_cells)
     sweeps = 0
     result = None
-    candidates: list[tuple[float, float, _Clusters]] = []
+    candidates: list[_Clusters] = []
     for level, count in enumerate(counts):
         if result is None:
             seeds = _initial_seeds(fine, count, rng, turn_deg)
@@ -459,15 +461,19 @@ def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: floa
                                           labels, len(seeds), max_sweeps=MAX_SWEEPS, moments=moments)
                 sweeps += result.sweeps
             if last and step >= min(FIRST_CANDIDATE_STEP, steps):
-                share = _interior_hexagon_share(fine, result.labels, len(seeds))
-                candidates.append((share, -float(result.energy.sum()),
-                                   _Clusters(labels=result.labels, centroids=result.centroids, sweeps=sweeps,
-                                             moves=result.moves)))
-                candidates.sort(key=lambda c: (c[0], c[1]), reverse=True)
+                candidates.append(_Clusters(labels=result.labels, centroids=result.centroids, sweeps=sweeps,
+                                            moves=result.moves, energy=float(result.energy.sum()),
+                                            hexagon_share=_interior_hexagon_share(fine, result.labels, len(seeds))))
+                candidates.sort(key=_candidate_order)
                 del candidates[keep:]
-    for _, _, clusters in candidates:
+    for clusters in candidates:
         clusters.sweeps = sweeps
-    return [clusters for _, _, clusters in candidates]
+    return candidates
+
+
+def _candidate_order(clusters: _Clusters) -> tuple[float, float]:
+    """Sort key, best first: the larger interior hexagon share, then the lower energy."""
+    return -clusters.hexagon_share, clusters.energy
 
 
 # ----------------------------------------------------------------------------- extraction
@@ -760,24 +766,30 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
     say("refining the surface", 0.0)
     fine = _refine(mesh, field, n_cells)
     starts = int(max(1, min(MAX_STARTS, START_BUDGET // len(fine.vertices))))
-    best, best_score = None, (-1.0, -1.0)
+    candidates: list[_Clusters] = []
+    start = perf_counter()
     for start_index in range(starts):
-        start = perf_counter()
         say(f"clustering {len(fine.vertices)} vertices into {n_cells} cells"
             + (f" (start {start_index + 1}/{starts})" if starts > 1 else ""), 0.1 + 0.8 * start_index / starts)
-        candidates = _cluster(fine, n_cells, replace(settings, seed=settings.seed + start_index),
-                              LATTICE_TURNS_DEG[start_index % len(LATTICE_TURNS_DEG)],
-                              keep=CANDIDATES_PER_START if starts > 1 else 1)
-        middle = perf_counter()
-        for clusters in candidates:
-            polymesh = _polygons(mesh, fine, clusters, support_vertices)
-            score = _grid_score(polymesh)
-            if score > best_score:
-                best, best_score = polymesh, score
-        if timing is not None:
-            timing.clustering_s += middle - start
-            timing.extraction_s += perf_counter() - middle
-            timing.sweeps = candidates[0].sweeps
+        candidates += _cluster(fine, n_cells, replace(settings, seed=settings.seed + start_index),
+                               LATTICE_TURNS_DEG[start_index % len(LATTICE_TURNS_DEG)],
+                               keep=CANDIDATES_PER_START if starts > 1 else 1)
+    middle = perf_counter()
+    # polygons of the candidates, best clustering first, until none left could score higher (the
+    # clusters' hexagon share is the grid's but where extraction collapses a short beam)
+    candidates.sort(key=_candidate_order)
+    best, best_score = None, (-1.0, -1.0)
+    for clusters in candidates:
+        if best_score >= (1.0, clusters.hexagon_share):
+            break
+        polymesh = _polygons(mesh, fine, clusters, support_vertices)
+        score = _grid_score(polymesh)
+        if score > best_score:
+            best, best_score = polymesh, score
+    if timing is not None:
+        timing.clustering_s += middle - start
+        timing.extraction_s += perf_counter() - middle
+        timing.sweeps = candidates[0].sweeps
     return best
 
 
