@@ -2,7 +2,7 @@
 
 Socket joint (3D printing): a cylindrical hub along the node axis (surface normal) with the
 node id engraved on its top face, one sleeve per beam (bore = beam size + 2 clearance, a wall
-around it, a pin hole across it); the bore starts at the set-back where neighbouring bores keep
+around it, a pin hole across it along the node axis); the bore starts at the set-back where neighbouring bores keep
 the least wall. Steel joint (full size): a hub tube along the node axis with one fin plate per
 beam, in the plane of the beam and the axis, with a bolt hole. Files: joints/J0001.step (the
 solid named J0001), joints/J0001.stl (watertight), joints/joints.step (all, named).
@@ -124,6 +124,16 @@ def _perpendicular(direction: np.ndarray, axis: np.ndarray) -> np.ndarray:
     if np.linalg.norm(side) < 1e-6:
         side = np.cross([1.0, 0.0, 0.0] if abs(direction[0]) < 0.9 else [0.0, 1.0, 0.0], direction)
     return side / np.linalg.norm(side)
+
+
+def _upright(direction: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """The node axis made perpendicular to a beam: the direction of the sleeve's pin hole, so the
+    hole runs through the sleeve's top and bottom (clear of the neighbouring sleeves, which lie
+    about the tangent plane, drilled or screwed from above, printed without overhang)."""
+    upright = axis - (axis @ direction) * direction
+    if np.linalg.norm(upright) < 1e-6:
+        return _perpendicular(direction, axis)
+    return upright / np.linalg.norm(upright)
 
 
 def _cylinder(base: np.ndarray, direction: np.ndarray, radius: float, length: float):
@@ -352,7 +362,7 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
             features.append(("sleeve", np.zeros(3), d * (setback + sleeve), outer))
             tools.append(_cylinder(d * setback, d, bore, sleeve + 1.0))
             features.append(("hole", d * setback, d * (setback + sleeve + 1.0), bore))
-            side = _perpendicular(d, axis)
+            side = _upright(d, axis)
             pin_centre = d * (setback + 0.6 * sleeve)
             tools.append(_cylinder(pin_centre - 2 * outer * side, side, 0.5 * settings.pin_hole_mm, 4 * outer))
             features.append(("hole", pin_centre - 2 * outer * side, pin_centre + 2 * outer * side,
