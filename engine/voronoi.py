@@ -79,6 +79,9 @@ COARSEST_CELLS = 250
 #: cells are graded from the second step on), and candidates per start whose polygons are made.
 FIRST_CANDIDATE_STEP = 2
 CANDIDATES_PER_START = 3
+#: Largest relative gap between a candidate grid's achieved size ratio (aspect) and the field's
+#: D' (A') that the choice among candidates accepts before looking at hexagons (issue 4's band).
+SHAPE_TOLERANCE = 0.25
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -760,7 +763,7 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
     offsets (seeds settings.seed, +1, ...; the lattice turned by LATTICE_TURNS_DEG in turn) are
     tried, up to START_BUDGET clustered vertices in all and MAX_STARTS starts, each giving its
     CANDIDATES_PER_START best clusterings (a single start gives one); the grid kept is the
-    candidate's with the best _grid_score (valence 3, then hexagons)."""
+    candidate's with the best _grid_score (valence 3, size and aspect within the band, hexagons)."""
     from time import perf_counter
 
     say("refining the surface", 0.0)
@@ -778,12 +781,12 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
     # polygons of the candidates, best clustering first, until none left could score higher (the
     # clusters' hexagon share is the grid's but where extraction collapses a short beam)
     candidates.sort(key=_candidate_order)
-    best, best_score = None, (-1.0, -1.0)
+    best, best_score = None, (-1.0, -1.0, -1.0)
     for clusters in candidates:
-        if best_score >= (1.0, clusters.hexagon_share):
+        if best_score >= (1.0, 1.0, clusters.hexagon_share):
             break
         polymesh = _polygons(mesh, fine, clusters, support_vertices)
-        score = _grid_score(polymesh)
+        score = _grid_score(polymesh, mesh, field)
         if score > best_score:
             best, best_score = polymesh, score
     if timing is not None:
@@ -793,14 +796,18 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
     return best
 
 
-def _grid_score(polymesh: PolyMesh) -> tuple[float, float]:
+def _grid_score(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField) -> tuple[float, float, float]:
     """What the choice among candidate grids maximises: the share of interior nodes of valence 3
-    (a short beam collapsed where four cells nearly meet leaves a valence-4 node), then the
-    hexagon share of interior cells."""
+    (a short beam collapsed where four cells nearly meet leaves a valence-4 node), then 1 if the
+    achieved size ratio and aspect lie within SHAPE_TOLERANCE of the field's D' and A' (0 if not),
+    then the hexagon share of interior cells."""
     interior_nodes = ~polymesh.boundary
     valence3 = float(np.mean(polymesh.valence[interior_nodes] == 3)) if interior_nodes.any() else 1.0
+    size_ratio, aspect = _size_and_aspect(polymesh, mesh, field)
+    bounds = float(field.size.max() / field.size.min()), float(field.anisotropy.max())
+    shaped = float(abs(size_ratio / bounds[0] - 1) <= SHAPE_TOLERANCE and abs(aspect / bounds[1] - 1) <= SHAPE_TOLERANCE)
     interior = ~polymesh.face_boundary
-    return valence3, float(np.mean(polymesh.face_degrees[interior] == 6)) if interior.any() else 0.0
+    return valence3, shaped, float(np.mean(polymesh.face_degrees[interior] == 6)) if interior.any() else 0.0
 
 
 def _polygons(mesh: TriMesh, fine: _Fine, clusters: _Clusters, support_vertices: np.ndarray | None) -> PolyMesh:
@@ -970,12 +977,7 @@ def polymesh_quality(polymesh: PolyMesh, *, mesh: TriMesh | None = None, field: 
     for ids, p in _face_groups(polymesh):
         # (m faces, d nodes, 3)
         following = np.roll(p, -1, axis=1)
-        sizes[ids] = np.sqrt(0.5 * np.linalg.norm(np.cross(p, following).sum(axis=1), axis=1))
-        centroids[ids] = p.mean(axis=1)
-        centred = p - centroids[ids][:, None, :]
-        _, s, vt = np.linalg.svd(centred, full_matrices=False)
-        s2 = np.maximum(s[:, :2], 1e-300)
-        aspects[ids] = s2[:, 0] / s2[:, 1]
+        sizes[ids], centroids[ids], centred, aspects[ids], vt = _cell_shapes(p)
         if p.shape[1] > 3:
             planarity[ids] = np.abs(np.einsum("mdi,mi->md", centred, vt[:, -1])).max(axis=1)
         # regularity: edge-length spread after un-stretching the cell's own anisotropy
@@ -1012,18 +1014,53 @@ def polymesh_quality(polymesh: PolyMesh, *, mesh: TriMesh | None = None, field: 
         quality["closeness_max_rel"] = float(distance.max() / mesh.diagonal)
         quality["closeness_mean_rel"] = float(distance.mean() / mesh.diagonal)
     if mesh is not None and field is not None:
-        _, nearest = cKDTree(mesh.vertices).query(centroids)
-        prescribed = field.size[nearest]
         quality["size_ratio_p5_p95"] = quality["achieved_size_ratio"]
-        if np.std(prescribed[pick]) > 1e-9 * prescribed.mean() and np.std(sizes[pick]) > 0:
-            quality["size_correlation"] = float(np.corrcoef(prescribed[pick], sizes[pick])[0, 1])
-            # grading actually achieved: the field's ratio to the power of the log-log slope
-            slope = np.polyfit(np.log(prescribed[pick]), np.log(sizes[pick]), 1)[0]
-            quality["size_grading_slope"] = float(slope)
-            quality["achieved_size_ratio"] = float((field.size.max() / field.size.min()) ** slope)
+        graded = _size_grading(sizes[pick], centroids[pick], mesh, field)
+        if graded is not None:
+            quality["size_correlation"], quality["size_grading_slope"], quality["achieved_size_ratio"] = graded
         else:
             quality["size_correlation"] = None
     return quality
+
+
+def _cell_shapes(p: np.ndarray):
+    """Cells of one degree, nodes p (m, d, 3): sizes sqrt(area) (m,), centroids (m, 3), centred
+    nodes (m, d, 3), aspects (m,: sqrt of the ratio of the two largest PCA eigenvalues) and the
+    PCA axes (m, 3, 3)."""
+    following = np.roll(p, -1, axis=1)
+    sizes = np.sqrt(0.5 * np.linalg.norm(np.cross(p, following).sum(axis=1), axis=1))
+    centroids = p.mean(axis=1)
+    centred = p - centroids[:, None, :]
+    _, s, vt = np.linalg.svd(centred, full_matrices=False)
+    s2 = np.maximum(s[:, :2], 1e-300)
+    return sizes, centroids, centred, s2[:, 0] / s2[:, 1], vt
+
+
+def _size_grading(sizes: np.ndarray, centroids: np.ndarray, mesh: TriMesh, field: GuidingField):
+    """(correlation of achieved and prescribed size, log-log slope, achieved size ratio D'^slope)
+    of cells, or None where the field's size (or the cells') does not vary."""
+    _, nearest = cKDTree(mesh.vertices).query(centroids)
+    prescribed = field.size[nearest]
+    if not (np.std(prescribed) > 1e-9 * prescribed.mean() and np.std(sizes) > 0):
+        return None
+    correlation = float(np.corrcoef(prescribed, sizes)[0, 1])
+    # grading actually achieved: the field's ratio to the power of the log-log slope
+    slope = np.polyfit(np.log(prescribed), np.log(sizes), 1)[0]
+    return correlation, float(slope), float((field.size.max() / field.size.min()) ** slope)
+
+
+def _size_and_aspect(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField) -> tuple[float, float]:
+    """The grid's achieved size ratio and aspect, as polymesh_quality reports them."""
+    n = polymesh.n_faces
+    sizes, aspects, centroids = np.zeros(n), np.zeros(n), np.zeros((n, 3))
+    for ids, p in _face_groups(polymesh):
+        sizes[ids], centroids[ids], _, aspects[ids], _ = _cell_shapes(p)
+    interior = ~polymesh.face_boundary
+    pick = interior if interior.sum() >= 4 else np.ones(n, dtype=bool)
+    lo, hi = np.percentile(sizes[pick], [5, 95])
+    graded = _size_grading(sizes[pick], centroids[pick], mesh, field)
+    size_ratio = graded[2] if graded is not None else float(hi / max(lo, 1e-300))
+    return size_ratio, float(np.percentile(aspects[pick], 95))
 
 
 def _distance_to_surface(mesh: TriMesh, points: np.ndarray) -> np.ndarray:
