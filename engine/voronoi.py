@@ -805,7 +805,8 @@ def _grid_score(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField) -> tuple
     valence3 = float(np.mean(polymesh.valence[interior_nodes] == 3)) if interior_nodes.any() else 1.0
     size_ratio, aspect = _size_and_aspect(polymesh, mesh, field)
     bounds = float(field.size.max() / field.size.min()), float(field.anisotropy.max())
-    shaped = float(abs(size_ratio / bounds[0] - 1) <= SHAPE_TOLERANCE and abs(aspect / bounds[1] - 1) <= SHAPE_TOLERANCE)
+    shaped = float(abs(size_ratio / bounds[0] - 1) <= SHAPE_TOLERANCE
+                   and abs(aspect / bounds[1] - 1) <= SHAPE_TOLERANCE)
     interior = ~polymesh.face_boundary
     return valence3, shaped, float(np.mean(polymesh.face_degrees[interior] == 6)) if interior.any() else 0.0
 
