@@ -786,8 +786,8 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
         if best_score >= (1.0, 1.0, clusters.hexagon_share):
             break
         polymesh = _polygons(mesh, fine, clusters, support_vertices)
-        score = _grid_score(polymesh, mesh, field)
-        if score > best_score:
+        score = _grid_score(polymesh, mesh, field) if len(candidates) > 1 else best_score
+        if best is None or score > best_score:
             best, best_score = polymesh, score
     if timing is not None:
         timing.clustering_s += middle - start
