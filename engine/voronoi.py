@@ -863,7 +863,8 @@ def remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
 
     The quality dict also holds ``clustering_s`` and ``extraction_s`` (seconds spent in the
     clustering, including refinement and seeding, and in the polygon extraction, over all
-    tessellations the size target needed) and ``clustering_sweeps`` (of the last one)."""
+    tessellations the size target needed; the extraction includes choosing among candidate grids)
+    and ``clustering_sweeps`` (those of the start whose grid was kept, in the last tessellation)."""
     def say(text: str, fraction: float | None = None) -> None:
         if progress is not None:
             progress(text, fraction)
