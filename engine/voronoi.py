@@ -14,13 +14,13 @@ about four times COARSEST_CELLS cells a coarse level runs first and its centroid
 midpoints of neighbouring centroids seed the next. At a few cells across, over-relaxed Lloyd
 steps carry the clusters among equally graded local minima whose hexagon shares differ by up to
 20 points, so the clusterings met along the finest level's steps are candidates; small meshes also
-try several lattice offsets, and the grid kept has every interior node of valence 3 and the most
-hexagons. The polygon grid-shell is the dual of the clusters: a node
-where three clusters meet (a triangle with three labels; at the anisotropic Voronoi vertex of
-the three centroids where that stays near the triangle and turns no beam round, else where the
-metric distances to the centroids balance along its edges), a beam along each border between two
-nodes, boundary nodes where a border meets the surface boundary, the surface's corners kept as
-nodes, boundary cells closed along the boundary. Why this route and not the
+try several lattice offsets. The grid kept has every interior node of valence 3, its size ratio
+and aspect within SHAPE_TOLERANCE of the field's, and the most hexagons. The polygon grid-shell
+is the dual of the clusters: a node where three clusters meet (a triangle with three labels; at
+the anisotropic Voronoi vertex of the three centroids where that stays near the triangle and
+turns no beam round, else where the metric distances to the centroids balance along its edges),
+a beam along each border between two nodes, boundary nodes where a border meets the surface
+boundary, the surface's corners kept as nodes, boundary cells closed along the boundary. Why this route and not the
 deform-then-uniform-CVT one, and why clustering rather than Lloyd iterations alone:
 docs/decisions.md.
 """
