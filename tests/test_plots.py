@@ -38,6 +38,39 @@ def test_gridshell_picture(grid, tmp_path, color_by):
     _check_png(plot_gridshell(grid, tmp_path / f"grid_{color_by}.png", color_by=color_by, title="cap"))
 
 
+def test_a_flat_grid_is_framed_with_a_height_and_draws_cleanly(tmp_path):
+    """A flat roof (zero height) is drawn in 3-D with a height of 5 % of its plan and limits that
+    match the box at true scale (a zero-height range made matplotlib's projection overflow);
+    a curved one keeps its true height."""
+    import warnings
+
+    from engine.mesh import TriMesh
+    from engine.parametric import grid_triangles
+    from workflow.plots._common import frame_3d, pyplot
+
+    plt = pyplot()
+    fig = plt.figure()
+    ax = fig.add_subplot(projection="3d")
+    frame_3d(ax, np.array([[0.0, 0.0, 2.0], [10.0, 4.0, 2.0]]))
+    assert ax.get_zlim() == pytest.approx((1.75, 2.25))
+    assert ax.get_xlim() == pytest.approx((0.0, 10.0)) and ax.get_ylim() == pytest.approx((0.0, 4.0))
+    frame_3d(ax, np.array([[0.0, 0.0, 0.0], [10.0, 4.0, 3.0]]))
+    assert ax.get_zlim() == pytest.approx((0.0, 3.0))
+    box = ax.get_box_aspect()
+    assert box[0] / box[2] == pytest.approx(10.0 / 3.0) and box[1] / box[2] == pytest.approx(4.0 / 3.0)
+    plt.close(fig)
+
+    xs = np.linspace(0.0, 10.0, 11)
+    x, y = np.meshgrid(xs, xs, indexing="ij")
+    flat = TriMesh(vertices=np.c_[x.ravel(), y.ravel(), np.zeros(x.size)], faces=grid_triangles(10, 10))
+    support = np.zeros(flat.n_vertices, dtype=bool)
+    support[flat.boundary_loops[0]] = True
+    grid = quad_grid(flat, total_length=12.0 * np.sqrt(flat.area), support_vertices=support)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        _check_png(plot_gridshell(grid, tmp_path / "flat.png", title="flat"))
+
+
 def test_utilisation_and_axial_force_pictures(grid, tmp_path):
     beams = grid.edges
     rng = np.random.default_rng(1)

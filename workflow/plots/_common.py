@@ -1,12 +1,14 @@
-"""Shared set-up of the matplotlib pictures: Agg backend, atomic PNG saving."""
+"""Shared set-up of the matplotlib pictures: Agg backend, atomic PNG saving, 3-D framing."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from fabrication.files import atomic_path
 
-__all__ = ["pyplot", "save_png"]
+__all__ = ["pyplot", "save_png", "frame_3d"]
 
 
 def pyplot():
@@ -26,3 +28,16 @@ def save_png(fig, path: Path, dpi: int = 130) -> Path:
         fig.savefig(tmp, format="png", dpi=dpi)
     plt.close(fig)
     return Path(path)
+
+
+def frame_3d(ax, points: np.ndarray) -> None:
+    """Limits and box of a 3-D axes around ``points`` (k, 3) at true scale, the height at least
+    5 % of the plan's extent so that flat or nearly flat surfaces still read (and the projection
+    stays finite)."""
+    lo, span = points.min(axis=0), np.ptp(points, axis=0)
+    height = max(span[2], 0.05 * span.max(), 1e-9)
+    middle = lo[2] + 0.5 * span[2]
+    ax.set_xlim(lo[0], lo[0] + max(span[0], 1e-9))
+    ax.set_ylim(lo[1], lo[1] + max(span[1], 1e-9))
+    ax.set_zlim(middle - 0.5 * height, middle + 0.5 * height)
+    ax.set_box_aspect((max(span[0], 1e-9), max(span[1], 1e-9), height))

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import pyplot, save_png
+from ._common import frame_3d, pyplot, save_png
 
 __all__ = ["plot_utilisation", "plot_axial_forces", "plot_buckling_modes", "plot_response"]
 
@@ -87,10 +87,7 @@ def plot_buckling_modes(nodes: np.ndarray, beams: np.ndarray, modes: np.ndarray,
         ax.add_collection3d(Line3DCollection(np.stack([moved[beams[:, 0]], moved[beams[:, 1]]], axis=1),
                                              colors="#c0392b", linewidths=1.0))
         both = np.vstack([nodes, moved])
-        lo, extent = both.min(axis=0), np.ptp(both, axis=0)
-        ax.set_xlim(lo[0], lo[0] + extent[0]), ax.set_ylim(lo[1], lo[1] + extent[1])
-        ax.set_zlim(lo[2], lo[2] + max(extent[2], 1e-6))
-        ax.set_box_aspect((extent[0], extent[1], max(extent[2], 0.05 * extent.max())))
+        frame_3d(ax, both)
         ax.set_axis_off()
         ax.set_title(f"mode {k + 1}: lambda = {factors[k]:.3g}")
     fig.suptitle(title or "linear buckling modes")

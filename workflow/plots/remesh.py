@@ -8,7 +8,7 @@ import numpy as np
 
 from engine.mesh import PolyMesh
 
-from ._common import pyplot, save_png
+from ._common import frame_3d, pyplot, save_png
 
 __all__ = ["plot_gridshell", "DEGREE_COLOURS"]
 
@@ -42,13 +42,11 @@ def plot_gridshell(polymesh: PolyMesh, path: Path, *, color_by: str = "degree", 
     fig = plt.figure(figsize=(13, 6))
     ax3 = fig.add_subplot(1, 2, 1, projection="3d")
     ax3.add_collection3d(Poly3DCollection(polygons, facecolors=colours, edgecolors="#222222", linewidths=0.4))
-    span = np.ptp(nodes, axis=0)
-    lo = nodes.min(axis=0)
-    ax3.set_xlim(lo[0], lo[0] + span[0]), ax3.set_ylim(lo[1], lo[1] + span[1]), ax3.set_zlim(lo[2], lo[2] + max(span[2], 1e-6))
-    ax3.set_box_aspect((span[0], span[1], max(span[2], 0.05 * span.max())))
+    frame_3d(ax3, nodes)
     ax3.view_init(elev=32, azim=-60)
     ax3.set_axis_off()
     ax = fig.add_subplot(1, 2, 2)
+    lo, span = nodes.min(axis=0), np.ptp(nodes, axis=0)
     ax.add_collection(PolyCollection([p[:, :2] for p in polygons], facecolors=colours, edgecolors="#222222",
                                      linewidths=0.4))
     supports = nodes[polymesh.supports]

@@ -9,6 +9,8 @@ import numpy as np
 from engine.mesh import TriMesh
 from fabrication.files import atomic_path
 
+from ._common import frame_3d
+
 __all__ = ["plot_surface"]
 
 
@@ -27,8 +29,7 @@ def plot_surface(mesh: TriMesh, support_nodes: np.ndarray, path: Path, *, title:
                      edgecolor=(0.3, 0.3, 0.3, 0.3), alpha=0.9, shade=True)
     s = v[support_nodes]
     ax3.scatter(s[:, 0], s[:, 1], s[:, 2], c="crimson", s=8, depthshade=False, label="supports")
-    span = np.ptp(v, axis=0)
-    ax3.set_box_aspect((span[0], span[1], max(span[2], 0.05 * span.max())))
+    frame_3d(ax3, v)
     ax3.set_xlabel("x (m)"), ax3.set_ylabel("y (m)"), ax3.set_zlabel("z (m)")
     ax3.legend(loc="upper left")
 
