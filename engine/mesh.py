@@ -15,7 +15,7 @@ from functools import cached_property
 
 import numpy as np
 
-__all__ = ["TriMesh", "PolyMesh", "unique_edges", "boundary_loops", "best_fit_plane"]
+__all__ = ["TriMesh", "PolyMesh", "unique_edges", "boundary_loops", "chain_loops", "best_fit_plane"]
 
 
 def _readonly(array: np.ndarray) -> np.ndarray:
@@ -45,21 +45,25 @@ def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
     key = np.sort(directed, axis=1)
     _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
     border = directed[counts[inverse.ravel()] == 1]
-    successor: dict[int, int] = {}
-    for a, b in border:
-        successor[int(a)] = int(b)
+    return chain_loops(border[:, 0], border[:, 1])
+
+
+def chain_loops(start: np.ndarray, end: np.ndarray) -> list[np.ndarray]:
+    """Closed loops of the directed edges start[i] -> end[i] (each vertex starting one edge), each
+    an ordered vertex array, longest first."""
+    successor = dict(zip(np.asarray(start).tolist(), np.asarray(end).tolist()))
     loops: list[np.ndarray] = []
     seen: set[int] = set()
-    for start in list(successor):
-        if start in seen:
+    for first in successor:
+        if first in seen:
             continue
-        loop = [start]
-        seen.add(start)
-        nxt = successor[start]
-        while nxt != start and nxt not in seen:
-            loop.append(nxt)
-            seen.add(nxt)
-            nxt = successor.get(nxt, start)
+        loop = [first]
+        seen.add(first)
+        following = successor[first]
+        while following != first and following not in seen:
+            loop.append(following)
+            seen.add(following)
+            following = successor.get(following, first)
         loops.append(np.array(loop, dtype=np.int64))
     loops.sort(key=len, reverse=True)
     return loops

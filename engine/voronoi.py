@@ -38,7 +38,7 @@ from scipy.spatial import cKDTree
 
 from .errors import InputError, MeshError
 from .field import GuidingField
-from .mesh import PolyMesh, TriMesh, best_fit_plane
+from .mesh import PolyMesh, TriMesh, best_fit_plane, chain_loops
 
 __all__ = ["RemeshSettings", "RemeshResult", "remesh", "polymesh_quality", "surface_corners"]
 
@@ -145,22 +145,7 @@ def _boundary_loops(faces: np.ndarray, face_edges: np.ndarray, counts: np.ndarra
     border = counts[face_edges] == 1
     start = faces[border]
     end = np.roll(faces, -1, axis=1)[border]
-    if not len(start):
-        return []
-    successor = dict(zip(start.tolist(), end.tolist()))
-    loops, seen = [], set()
-    for first in start.tolist():
-        if first in seen:
-            continue
-        loop, current = [first], successor[first]
-        seen.add(first)
-        while current != first and current not in seen:
-            loop.append(current)
-            seen.add(current)
-            current = successor.get(current, first)
-        loops.append(np.array(loop, dtype=np.int64))
-    loops.sort(key=len, reverse=True)
-    return loops
+    return chain_loops(start, end)
 
 
 def _loop_corners(vertices: np.ndarray, loops: list[np.ndarray], angle_deg: float) -> np.ndarray:
