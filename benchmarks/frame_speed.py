@@ -177,17 +177,11 @@ def _pynite(frame: FrameModel, supports: Supports, loads: np.ndarray):
     return seconds, largest
 
 
-def _opensees(frame: FrameModel, supports: Supports, loads: np.ndarray):
-    """OpenSees (openseespy; its licence forbids redistribution, so it is never a dependency:
-    imported here only when this machine has it): elasticBeamColumn elements on the same
-    element mesh as ours (the beams' internal nodes included), local x-z plane through our
-    ``up`` vector, UmfPack sparse solver. Returns (seconds, largest |u_z|) or a sentence why not."""
-    try:
-        import openseespy.opensees as ops  # type: ignore
-    except Exception:  # ImportError, or its shared libraries missing
-        return "not installed (openseespy, with libblas3 and liblapack3, to compare on this machine)"
+def _opensees_model(ops, frame: FrameModel, supports: Supports, loads: np.ndarray, transformation: str) -> None:
+    """Our element mesh in OpenSees (the beams' internal nodes included): elasticBeamColumn
+    elements with the given geometric transformation, local x-z plane through our ``up`` vector,
+    the vertical nodal loads in a linear pattern, UmfPack."""
     el = frame_module._elements(frame)
-    start = time.perf_counter()
     ops.wipe()
     ops.model("basic", "-ndm", 3, "-ndf", 6)
     for k, p in enumerate(el.nodes):
@@ -195,7 +189,7 @@ def _opensees(frame: FrameModel, supports: Supports, loads: np.ndarray):
     for node, flags in zip(supports.nodes, supports.restraints):
         ops.fix(int(node), *map(int, flags))
     for k, ((a, b), up) in enumerate(zip(el.connectivity, el.up)):
-        ops.geomTransf("Linear", k + 1, *map(float, up))
+        ops.geomTransf(transformation, k + 1, *map(float, up))
         ops.element("elasticBeamColumn", k + 1, int(a), int(b), float(el.A[k]), float(el.E[k]), float(el.G[k]),
                     float(el.J[k]), float(el.Iy[k]), float(el.Iz[k]), k + 1)
     ops.timeSeries("Linear", 1)
@@ -205,6 +199,19 @@ def _opensees(frame: FrameModel, supports: Supports, loads: np.ndarray):
     ops.constraints("Plain")
     ops.numberer("RCM")
     ops.system("UmfPack")
+
+
+def _opensees(frame: FrameModel, supports: Supports, loads: np.ndarray):
+    """OpenSees (openseespy; its licence forbids redistribution, so it is never a dependency:
+    imported here only when this machine has it): elasticBeamColumn elements on the same
+    element mesh as ours (the beams' internal nodes included), local x-z plane through our
+    ``up`` vector, UmfPack sparse solver. Returns (seconds, largest |u_z|) or a sentence why not."""
+    try:
+        import openseespy.opensees as ops  # type: ignore
+    except Exception:  # ImportError, or its shared libraries missing
+        return "not installed (openseespy, with libblas3 and liblapack3, to compare on this machine)"
+    start = time.perf_counter()
+    _opensees_model(ops, frame, supports, loads, "Linear")
     ops.algorithm("Linear")
     ops.integrator("LoadControl", 1.0)
     ops.analysis("Static")
@@ -224,25 +231,8 @@ def _opensees_path(frame: FrameModel, supports: Supports, loads: np.ndarray, con
         import openseespy.opensees as ops  # type: ignore
     except Exception:
         return "not installed"
-    el = frame_module._elements(frame)
     start = time.perf_counter()
-    ops.wipe()
-    ops.model("basic", "-ndm", 3, "-ndf", 6)
-    for k, p in enumerate(el.nodes):
-        ops.node(k, *map(float, p))
-    for node, flags in zip(supports.nodes, supports.restraints):
-        ops.fix(int(node), *map(int, flags))
-    for k, ((a, b), up) in enumerate(zip(el.connectivity, el.up)):
-        ops.geomTransf("Corotational", k + 1, *map(float, up))
-        ops.element("elasticBeamColumn", k + 1, int(a), int(b), float(el.A[k]), float(el.E[k]), float(el.G[k]),
-                    float(el.J[k]), float(el.Iy[k]), float(el.Iz[k]), k + 1)
-    ops.timeSeries("Linear", 1)
-    ops.pattern("Plain", 1, 1)
-    for k in np.flatnonzero(loads[:, 2]):
-        ops.load(int(k), 0.0, 0.0, float(loads[k, 2]), 0.0, 0.0, 0.0)
-    ops.constraints("Plain")
-    ops.numberer("RCM")
-    ops.system("UmfPack")
+    _opensees_model(ops, frame, supports, loads, "Corotational")
     ops.test("NormUnbalance", 1e-6 * float(np.abs(loads).sum()), 30, 0)
     ops.algorithm("Newton")
     ops.integrator("ArcLength", float(arc), 0.0)
