@@ -42,17 +42,23 @@ def glyph_bounds(faces: Sequence) -> tuple[float, float, float, float]:
     return x0, y0, x1, y1
 
 
-def _faces(shape) -> list:
-    from OCP.TopAbs import TopAbs_FACE
+def subshapes(shape, kind: str = "face") -> list:
+    """The faces (``kind`` "face") or solids ("solid") of an OCP shape, as typed OCP objects."""
+    from OCP.TopAbs import TopAbs_FACE, TopAbs_SOLID
     from OCP.TopExp import TopExp_Explorer
     from OCP.TopoDS import TopoDS
 
+    shape_type, cast = {"face": (TopAbs_FACE, TopoDS.Face_s), "solid": (TopAbs_SOLID, TopoDS.Solid_s)}[kind]
     out = []
-    explorer = TopExp_Explorer(shape, TopAbs_FACE)
+    explorer = TopExp_Explorer(shape, shape_type)
     while explorer.More():
-        out.append(TopoDS.Face_s(explorer.Current()))
+        out.append(cast(explorer.Current()))
         explorer.Next()
     return out
+
+
+def _faces(shape) -> list:
+    return subshapes(shape, "face")
 
 
 def planar_faces(solid, origin: np.ndarray, normal: np.ndarray, tolerance: float = 1e-6) -> list:

@@ -169,16 +169,9 @@ def _boolean(kind: str, arguments: list, tools: list):
 
 
 def _solids(shape) -> list:
-    from OCP.TopAbs import TopAbs_SOLID
-    from OCP.TopExp import TopExp_Explorer
-    from OCP.TopoDS import TopoDS
+    from .engraving import subshapes
 
-    out = []
-    explorer = TopExp_Explorer(shape, TopAbs_SOLID)
-    while explorer.More():
-        out.append(TopoDS.Solid_s(explorer.Current()))
-        explorer.Next()
-    return out
+    return subshapes(shape, "solid")
 
 
 def _is_valid(shape) -> bool:
