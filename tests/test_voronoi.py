@@ -90,20 +90,23 @@ def test_total_length_target_met_within_one_percent():
     assert result.polymesh.total_length == pytest.approx(target, rel=0.01)
 
 
-@pytest.mark.parametrize("length", [0.2, 0.35])
-def test_mean_beam_length_target_met_within_one_percent(length):
+def _graded_square():
+    """A 4 m square with a field graded along x (D = 2) and a uniform aspect of 2."""
     mesh = _square(24, side=4.0)
     x = mesh.vertices[:, 0]
-    field = _field(mesh, size=1.0 + (x - x.min()) / np.ptp(x), aspect=np.full(mesh.n_vertices, 2.0))
+    return mesh, _field(mesh, size=1.0 + (x - x.min()) / np.ptp(x), aspect=np.full(mesh.n_vertices, 2.0))
+
+
+@pytest.mark.parametrize("length", [0.2, 0.35])
+def test_mean_beam_length_target_met_within_one_percent(length):
+    mesh, field = _graded_square()
     result = remesh(mesh, field, RemeshSettings(mean_beam_length=length))
     assert result.polymesh.beam_lengths.mean() == pytest.approx(length, rel=0.01)
 
 
 @pytest.mark.parametrize("n_cells", [40, 333])
 def test_cell_count_target_met_within_one_percent(n_cells):
-    mesh = _square(24, side=4.0)
-    x = mesh.vertices[:, 0]
-    field = _field(mesh, size=1.0 + (x - x.min()) / np.ptp(x), aspect=np.full(mesh.n_vertices, 2.0))
+    mesh, field = _graded_square()
     result = remesh(mesh, field, RemeshSettings(n_cells=n_cells))
     assert result.quality["n_faces"] == pytest.approx(n_cells, rel=0.01)
 
