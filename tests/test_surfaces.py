@@ -15,17 +15,37 @@ from workflow.surface_io import read_surface, write_surface_ply
 from .conftest import real_surfaces
 
 
+def _red_vertices(path) -> int:
+    """Independent count of pure red vertices: the PLY text itself, or numpy's reading of a
+    binary little-endian PLY's vertex records."""
+    data = path.read_bytes()
+    end = data.index(b"end_header") + len(b"end_header\n")
+    header = data[:end].decode("ascii").splitlines()
+    n_vertices = int(next(l for l in header if l.startswith("element vertex")).split()[-1])
+    vertex_props, element = [], None
+    for line in header:
+        if line.startswith("element"):
+            element = line.split()[1]
+        elif line.startswith("property") and element == "vertex":
+            vertex_props.append(line.split()[1:])
+    names = [p[-1] for p in vertex_props]
+    if "format ascii" in header[1]:
+        body = [l.split() for l in data[end:].decode("ascii").splitlines()[:n_vertices]]
+        rgb = np.array([[row[names.index(c)] for c in ("red", "green", "blue")] for row in body], dtype=float)
+    else:
+        assert "binary_little_endian" in header[1]
+        kinds = {"float": "<f4", "float32": "<f4", "double": "<f8", "float64": "<f8", "uchar": "u1", "uint8": "u1",
+                 "int": "<i4", "int32": "<i4", "uint": "<u4", "short": "<i2", "ushort": "<u2", "char": "i1"}
+        dtype = np.dtype([(p[-1], kinds[p[0]]) for p in vertex_props])
+        records = np.frombuffer(data, dtype=dtype, count=n_vertices, offset=end)
+        rgb = np.stack([records[c].astype(float) for c in ("red", "green", "blue")], axis=1)
+    return int(np.sum(np.all(rgb == [255, 0, 0], axis=1)))
+
+
 @pytest.mark.parametrize("path", real_surfaces())
 def test_real_surfaces_load_clean_with_their_flagged_supports(path):
     vertices, faces, flagged = read_surface(path)
-    # independent count of red vertices straight from the ASCII PLY text
-    lines = path.read_text().splitlines()
-    header = lines[: lines.index("end_header")]
-    props = [l.split()[-1] for l in header if l.startswith("property") and "list" not in l]
-    n_vertices = int(next(l for l in header if l.startswith("element vertex")).split()[-1])
-    body = [l.split() for l in lines[len(header) + 1: len(header) + 1 + n_vertices]]
-    r, g, b = (props.index(c) for c in ("red", "green", "blue"))
-    red = sum(1 for row in body if (row[r], row[g], row[b]) == ("255", "0", "0"))
+    red = _red_vertices(path)
     assert flagged.sum() == red > 0
     mesh, report = clean_mesh(vertices, faces, flagged, name=path.stem)
     assert mesh.flagged.sum() == red
