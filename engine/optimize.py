@@ -69,7 +69,8 @@ class OptimizeSettings:
     With ``planar`` (and a planarity weight > 0): planarity_tolerance, the largest wanted node
     distance from its cell's plane relative to the mean beam length; planarity_iterations, the
     largest number of Gauss-Newton steps of the end game (0: none); split_cells, whether boundary
-    cells that the boundary holds out of plane are split by new beams first.
+    cells that the boundary holds out of plane are split by new beams first; min_beam_length (m),
+    the shortest beam the end game leaves (the shortest buildable beam; 0: none).
     """
 
     regularity_weight: float = 1.0
@@ -81,6 +82,7 @@ class OptimizeSettings:
     planarity_tolerance: float = 0.005
     planarity_iterations: int = 80
     split_cells: bool = True
+    min_beam_length: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("regularity_weight", "planarity_weight", "closeness_weight", "fairness_weight"):
@@ -532,7 +534,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
                                          limit=CLOSENESS_LIMIT * surface.diagonal,
                                          regularity_weight=SHAPE_SCALE * settings.regularity_weight,
                                          closeness_weight=settings.closeness_weight,
-                                         iterations=settings.planarity_iterations)
+                                         iterations=settings.planarity_iterations,
+                                         min_beam_length=settings.min_beam_length)
 
         def regular(x: np.ndarray, groups: dict = groups) -> np.ndarray:
             return _stack(groups, {k: regular_targets(x[faces]) for k, faces in groups.items()})

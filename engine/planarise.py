@@ -59,7 +59,8 @@ class PlanariseSettings:
     band: half-width of the closeness band (nodes inside it are free to leave the surface);
     iterations: largest number of Gauss-Newton steps. A corner may not close below
     min(min_angle_deg, angle_share * its start angle), a beam not shorten below
-    min_length_share * its start length.
+    min_length_share * its start length, nor below ``min_beam_length`` (m; the shortest buildable
+    beam, which a shorter beam is pushed back to).
     """
 
     tolerance: float
@@ -75,6 +76,7 @@ class PlanariseSettings:
     min_angle_deg: float = 20.0
     angle_share: float = 0.75
     min_length_share: float = 0.5
+    min_beam_length: float = 0.0
     guard_share: float = 10.0
     max_step: float = 0.1
 
@@ -219,7 +221,7 @@ class _EndGame:
         self.min_angle = np.minimum(np.radians(settings.min_angle_deg),
                                     settings.angle_share * corner_angles(reference, self.corners))
         lengths = np.linalg.norm(reference[beams[:, 1]] - reference[beams[:, 0]], axis=1)
-        self.min_length = settings.min_length_share * lengths
+        self.min_length = np.maximum(settings.min_length_share * lengths, settings.min_beam_length)
         self.scale = float(lengths.mean()) if len(beams) else 1.0
         self.refresh()
 

@@ -18,7 +18,7 @@ from engine.errors import InputError
 from engine.mesh import PolyMesh
 
 from .files import atomic_path
-from .joints import JointSettings, joint_geometry, joint_setback_mm, _smallest_angle
+from .joints import JointSettings, joint_geometry, joint_setback_mm, smallest_angle
 
 __all__ = ["BeamSettings", "cut_list", "write_cut_list", "write_beams_step", "roll_angles_deg"]
 
@@ -62,13 +62,9 @@ def cut_list(polymesh: PolyMesh, normals: np.ndarray, settings: BeamSettings, jo
     setback = np.zeros(polymesh.n_nodes)
     for geometry in joint_geometry(polymesh, normals, settings.outer_size_mm):
         setback[geometry.node] = joint_setback_mm(joint_settings, settings.outer_size_mm,
-                                                  _smallest_angle(geometry.directions))
-    cut = node_length - setback[e[:, 0]] - setback[e[:, 1]]
-    bad = np.flatnonzero(cut <= 0)
-    if len(bad):
-        b = int(bad[0])
-        raise InputError(f"beam B{b + 1:04d} ({node_length[b]:.0f} mm) is shorter than its two joints take",
-                         hint="use smaller joints, a thinner section or longer beams (fewer cells)")
+                                                  smallest_angle(geometry.directions))
+    # a beam shorter than its two joints take keeps a zero cut length; the caller reports it
+    cut = np.maximum(node_length - setback[e[:, 0]] - setback[e[:, 1]], 0.0)
     ids = [f"B{i + 1:04d}" for i in range(len(e))]
     return pd.DataFrame({
         "id": ids, "start_node": [f"N{a + 1:04d}" for a in e[:, 0]], "end_node": [f"N{b + 1:04d}" for b in e[:, 1]],
@@ -104,12 +100,15 @@ def write_cut_list(table: pd.DataFrame, folder: Path) -> tuple[Path, Path]:
 
 
 def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, outer_size_mm: float) -> Path:
-    """Every beam as a named cylinder of its cut length, placed between its joints (mm)."""
+    """Every beam as a named cylinder of its cut length, placed between its joints (mm); a beam of
+    zero cut length (shorter than its joints take, reported by the caller) has no solid."""
     from build123d import Align, Compound, Cylinder, Location, Plane, export_step
 
     e = polymesh.edges
     solids = []
     for row, (a, b) in zip(table.itertuples(index=False), e):
+        if row.cut_length_mm <= 0:
+            continue
         start, end = 1000 * polymesh.nodes[a], 1000 * polymesh.nodes[b]
         direction = (end - start) / np.linalg.norm(end - start)
         origin = start + direction * row.setback_start_mm

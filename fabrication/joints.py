@@ -33,11 +33,15 @@ from engine.mesh import PolyMesh
 from .files import atomic_path
 from .step_assembly import StepAssemblyWriter, step_part, write_step_part
 
-__all__ = ["JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "build_joint", "build_joints",
+__all__ = ["JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "joint_hub_radius_mm",
+           "joint_sleeve_mm", "smallest_angle", "build_joint", "build_joints",
            "JointsInBackground", "joint_name"]
 
 ENGRAVE_DEPTH_MM = 0.6
 LABEL_MARGIN_MM = 0.5  # between the label and a sleeve rising through the hub's top face
+#: Steel joint: hub radius and fin plate length inside the slotted tube, per beam outer size.
+STEEL_HUB_RADIUS = 0.75
+STEEL_PLATE_ENGAGEMENT = 1.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -71,7 +75,8 @@ def joint_name(node: int) -> str:
     return f"J{node + 1:04d}"
 
 
-def _smallest_angle(directions: np.ndarray) -> float:
+def smallest_angle(directions: np.ndarray) -> float:
+    """Smallest angle (radians) between two of a node's unit beam directions (k,3); pi for one beam."""
     if len(directions) < 2:
         return np.pi
     cosine = np.clip(directions @ directions.T, -1.0, 1.0)
@@ -79,15 +84,33 @@ def _smallest_angle(directions: np.ndarray) -> float:
     return float(np.arccos(cosine.max()))
 
 
-def joint_setback_mm(settings: JointSettings, beam_size_mm: float, smallest_angle_rad: float = 2 * np.pi / 3) -> float:
-    """Distance from the node to where a beam ends in its sleeve (the bore's start), mm: far enough
-    that two bores at the smallest angle keep the least wall between them, and outside the hub."""
-    bore = 0.5 * beam_size_mm + settings.clearance_mm
+def joint_hub_radius_mm(settings: JointSettings, beam_size_mm: float) -> float:
+    """Radius of the joint's hub, mm: the setting, else derived from the beam size."""
+    if settings.hub_radius_mm is not None:
+        return float(settings.hub_radius_mm)
     if settings.kind == "steel":
-        return (settings.hub_radius_mm or 1.2 * beam_size_mm) + 5.0
+        return STEEL_HUB_RADIUS * beam_size_mm
+    return 1.5 * (0.5 * beam_size_mm + settings.clearance_mm + settings.wall_mm)
+
+
+def joint_sleeve_mm(settings: JointSettings, beam_size_mm: float) -> float:
+    """How far the joint reaches into a beam past its end, mm: the socket's sleeve, or the steel
+    joint's fin plate inside the slotted tube."""
+    if settings.sleeve_length_mm is not None:
+        return float(settings.sleeve_length_mm)
+    return (STEEL_PLATE_ENGAGEMENT if settings.kind == "steel" else 2.0) * beam_size_mm
+
+
+def joint_setback_mm(settings: JointSettings, beam_size_mm: float, smallest_angle_rad: float = 2 * np.pi / 3) -> float:
+    """Distance from the node to where a beam ends (the socket's bore start, the steel tube's end), mm:
+    outside the hub, and far enough that two beams at the smallest angle keep apart (sockets: the
+    least wall between two bores; steel: 5 mm between two tubes)."""
     half = max(np.sin(0.5 * smallest_angle_rad), 0.05)
+    hub = joint_hub_radius_mm(settings, beam_size_mm)
+    if settings.kind == "steel":
+        return float(max(hub + 5.0, (0.5 * beam_size_mm + 2.5) / half))
+    bore = 0.5 * beam_size_mm + settings.clearance_mm
     setback = (2 * bore + settings.min_wall_mm) / (2 * half)
-    hub = settings.hub_radius_mm or (bore + settings.wall_mm) * 1.5
     return float(max(setback, 0.8 * hub))
 
 
@@ -325,13 +348,13 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
     size = geometry.beam_size_mm
     bore = 0.5 * size + settings.clearance_mm
     outer = bore + settings.wall_mm
-    angle = _smallest_angle(directions)
+    angle = smallest_angle(directions)
     setback = joint_setback_mm(settings, size, angle)
-    sleeve = settings.sleeve_length_mm or 2.0 * size
+    sleeve = joint_sleeve_mm(settings, size)
     report = {"id": name, "node": geometry.node, "beams": int(len(directions)), "setback_mm": setback,
               "smallest_angle_deg": float(np.degrees(angle))}
     if settings.kind == "steel":
-        hub_radius = settings.hub_radius_mm or 1.2 * size
+        hub_radius = joint_hub_radius_mm(settings, size)
         height = 2.5 * size
         solid = Cylinder(hub_radius, height).moved(Location(_plane((0, 0, 0), axis)))
         for d in directions:
@@ -346,7 +369,7 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
             solid = solid + plate - hole
         report["min_wall_mm"] = float(settings.plate_thickness_mm)
     else:
-        hub_radius = settings.hub_radius_mm or 1.5 * outer
+        hub_radius = joint_hub_radius_mm(settings, size)
         hub_height = 2.0 * outer + 1.0  # taller than a sleeve: no tangent faces between hub top and sleeves
         hub = _cylinder(-0.5 * hub_height * axis, axis, hub_radius, hub_height)
         sleeves, tools, features = [], [], []
@@ -446,6 +469,8 @@ def _tessellate(shape, tolerance: float, angular_tolerance: float) -> tuple[np.n
         t = np.array([poly.Triangle(i).Get() for i in range(1, poly.NbTriangles() + 1)], dtype=np.int64) - 1 + offset
         triangles.append(t[:, [0, 2, 1]] if face.Orientation() == TopAbs_REVERSED else t)
         offset += poly.NbNodes()
+    if not vertices:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
     return np.vstack(vertices), np.vstack(triangles)
 
 
@@ -454,6 +479,8 @@ def _watertight_stl(solid, path: Path) -> bool:
     import trimesh
 
     vertices, triangles = _tessellate(solid.wrapped, 0.05, 0.3)
+    if not len(triangles):
+        raise RuntimeError("the joint solid has no faces to tessellate (the booleans left nothing)")
     mesh = trimesh.Trimesh(vertices, triangles, process=True)
     mesh.merge_vertices(digits_vertex=5)
     mesh.update_faces(mesh.nondegenerate_faces())
@@ -466,7 +493,23 @@ def _watertight_stl(solid, path: Path) -> bool:
 
 
 def _build_and_write(job: tuple) -> dict:
-    """Build, check and write one joint (J0001.step, J0001.stl) and its entities for joints.step."""
+    """Build, check and write one joint (J0001.step, J0001.stl) and its entities for joints.step.
+    A joint the modeller cannot build is a report with ``ok`` False and its ``error``, no files."""
+    geometry = job[0]
+    started = time.perf_counter()
+    try:
+        return _build_and_write_checked(job)
+    except Exception as error:  # noqa: BLE001 - the OCP kernel's failures are many; the joint is reported
+        name = joint_name(geometry.node)
+        for suffix in (".step", ".stl"):
+            (Path(job[2]) / f"{name}{suffix}").unlink(missing_ok=True)
+        return {"id": name, "node": geometry.node, "beams": int(len(geometry.directions)), "ok": False,
+                "built": False, "error": f"{type(error).__name__}: {error}".splitlines()[0],
+                "smallest_angle_deg": float(np.degrees(smallest_angle(geometry.directions))), "_part": False,
+                "seconds": {"build": round(time.perf_counter() - started, 4)}}
+
+
+def _build_and_write_checked(job: tuple) -> dict:
     geometry, settings, folder, parts_folder, first_id, last_id = job
     from build123d import Location, export_step
 
@@ -566,7 +609,9 @@ class JointsInBackground:
 
     def _collect(self, report: dict) -> None:
         part = report.pop("_part")
-        if part is None:
+        if part is False:  # not built: nothing to add
+            pass
+        elif part is None:
             text = (self.folder / f"{report['id']}.step").read_text(encoding="utf-8")
             self._writer.add(step_part(text, max(self._writer.next_free_id, self._ranges[-1][1] + 1)))
         else:
@@ -605,7 +650,8 @@ class JointsInBackground:
                 self.wait()
                 if self._error is not None:
                     raise self._error
-                self._writer.finish([joint_name(g.node) for g in self.geometries])
+                built = {r["id"] for r in self.reports if r.get("built", True)}
+                self._writer.finish([joint_name(g.node) for g in self.geometries if joint_name(g.node) in built])
                 self.seconds = time.perf_counter() - self._started
             except BaseException as failure:  # noqa: BLE001 - raised below, after the clean-up
                 error = failure

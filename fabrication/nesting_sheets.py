@@ -33,7 +33,7 @@ from fabrication.files import atomic_path
 if TYPE_CHECKING:  # pragma: no cover
     from fabrication.panels import Panel, PanelSettings
 
-__all__ = ["SheetSettings", "Placement", "SheetNesting", "nest_sheets", "write_sheet_dxfs", "write_sheets_picture",
+__all__ = ["SheetSettings", "Placement", "SheetNesting", "StockNesting", "nest_sheets", "nest_on_stock", "fits_sheet", "write_sheet_dxfs", "write_sheets_picture",
            "placed_outline", "rotation"]
 
 #: buffer arcs are drawn with this many segments per quarter circle
@@ -220,6 +220,66 @@ def _place(sheet: _Sheet, k: int, i: int, options: list[_Orientation], settings:
     return True
 
 
+def fits_sheet(panel: "Panel", settings: SheetSettings) -> bool:
+    """Whether the panel's cut outline fits the sheet less its margins in one of its rotations."""
+    usable_w = settings.width_mm - 2 * settings.margin_mm
+    usable_h = settings.height_mm - 2 * settings.margin_mm
+    return any(o.width <= usable_w + 1e-9 and o.height <= usable_h + 1e-9
+               for o in _orientations(np.asarray(panel.outline_mm, float), settings.rotations))
+
+
+@dataclass(frozen=True, kw_only=True)
+class StockNesting:
+    """Panels nested on several stock sheet sizes: ``groups`` holds, per size used, its settings,
+    the indices of its panels (into the full list) and their nesting; ``unfit`` the panels larger
+    than every size. Sheets are numbered S01... across the sizes in order."""
+
+    groups: list[tuple[SheetSettings, list[int], SheetNesting]]
+    unfit: list[int]
+
+    @property
+    def n_sheets(self) -> int:
+        return sum(n.n_sheets for _, _, n in self.groups)
+
+    @property
+    def utilisation(self) -> float:
+        """Panel area over sheet area, all sizes."""
+        used = sum(n.utilisation * n.n_sheets * s.width_mm * s.height_mm for s, _, n in self.groups)
+        total = sum(n.n_sheets * s.width_mm * s.height_mm for s, _, n in self.groups)
+        return float(used / total) if total else 0.0
+
+    def first_numbers(self) -> list[int]:
+        """Number of each group's first sheet (1-based)."""
+        out, number = [], 1
+        for _, _, nesting in self.groups:
+            out.append(number)
+            number += nesting.n_sheets
+        return out
+
+    def sheet_of(self, panels: list["Panel"]) -> dict[str, str]:
+        """Panel id -> sheet name (S01...), for the panels placed."""
+        out = {}
+        for first, (_, members, nesting) in zip(self.first_numbers(), self.groups):
+            for p in nesting.placements:
+                out[panels[members[p.panel]].id] = f"S{first + p.sheet:02d}"
+        return out
+
+
+def nest_on_stock(panels: list["Panel"], stocks: list[SheetSettings]) -> StockNesting:
+    """Each panel on the first stock size it fits, each size nested with :func:`nest_sheets`;
+    panels that fit none are left out (``unfit``) for the caller to report."""
+    if not stocks:
+        raise InputError("sheet nesting needs at least one stock sheet size")
+    members: list[list[int]] = [[] for _ in stocks]
+    unfit = []
+    for i, panel in enumerate(panels):
+        k = next((k for k, stock in enumerate(stocks) if fits_sheet(panel, stock)), None)
+        (unfit if k is None else members[k]).append(i)
+    groups = [(stock, group, nest_sheets([panels[i] for i in group], stock))
+              for stock, group in zip(stocks, members) if group]
+    return StockNesting(groups=groups, unfit=unfit)
+
+
 def nest_sheets(panels: list["Panel"], settings: SheetSettings | None = None) -> SheetNesting:
     """Place every panel's cut outline (``Panel.outline_mm``) once on as few sheets as the
     bottom-left fill finds, parts at least ``spacing_mm`` apart and ``margin_mm`` inside the
@@ -270,10 +330,10 @@ def nest_sheets(panels: list["Panel"], settings: SheetSettings | None = None) ->
 
 
 def write_sheet_dxfs(nesting: SheetNesting, panels: list["Panel"], folder: str | os.PathLike,
-                     settings: "PanelSettings | None" = None) -> list[Path]:
+                     settings: "PanelSettings | None" = None, *, first_number: int = 1) -> list[Path]:
     """Write ``folder/S01.dxf``... : sheet outline on NOTES, parts on CUT, panel ids on
     ENGRAVE, drill holes on DRILL (mm, $INSUNITS 4). ``settings``: PanelSettings for the
-    hole diameter (default: PanelSettings())."""
+    hole diameter (default: PanelSettings()); ``first_number``: the first sheet's number."""
     from fabrication.panels import PanelSettings, add_panel, new_dxf
 
     settings = settings or PanelSettings()
@@ -286,12 +346,13 @@ def write_sheet_dxfs(nesting: SheetNesting, panels: list["Panel"], folder: str |
         msp = doc.modelspace()
         msp.add_lwpolyline([(0, 0), (sheet.width_mm, 0), (sheet.width_mm, sheet.height_mm), (0, sheet.height_mm)],
                            close=True, dxfattribs={"layer": "NOTES"})
-        msp.add_text(f"S{k + 1:02d}  {len(members)} parts  utilisation {100 * nesting.sheet_utilisation[k]:.1f} %",
+        name = f"S{first_number + k:02d}"
+        msp.add_text(f"{name}  {sheet.width_mm:g} x {sheet.height_mm:g} mm  {len(members)} parts  utilisation {100 * nesting.sheet_utilisation[k]:.1f} %",
                      height=5.0, dxfattribs={"layer": "NOTES", "insert": (0.0, -10.0)})
         for i in members:
             p = nesting.placements[i]
             add_panel(msp, panels[i], offset=(p.dx, p.dy), angle_deg=p.angle_deg, settings=settings)
-        target = folder / f"S{k + 1:02d}.dxf"
+        target = folder / f"{name}.dxf"
         with atomic_path(target) as tmp:
             doc.saveas(tmp)
         paths.append(target)
@@ -299,7 +360,7 @@ def write_sheet_dxfs(nesting: SheetNesting, panels: list["Panel"], folder: str |
 
 
 def write_sheets_picture(nesting: SheetNesting, panels: list["Panel"], path: str | os.PathLike,
-                         max_sheets: int = 6) -> Path:
+                         max_sheets: int = 6, *, first_number: int = 1) -> Path:
     """A PNG of the first ``max_sheets`` sheets with their parts and ids."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -322,7 +383,7 @@ def write_sheets_picture(nesting: SheetNesting, panels: list["Panel"], path: str
         ax.set_aspect("equal")
         ax.set_axis_off()
         if k < nesting.n_sheets:
-            ax.set_title(f"S{k + 1:02d}: {len(nesting.sheets[k])} parts, "
+            ax.set_title(f"S{first_number + k:02d}: {len(nesting.sheets[k])} parts, "
                          f"{100 * nesting.sheet_utilisation[k]:.0f} % used", fontsize=9)
     fig.tight_layout()
     with atomic_path(path) as tmp:

@@ -213,13 +213,15 @@ def _make_panel(panel_id: str, face: int, loop_m: np.ndarray, settings: PanelSet
                  nonplanar=planarity_mm > settings.planarity_tolerance_mm)
 
 
-def flatten_panels(polymesh: PolyMesh, settings: PanelSettings | None = None) -> list[Panel]:
+def flatten_panels(polymesh: PolyMesh, settings: PanelSettings | None = None, *,
+                   problems: list[tuple[str, str]] | None = None) -> list[Panel]:
     """One flat panel per cell of ``polymesh`` (node loops, m), in face order, id P{f+1:04d}.
 
     Cells further from planar than ``settings.planarity_tolerance_mm`` are flagged
     ``nonplanar``; with ``settings.split_nonplanar`` they are replaced by their ear-clipped
     triangles (ids with a letter suffix), which are exactly planar. Raises ``InputError``
-    naming the panel when a cell is degenerate or the clearance leaves nothing.
+    naming the panel when a cell is degenerate or the clearance leaves nothing; with ``problems``
+    (a list) such a cell gets no panel and (panel id, message) is appended instead.
     """
     settings = settings or PanelSettings()
     panels: list[Panel] = []
@@ -229,7 +231,13 @@ def flatten_panels(polymesh: PolyMesh, settings: PanelSettings | None = None) ->
         if len(loop) < 3:
             raise InputError(f"cell {f} ({panel_id}) has {len(loop)} nodes; a panel needs at least 3")
         loop_m = nodes[loop]
-        panel = _make_panel(panel_id, f, loop_m, settings)
+        try:
+            panel = _make_panel(panel_id, f, loop_m, settings)
+        except InputError as error:
+            if problems is None:
+                raise
+            problems.append((panel_id, str(error).splitlines()[0]))
+            continue
         if not (panel.nonplanar and settings.split_nonplanar):
             panels.append(panel)
             continue
@@ -313,12 +321,15 @@ def write_panel_dxfs(panels: list[Panel], folder: str | os.PathLike,
 
 
 def write_panels_csv(panels: list[Panel], nesting: "SheetNesting | None", settings: PanelSettings | None,
-                     path: str | os.PathLike) -> Path:
+                     path: str | os.PathLike, *, sheet_names: dict[str, str] | None = None) -> Path:
     """Panel schedule: id, area_mm2, perimeter_mm, vertex_count, planarity_mm, thickness_mm,
-    mass_kg (cut area less drill holes x thickness x density), sheet (S01... or empty)."""
+    mass_kg (cut area less drill holes x thickness x density), sheet (S01... or empty).
+    ``sheet_names`` (panel id -> sheet) replaces the nesting's names (several stock sizes)."""
     settings = settings or PanelSettings()
     sheet_of: dict[int, str] = {}
-    if nesting is not None:
+    if sheet_names is not None:
+        sheet_of = {i: sheet_names[p.id] for i, p in enumerate(panels) if p.id in sheet_names}
+    elif nesting is not None:
         for placement in nesting.placements:
             sheet_of[placement.panel] = f"S{placement.sheet + 1:02d}"
     buffer = io.StringIO()

@@ -76,10 +76,15 @@ def cmd_run(args: argparse.Namespace) -> int:
                           progress=progress, project_file=project_file)
     if summary.message:
         print(f"stopped: {summary.message}", file=sys.stderr)
+    findings = summary.findings
+    progress.findings(findings)
     report = out_dir / "report.html"
     print(f"manifest: {summary.manifest_path.resolve()}")
     if report.is_file():
         print(f"report: {report.resolve()}")
+    if findings and args.strict:
+        print(f"--strict: {len(findings)} failing checks or findings (exit 3)", file=sys.stderr)
+        return 3
     return 0
 
 
@@ -161,6 +166,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--only", metavar="STAGE", help="run only this stage (earlier results must exist)")
     run.add_argument("--force", action="store_true", help="ignore cached results")
     run.add_argument("--quiet", action="store_true", help="no progress output")
+    run.add_argument("--strict", action="store_true",
+                     help="exit 3 when a check fails or a part cannot be built (findings); default exit 0")
     run.set_defaults(func=cmd_run)
 
     validate = sub.add_parser("validate", help="check a project file")

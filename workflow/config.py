@@ -288,7 +288,12 @@ class AnalysisConfig(_Section):
 
 
 class JointsConfig(_Section):
-    kind: Literal["socket", "steel"] = "socket"
+    """Joint kind: printed sockets ("socket", small tubes) or steel hub nodes with fin plates
+    ("steel"); unset, steel for steel beams over 30 mm and sockets otherwise. min_angle: the
+    smallest angle between two beams at a node (degrees; unset, 20 for sockets, 30 for steel)."""
+
+    kind: Literal["socket", "steel"] | None = None
+    min_angle: float | None = Field(None, gt=0.0, lt=120.0)
     hub_radius: Length | None = None
     sleeve_length: Length | None = None
     clearance: Length = 0.0003
@@ -301,15 +306,23 @@ class JointsConfig(_Section):
 
 
 class BeamsConfig(_Section):
+    """min_cut_length: the shortest tube a beam may be cut to (unset: both joints' reach into the
+    tube plus half its diameter, at least one diameter); remesh and optimize collapse beams shorter
+    than it plus their joints' set-backs."""
+
     stock_length: Length = 6.0
     kerf: Length = 0.003
+    min_cut_length: Length | None = Field(None, gt=0.0)
 
 
 class PanelsConfig(_Section):
+    """Unset material, thickness and density follow the joints: 3 mm acrylic (1190 kg/m^3) with
+    printed sockets, 10 mm laminated glass (2500 kg/m^3) with steel joints."""
+
     enabled: bool = True
-    thickness: Length = 0.003
-    material: str = "acrylic"
-    density: Density = 1190.0
+    thickness: Length | None = None
+    material: str | None = None
+    density: Density | None = None
     clearance: Length = 0.002
     hole_diameter: Length = 0.0
     hole_inset: Length = 0.01
@@ -318,8 +331,13 @@ class PanelsConfig(_Section):
 
 
 class SheetsConfig(_Section):
-    width: Length = 1.2
-    height: Length = 0.6
+    """Stock sheets: ``width`` x ``height``, and any further sizes in ``sizes`` ([[w, h], ...]); a
+    panel goes on the first size it fits. Unset, they follow the joints: a 1200 x 600 mm laser bed
+    with printed sockets; glass from jumbo 6000 x 3210 mm sheets with steel joints."""
+
+    width: Length | None = None
+    height: Length | None = None
+    sizes: list[Annotated[list[Length], Field(min_length=2, max_length=2)]] = Field(default_factory=list)
     spacing: Length = 0.004
     margin: Length = 0.01
     rotations: bool = True
@@ -360,6 +378,30 @@ class Project(_Section):
     report: ReportConfig = Field(default_factory=ReportConfig)
 
     @model_validator(mode="after")
+    def _fabrication_defaults(self) -> "Project":
+        """Resolve the fabrication settings that follow the joint kind (see their sections)."""
+        f = self.fabrication
+        kind = f.joints.kind
+        if kind is None:
+            size = self.section.diameter or max(self.section.height or 0.0, self.section.width or 0.0)
+            kind = "steel" if self.material.name.startswith("steel") and size > 0.03 else "socket"
+        glass = kind == "steel"
+        p, s = f.panels, f.sheets
+        if (s.width is None) != (s.height is None):
+            raise ValueError("fabrication.sheets: give both width and height, or neither")
+        for size in s.sizes:
+            if min(size) <= 0:
+                raise ValueError(f"fabrication.sheets.sizes: {size} must be two positive lengths")
+        width, height = (s.width, s.height) if s.width is not None else ((6.0, 3.21) if glass else (1.2, 0.6))
+        panels = p.model_copy(update={
+            "material": p.material if p.material is not None else ("laminated glass" if glass else "acrylic"),
+            "thickness": p.thickness if p.thickness is not None else (0.010 if glass else 0.003),
+            "density": p.density if p.density is not None else (2500.0 if glass else 1190.0)})
+        fabrication = f.model_copy(update={"joints": f.joints.model_copy(update={"kind": kind}), "panels": panels,
+                                           "sheets": s.model_copy(update={"width": width, "height": height})})
+        return self.model_copy(update={"fabrication": fabrication})
+
+    @model_validator(mode="after")
     def _combinations_exist(self) -> "Project":
         for key, name in (("shell.combination", self.shell.combination),
                           ("analysis.uls_combination", self.analysis.uls_combination),
@@ -374,8 +416,8 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "surface": ("surface", "supports", "loads"),
     "shell": ("shell", "loads"),
     "field": ("field",),
-    "remesh": ("remesh",),
-    "optimize": ("optimize",),
+    "remesh": ("remesh", "section", "material", "fabrication.joints", "fabrication.beams"),
+    "optimize": ("optimize", "section", "material", "fabrication.joints", "fabrication.beams"),
     "analysis": ("analysis", "material", "section", "loads"),
     "fabrication": ("fabrication", "material", "section"),
     "report": ("report", "project"),

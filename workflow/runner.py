@@ -76,6 +76,7 @@ class StageContext:
     progress: Progress
     _results: dict[str, Any]
     _loader: Callable[[str], Any]
+    findings: list[dict] = field(default_factory=list)
 
     def result(self, stage: str) -> Any:
         """The in-memory result of an earlier stage (reloaded from its artifacts if cached)."""
@@ -86,6 +87,11 @@ class StageContext:
     def step(self, text: str, fraction: float | None = None) -> None:
         """Report the current step of the stage (and optionally its completed fraction)."""
         self.progress.step(text, fraction)
+
+    def report_findings(self, findings: list[dict]) -> None:
+        """Record the stage's findings (engine.findings.Finding dicts): failing checks and what
+        could not be built. They go into the manifest, the end of the run and the report."""
+        self.findings.extend(findings)
 
 
 @dataclass(frozen=True)
@@ -119,11 +125,24 @@ class RunSummary:
     def manifest_path(self) -> Path:
         return self.out_dir / "manifest.json"
 
+    @property
+    def findings(self) -> list[dict]:
+        """Every finding of the stages run or cached, in stage order."""
+        return [f for stage in self.stages for f in stage.get("findings", [])]
+
+
+def _section_value(project: Project, path: str):
+    """JSON of a project section named by a dotted path ("fabrication.joints")."""
+    value = project
+    for name in path.split("."):
+        value = getattr(value, name)
+    if hasattr(value, "model_dump"):
+        return value.model_dump(mode="json")
+    return [item.model_dump(mode="json") for item in value]
+
 
 def _stage_key(stage: Stage, project: Project, keys: dict[str, str], version: str) -> str:
-    config = {name: getattr(project, name).model_dump(mode="json") if hasattr(getattr(project, name), "model_dump")
-              else [item.model_dump(mode="json") for item in getattr(project, name)]
-              for name in STAGE_SECTIONS.get(stage.name, ())}
+    config = {name: _section_value(project, name) for name in STAGE_SECTIONS.get(stage.name, ())}
     payload = {"stage": stage.name, "version": version, "config": config,
                "upstream": {d: keys[d] for d in stage.depends},
                "external": stage.external(project) if stage.external else None}
@@ -216,14 +235,15 @@ def run_project(project: Project, out_dir: Path, stages: list[Stage], *, until: 
         entry = previous.get(stage.name)
         if not force and _still_valid(entry, keys[stage.name], out_dir):
             records[stage.name] = {**entry, "status": STATUS_CACHED, "duration_s": 0.0}
-            progress.stage_done(stage.name, STATUS_CACHED, 0.0)
+            progress.stage_done(stage.name, STATUS_CACHED, 0.0, findings=len(entry.get("findings", [])))
             summary.stages.append(records[stage.name])
             continue
         progress.stage_start(stage.name)
         started = time.perf_counter()
         tmp = atomic_folder(out_dir, stage.folder)
+        ctx = context(stage, tmp)
         try:
-            results[stage.name] = stage.run(context(stage, tmp))
+            results[stage.name] = stage.run(ctx)
         except StageNotAvailable as exc:
             shutil.rmtree(tmp, ignore_errors=True)
             records[stage.name] = {"name": stage.name, "folder": stage.folder, "status": STATUS_NOT_AVAILABLE,
@@ -249,9 +269,10 @@ def run_project(project: Project, out_dir: Path, stages: list[Stage], *, until: 
         duration = time.perf_counter() - started
         records[stage.name] = {"name": stage.name, "folder": stage.folder, "status": STATUS_RAN,
                                "duration_s": round(duration, 3), "key": keys[stage.name],
-                               "artifacts": _artifacts(folder, out_dir, stage.published)}
+                               "artifacts": _artifacts(folder, out_dir, stage.published),
+                               "findings": ctx.findings}
         summary.stages.append(records[stage.name])
-        progress.stage_done(stage.name, STATUS_RAN, duration)
+        progress.stage_done(stage.name, STATUS_RAN, duration, findings=len(ctx.findings))
         write_manifest()
     write_manifest()
     return summary

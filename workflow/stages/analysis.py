@@ -18,6 +18,7 @@ import numpy as np
 from engine.errors import MechanismError
 from engine.loads import LoadCombination, combine
 from engine.structure import BeamProperties, beam_up_vectors, gridshell_loads, node_normals, support_restraints
+from engine.findings import Finding
 from engine.supports import Supports
 from fabrication.files import atomic_path, write_text_atomic
 
@@ -117,20 +118,26 @@ def run(ctx):
     deflection_limit = span / config.deflection_limit_ratio
     vertical_sls = float(np.abs(result.sls_displacements[:, 2]).max())
     worst = result.worst
+    stiffer = "a larger [section] diameter or thickness, a stronger [material], or more supports ([[supports]])"
     verdicts = [
-        {"check": "member utilisation (ULS)", "value": float(utilisation.max()), "limit": 1.0,
-         "pass": bool(utilisation.max() <= 1.0)},
-        {"check": f"deflection (SLS) vs span/{config.deflection_limit_ratio:g}", "value": vertical_sls,
-         "limit": deflection_limit, "pass": bool(vertical_sls <= deflection_limit), "unit": "m"},
+        {"check": "member utilisation (ULS)", "kind": "utilisation", "value": float(utilisation.max()), "limit": 1.0,
+         "pass": bool(utilisation.max() <= 1.0), "part": f"B{int(utilisation.argmax()) + 1:04d}",
+         "fix": f"{stiffer}"},
+        {"check": f"deflection (SLS) vs span/{config.deflection_limit_ratio:g}", "kind": "deflection",
+         "value": vertical_sls, "limit": deflection_limit, "pass": bool(vertical_sls <= deflection_limit), "unit": "m",
+         "part": f"N{int(np.abs(result.sls_displacements[:, 2]).argmax()) + 1:04d}",
+         "fix": f"{stiffer}; or [analysis] deflection_limit_ratio if the limit is not the project's"},
     ]
     if result.lambda_LB is not None:
-        verdicts.append({"check": "linear buckling factor lambda_LB", "value": result.lambda_LB,
-                         "limit": config.required_load_factor, "pass": bool(result.lambda_LB >= config.required_load_factor)})
+        verdicts.append({"check": "linear buckling factor lambda_LB", "kind": "buckling", "value": result.lambda_LB,
+                         "limit": config.required_load_factor, "part": "mode 1",
+                         "pass": bool(result.lambda_LB >= config.required_load_factor), "fix": stiffer})
     if worst is not None:
         value = worst.capacity
         label = "limit factor" if worst.limit_load_factor is not None else "load factor carried (no limit point found)"
-        verdicts.append({"check": f"worst non-linear {label} lambda_NL ({worst.name})", "value": float(value),
-                         "limit": config.required_load_factor, "pass": bool(value >= config.required_load_factor)})
+        verdicts.append({"check": f"worst non-linear {label} lambda_NL ({worst.name})", "kind": "nonlinear_buckling",
+                         "value": float(value), "limit": config.required_load_factor, "part": worst.name,
+                         "pass": bool(value >= config.required_load_factor), "fix": stiffer})
     axial = np.asarray(checks.axial_force)
     figures = {
         "nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
@@ -150,7 +157,12 @@ def run(ctx):
         "imperfections": [{"shape": c.name, "lambda_NL": c.capacity, "limit_point": c.limit_load_factor is not None,
                            "path_complete": c.converged} for c in result.imperfect],
         "verdicts": verdicts,
+        "findings": [Finding(kind=v["kind"], parts=[v["part"]], measure=v["value"], limit=v["limit"],
+                             unit=v.get("unit", ""), stage="analysis", fix=v["fix"],
+                             message=f"{v['check']}: {v['value']:.3g} against {v['limit']:.3g}").to_dict()
+                     for v in verdicts if not v["pass"]],
     }
+    ctx.report_findings(figures["findings"])
     ctx.step("writing")
     write_text_atomic(ctx.folder / "analysis.json", json.dumps(figures, indent=1, default=float))
     import pandas as pd

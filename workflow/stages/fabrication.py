@@ -9,7 +9,6 @@ took, ``step_seconds``). Lengths in mm.
 
 from __future__ import annotations
 
-import importlib
 import json
 import time
 from pathlib import Path
@@ -17,12 +16,13 @@ from pathlib import Path
 import numpy as np
 
 from engine.structure import node_normals
+from engine.findings import Finding
 from fabrication.files import write_text_atomic
 
 from ..config import Project
 from ._require import require
 
-__all__ = ["run", "load", "beam_outer_size_mm"]
+__all__ = ["run", "load", "beam_outer_size_mm", "joint_settings_of", "build_limits_of", "sheet_stock"]
 
 MM = 1000.0
 
@@ -31,6 +31,30 @@ def beam_outer_size_mm(project: Project) -> float:
     """The beam's largest outer dimension in mm (tube or rod diameter, or the section height)."""
     s = project.section
     return MM * (s.diameter if s.diameter is not None else max(s.height or 0.0, s.width or 0.0))
+
+
+def joint_settings_of(project: Project):
+    """The project's joint settings in fabrication's terms (mm)."""
+    from fabrication.joints import JointSettings
+
+    j = project.fabrication.joints
+    return JointSettings(**{k: v for k, v in {
+        "kind": j.kind, "clearance_mm": MM * j.clearance, "wall_mm": MM * j.wall, "min_wall_mm": MM * j.min_wall,
+        "pin_hole_mm": MM * j.pin_hole, "engrave": j.engrave,
+        "hub_radius_mm": None if j.hub_radius is None else MM * j.hub_radius,
+        "sleeve_length_mm": None if j.sleeve_length is None else MM * j.sleeve_length,
+        "plate_thickness_mm": MM * j.plate_thickness, "bolt_hole_mm": MM * j.bolt_hole}.items() if v is not None})
+
+
+def build_limits_of(project: Project):
+    """The shortest buildable beam and smallest angle at a joint that the project's joints, tube
+    and fabrication settings give (fabrication.limits.BuildLimits)."""
+    from fabrication.limits import BuildLimits
+
+    b = project.fabrication.beams
+    return BuildLimits.of(joint_settings_of(project), beam_outer_size_mm(project),
+                          min_cut_length_mm=None if b.min_cut_length is None else MM * b.min_cut_length,
+                          min_angle_deg=project.fabrication.joints.min_angle)
 
 
 class _StepClock:
@@ -63,23 +87,20 @@ def run(ctx):
     folder: Path = ctx.folder
     normals = node_normals(polymesh, surface.mesh)
     size_mm = beam_outer_size_mm(project)
-    summary: dict = {"nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces}
+    limits = build_limits_of(project)
+    summary: dict = {"nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
+                     "limits": limits.to_dict()}
+    findings: list[Finding] = []
 
-    JointSettings, JointsInBackground = require("fabrication", "fabrication.joints", "JointSettings",
-                                                "JointsInBackground")
-    j = config.joints
-    joint_settings = JointSettings(**{k: v for k, v in {
-        "kind": j.kind, "clearance_mm": MM * j.clearance, "wall_mm": MM * j.wall, "min_wall_mm": MM * j.min_wall,
-        "pin_hole_mm": MM * j.pin_hole, "engrave": j.engrave,
-        "hub_radius_mm": None if j.hub_radius is None else MM * j.hub_radius,
-        "sleeve_length_mm": None if j.sleeve_length is None else MM * j.sleeve_length,
-        "plate_thickness_mm": MM * j.plate_thickness, "bolt_hole_mm": MM * j.bolt_hole}.items() if v is not None})
+    from fabrication.joints import JointsInBackground
+
+    joint_settings = joint_settings_of(project)
     summary.update({"joints": 0, "joint_problems": []})
     # the joints take both cores in worker processes; the other steps run here meanwhile
     clock.start("joints: start")
     with JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
                             workers=config.workers) as joints:
-        _beams_panels_drawings_assembly(ctx, clock, polymesh, normals, joint_settings, summary)
+        _beams_panels_drawings_assembly(ctx, clock, polymesh, normals, joint_settings, limits, summary, findings)
         clock.start("joints: waiting")
         joints.wait(ctx.step)
     clock.stop()
@@ -88,14 +109,78 @@ def run(ctx):
     summary["joints"] = len(joint_reports)
     summary["joint_problems"] = [{k: v for k, v in r.items() if k != "seconds"} for r in joint_reports
                                  if not r.get("ok", True)]
+    findings += _joint_findings(joint_reports, limits)
+    clock.start("joints: clearance between neighbours")
+    summary["joint_clashes"] = _joint_clashes(folder / "joints", [r["id"] for r in joint_reports
+                                                                  if r.get("built", True)], ctx)
+    findings += [Finding(kind="joint_clash", parts=list(c["parts"]), measure=c.get("volume_mm3"), limit=CLASH_MM3,
+                         unit="mm3", stage="fabrication",
+                         message=(f"joints {c['parts'][0]} and {c['parts'][1]} overlap by "
+                                  f"{c['volume_mm3']:.1f} mm3" if c.get("volume_mm3") is not None else
+                                  f"joints {c['parts'][0]} and {c['parts'][1]}: clearance not checked "
+                                  f"({c.get('error', 'boolean failed')})"),
+                         fix="make the beams between them longer: raise [fabrication.beams] min_cut_length or "
+                             "lower [remesh] n_cells; or smaller joints ([fabrication.joints] sleeve_length)")
+                 for c in summary["joint_clashes"]]
+    clock.stop()
+    summary["findings"] = [f.to_dict() for f in findings]
+    ctx.report_findings(summary["findings"])
     summary["step_seconds"] = clock.seconds
     write_text_atomic(folder / "fabrication.json", json.dumps(summary, indent=1, default=_jsonable))
     return summary
 
 
-def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: np.ndarray, joint_settings,
-                                    summary: dict) -> None:
-    """Every step but the joints (they run meanwhile); fills ``summary``."""
+#: Joint solids sharing more than this volume (mm3) clash.
+CLASH_MM3 = 1.0
+
+
+def _joint_clashes(folder: Path, names: list[str], ctx) -> list[dict]:
+    """Pairs of joint solids (as written) that intersect by more than CLASH_MM3."""
+    from fabrication.clearance import joint_clashes_from_step
+
+    return joint_clashes_from_step(folder, names, min_volume_mm3=CLASH_MM3)
+
+
+def _joint_findings(reports: list[dict], limits) -> list[Finding]:
+    """Joints whose solid failed a check, or whose beams meet at less than the joint takes."""
+    out = []
+    for r in reports:
+        angle = r.get("smallest_angle_deg")
+        if angle is not None and angle < limits.min_angle_deg and r.get("beams", 0) > 1:
+            out.append(Finding(kind="joint_angle", parts=[r["id"]], measure=angle, limit=limits.min_angle_deg,
+                               unit="deg", stage="fabrication",
+                               message=f"joint {r['id']}: two beams meet at {angle:.1f} deg",
+                               fix="lower [fabrication.joints] min_angle if the joint takes it, or move the node "
+                                   "(other [remesh] seed or n_cells)"))
+        if r.get("ok", True):
+            continue
+        failed = [r["error"]] if r.get("error") else []
+        failed += [name for name in ("valid", "single_solid", "watertight", "wall_ok") if not r.get(name, True)]
+        if r.get("clashes"):
+            failed.append(f"{len(r['clashes'])} sleeve pairs overlap")
+        error = r.get("max_axis_error_deg")
+        if error is not None and np.isfinite(error) and error > 0.1:
+            failed.append(f"bore axis off by {error:.2f} deg")
+        out.append(Finding(kind="joint_solid", parts=[r["id"]], measure=r.get("min_wall_mm"), unit="mm",
+                           stage="fabrication", message=f"joint {r['id']}: {', '.join(failed) or 'check failed'}",
+                           fix="[fabrication.joints] wall, min_wall or sleeve_length; or "
+                               "[fabrication.joints] min_angle with a new run"))
+    return out
+
+
+def sheet_stock(project: Project):
+    """The stock sheet sizes (SheetSettings, mm) in the order panels are given to them."""
+    from fabrication.nesting_sheets import SheetSettings
+
+    s = project.fabrication.sheets
+    sizes = [(s.width, s.height)] + [tuple(size) for size in s.sizes]
+    return [SheetSettings(width_mm=MM * w, height_mm=MM * h, spacing_mm=MM * s.spacing, margin_mm=MM * s.margin,
+                          rotations=s.rotations) for w, h in sizes]
+
+
+def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: np.ndarray, joint_settings, limits,
+                                    summary: dict, findings: list[Finding]) -> None:
+    """Every step but the joints (they run meanwhile); fills ``summary`` and ``findings``."""
     project: Project = ctx.project
     config = project.fabrication
     folder: Path = ctx.folder
@@ -113,14 +198,33 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
                                  area_m2=section.A, outer_size_mm=size_mm)
     table = cut_list(polymesh, normals, beam_settings, joint_settings)
     write_cut_list(table, folder / "beams")
+    cut = table["cut_length_mm"].to_numpy()
+    ids = table["id"].tolist()
+    fix_short = ("lower [remesh] n_cells or raise [field] max_size_ratio limits; the grid's shortest beams are "
+                 "collapsed down to [fabrication.beams] min_cut_length plus the joints' set-backs")
+    for i in np.flatnonzero(cut < limits.min_cut_length_mm - 0.05):
+        a, z = table["start_node"].iloc[i], table["end_node"].iloc[i]
+        findings.append(Finding(kind="cut_length", parts=[ids[i], a, z], measure=float(cut[i]),
+                                limit=limits.min_cut_length_mm, unit="mm", stage="fabrication",
+                                message=(f"beam {ids[i]} ({a}-{z}) is shorter than its two joints take"
+                                         if cut[i] <= 0 else f"beam {ids[i]} ({a}-{z}) cuts to {cut[i]:.1f} mm"),
+                                fix=fix_short))
+    stock = MM * b.stock_length
+    for i in np.flatnonzero(cut + MM * b.kerf > stock):
+        findings.append(Finding(kind="stock_length", parts=[ids[i]], measure=float(cut[i]), limit=stock, unit="mm",
+                                stage="fabrication", message=f"beam {ids[i]} ({cut[i]:.0f} mm) is longer than a stock bar",
+                                fix="raise [fabrication.beams] stock_length, or more cells ([remesh] n_cells)"))
+    nestable = np.flatnonzero((cut > 0) & (cut + MM * b.kerf <= stock))
     clock.start("beams: bar nesting")
-    nesting = nest_bars(table["cut_length_mm"].to_numpy(), table["id"].tolist(), MM * b.stock_length, MM * b.kerf)
+    nesting = nest_bars(cut[nestable], [ids[i] for i in nestable], stock, MM * b.kerf)
     _write_bars(nesting, folder / "beams" / "bars.csv")
     clock.start("beams: beams.step")
     write_beams_step(polymesh, table, folder / "beams" / "beams.step", outer_size_mm=size_mm)
     summary.update({"bars_used": int(nesting.bars_used), "bars_lower_bound": int(nesting.lower_bound),
                     "bar_nesting_method": getattr(nesting, "method", ""), "bar_waste_mm": float(nesting.waste_mm),
                     "total_cut_length_m": float(table["cut_length_mm"].sum() / MM),
+                    "shortest_cut_length_mm": float(cut.min()) if len(cut) else 0.0,
+                    "shortest_beam_m": float(polymesh.beam_lengths.min()) if len(cut) else 0.0,
                     "beam_mass_kg": float(table["mass_kg"].sum())})
 
     panels = []
@@ -128,30 +232,45 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
         clock.start("panels: flatten and DXFs")
         (PanelSettings, flatten_panels, write_panel_dxfs, write_panels_csv) = require(
             "fabrication", "fabrication.panels", "PanelSettings", "flatten_panels", "write_panel_dxfs", "write_panels_csv")
-        SheetSettings, nest_sheets, write_sheet_dxfs = require("fabrication", "fabrication.nesting_sheets", "SheetSettings",
-                                                               "nest_sheets", "write_sheet_dxfs")
-        p, s = config.panels, config.sheets
+        from fabrication.nesting_sheets import nest_on_stock, write_sheet_dxfs, write_sheets_picture
+
+        p = config.panels
         panel_settings = PanelSettings(thickness_mm=MM * p.thickness, material_name=p.material, density=p.density,
                                        clearance_mm=MM * p.clearance, hole_diameter_mm=MM * p.hole_diameter,
                                        hole_inset_mm=MM * p.hole_inset, planarity_tolerance_mm=MM * p.planarity_tolerance,
                                        split_nonplanar=p.split_nonplanar)
-        panels = flatten_panels(polymesh, panel_settings)
+        problems: list[tuple[str, str]] = []
+        panels = flatten_panels(polymesh, panel_settings, problems=problems)
+        findings += [Finding(kind="panel_outline", parts=[pid], stage="fabrication", message=message,
+                             fix="[fabrication.panels] clearance, or a new grid ([remesh] seed)")
+                     for pid, message in problems]
         write_panel_dxfs(panels, folder / "panels", panel_settings)
         clock.start("panels: sheet nesting")
-        sheet_nesting = nest_sheets(panels, SheetSettings(width_mm=MM * s.width, height_mm=MM * s.height,
-                                                          spacing_mm=MM * s.spacing, margin_mm=MM * s.margin,
-                                                          rotations=s.rotations))
+        stocks = sheet_stock(project)
+        stock_nesting = nest_on_stock(panels, stocks)
+        largest = max(stocks, key=lambda s: s.width_mm * s.height_mm)
+        for i in stock_nesting.unfit:
+            outline = np.asarray(panels[i].outline_mm)
+            extent = outline.max(axis=0) - outline.min(axis=0)
+            findings.append(Finding(
+                kind="sheet_size", parts=[panels[i].id], measure=float(extent.max()),
+                limit=float(max(largest.width_mm, largest.height_mm) - 2 * largest.margin_mm), unit="mm",
+                stage="fabrication",
+                message=(f"panel {panels[i].id} ({extent[0]:.0f} x {extent[1]:.0f} mm) fits no stock sheet "
+                         f"(largest {largest.width_mm:g} x {largest.height_mm:g} mm); its DXF is written"),
+                fix="add a larger size to [fabrication.sheets] sizes, or more cells ([remesh] n_cells)"))
         clock.start("panels: sheet DXFs, picture, CSV")
-        write_sheet_dxfs(sheet_nesting, panels, folder / "panels" / "sheets")
-        picture = getattr(importlib.import_module("fabrication.nesting_sheets"), "write_sheets_picture", None)
-        if picture is not None:
-            picture(sheet_nesting, panels, folder / "panels" / "sheets.png")
-        write_panels_csv(panels, sheet_nesting, panel_settings, folder / "panels" / "panels.csv")
-        sheets = getattr(sheet_nesting, "n_sheets", None)
-        if sheets is None:
-            sheets = len(getattr(sheet_nesting, "sheets", []))
-        summary.update({"panels": len(panels), "sheets": int(sheets),
-                        "sheet_utilisation": float(getattr(sheet_nesting, "utilisation", 0.0)),
+        for first, (_, members, nesting_k) in zip(stock_nesting.first_numbers(), stock_nesting.groups):
+            group = [panels[i] for i in members]
+            write_sheet_dxfs(nesting_k, group, folder / "panels" / "sheets", panel_settings, first_number=first)
+        if stock_nesting.groups:
+            _, members, nesting_0 = stock_nesting.groups[0]
+            write_sheets_picture(nesting_0, [panels[i] for i in members], folder / "panels" / "sheets.png")
+        write_panels_csv(panels, None, panel_settings, folder / "panels" / "panels.csv",
+                         sheet_names=stock_nesting.sheet_of(panels))
+        summary.update({"panels": len(panels), "sheets": int(stock_nesting.n_sheets),
+                        "sheet_sizes_mm": [[s.width_mm, s.height_mm, n.n_sheets] for s, _, n in stock_nesting.groups],
+                        "sheet_utilisation": float(stock_nesting.utilisation),
                         "panels_over_planarity_tolerance": [getattr(x, "id", "") for x in panels if getattr(x, "nonplanar", False)]})
 
     clock.start("drawings")

@@ -17,7 +17,7 @@ from ..config import Project
 from ._require import require
 from .polymesh_io import read_polymesh_obj, write_polymesh_obj
 
-__all__ = ["run", "load", "remesh_settings"]
+__all__ = ["run", "load", "remesh_settings", "buildable_grid"]
 
 DEFAULT_CELLS = 120
 
@@ -41,17 +41,37 @@ def run(ctx):
     support_vertices[surface.supports.nodes] = True
     result = remesh(surface.mesh, field, remesh_settings(project), support_vertices=support_vertices,
                     progress=ctx.step)
-    write_polymesh_obj(result.polymesh, ctx.folder / "gridshell.obj",
+    ctx.step("collapsing beams shorter than the joints and the shortest cut take")
+    polymesh, buildable = buildable_grid(result.polymesh, project)
+    write_polymesh_obj(polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: statics-aware Voronoi grid-shell (remesh)")
     quality = dict(result.quality)
+    quality["buildable"] = buildable
     quality.update({"max_size_ratio_D": project.field.max_size_ratio, "max_aspect_A": project.field.max_aspect})
     write_text_atomic(ctx.folder / "remesh.json", json.dumps(quality, indent=1, default=float))
     ctx.step("drawing")
     from ..plots.remesh import plot_gridshell
 
-    plot_gridshell(result.polymesh, ctx.folder / "degree.png", color_by="degree",
+    plot_gridshell(polymesh, ctx.folder / "degree.png", color_by="degree",
                    title=f"{project.project.name}: remeshed grid-shell, cells by number of sides")
-    return result.polymesh
+    return polymesh
+
+
+def buildable_grid(polymesh, project: Project):
+    """(grid, record): ``polymesh`` with every beam shorter than its joints and the shortest cut
+    take collapsed where a valid collapse exists; the record (JSON-ready) has the limits, the
+    collapses, the shortest beam and the smallest angle between two beams at a node."""
+    from engine.collapse import collapse_short_beams
+    from fabrication.limits import node_smallest_angles, required_beam_lengths_m
+
+    from .fabrication import build_limits_of
+
+    limits = build_limits_of(project)
+    grid, report = collapse_short_beams(polymesh, lambda g: required_beam_lengths_m(g, limits))
+    record = {**limits.to_dict(), **report.to_dict(),
+              "shortest_beam_m": float(grid.beam_lengths.min()) if len(grid.edges) else 0.0,
+              "smallest_beam_angle_deg": float(np.degrees(node_smallest_angles(grid).min()))}
+    return grid, record
 
 
 def load(folder: Path, ctx):

@@ -1,0 +1,97 @@
+"""What the joints and the tubes allow of the grid: the shortest buildable beam and the smallest
+angle between two beams at a node.
+
+A beam of node-to-node length L is buildable when its cut length L - s_a - s_b (s the set-back of
+the joint at each end, which grows as the node's smallest angle shrinks) is at least the minimum
+cut length. The default minimum keeps the two joints' sleeves (or fin plates) apart inside the tube
+and leaves half a tube diameter between them: 2 x sleeve + 0.5 x outer size. Lengths in mm here,
+as in every fabrication module; :func:`required_beam_lengths_m` gives metres for the geometry stages.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from engine.mesh import PolyMesh
+
+from .joints import JointSettings, joint_setback_mm, joint_sleeve_mm, smallest_angle
+
+__all__ = ["BuildLimits", "node_smallest_angles", "required_beam_lengths_m", "default_min_cut_length_mm",
+           "default_min_angle_deg"]
+
+
+def default_min_cut_length_mm(settings: JointSettings, beam_size_mm: float) -> float:
+    """Shortest cut length a fabricator would accept: the joints' reach into the tube from both
+    ends plus half a tube diameter between them, and never under one tube diameter (mm)."""
+    return float(max(2 * joint_sleeve_mm(settings, beam_size_mm) + 0.5 * beam_size_mm, beam_size_mm))
+
+
+def default_min_angle_deg(settings: JointSettings) -> float:
+    """Smallest angle between two beams a joint takes: under it the set-back (so the shortest
+    beam) grows past three times its value at 120 degrees."""
+    return 20.0 if settings.kind == "socket" else 30.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class BuildLimits:
+    """The joints, the beam's outer size (mm), the minimum cut length (mm) and the smallest angle
+    between two beams at a node (degrees)."""
+
+    joints: JointSettings
+    beam_size_mm: float
+    min_cut_length_mm: float
+    min_angle_deg: float
+
+    @classmethod
+    def of(cls, joints: JointSettings, beam_size_mm: float, *, min_cut_length_mm: float | None = None,
+           min_angle_deg: float | None = None) -> BuildLimits:
+        """Limits with the defaults of :func:`default_min_cut_length_mm` and :func:`default_min_angle_deg`."""
+        return cls(joints=joints, beam_size_mm=float(beam_size_mm),
+                   min_cut_length_mm=float(default_min_cut_length_mm(joints, beam_size_mm)
+                                           if min_cut_length_mm is None else min_cut_length_mm),
+                   min_angle_deg=float(default_min_angle_deg(joints) if min_angle_deg is None else min_angle_deg))
+
+    def setback_mm(self, angle_rad: float) -> float:
+        """Set-back of a joint whose smallest angle between beams is ``angle_rad``, mm."""
+        return joint_setback_mm(self.joints, self.beam_size_mm, angle_rad)
+
+    def shortest_beam_mm(self, angle_rad: float = 2 * np.pi / 3) -> float:
+        """Shortest buildable node-to-node length between two joints of that smallest angle, mm."""
+        return 2 * self.setback_mm(angle_rad) + self.min_cut_length_mm
+
+    def to_dict(self) -> dict:
+        """JSON-ready record (mm and degrees)."""
+        return {"joint_kind": self.joints.kind, "beam_size_mm": self.beam_size_mm,
+                "min_cut_length_mm": round(self.min_cut_length_mm, 2), "min_angle_deg": self.min_angle_deg,
+                "shortest_beam_mm_at_120deg": round(self.shortest_beam_mm(), 2)}
+
+
+def node_smallest_angles(polymesh: PolyMesh) -> np.ndarray:
+    """(n_nodes,) smallest angle (radians) between two beams at each node; pi with fewer than two."""
+    e = polymesh.edges
+    x = polymesh.nodes
+    out = np.full(polymesh.n_nodes, np.pi)
+    if not len(e):
+        return out
+    # incident beam directions grouped by node, one group per node
+    ends = np.r_[e[:, 0], e[:, 1]]
+    others = np.r_[e[:, 1], e[:, 0]]
+    d = x[others] - x[ends]
+    d /= np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
+    order = np.argsort(ends, kind="stable")
+    ends, d = ends[order], d[order]
+    starts = np.flatnonzero(np.r_[True, ends[1:] != ends[:-1]])
+    for first, last in zip(starts, np.r_[starts[1:], len(ends)]):
+        out[ends[first]] = smallest_angle(d[first:last])
+    return out
+
+
+def required_beam_lengths_m(polymesh: PolyMesh, limits: BuildLimits) -> np.ndarray:
+    """(n_beams,) shortest buildable node-to-node length of each beam of the grid as it is, m:
+    the two set-backs at its end nodes' smallest angles plus the minimum cut length."""
+    angles = node_smallest_angles(polymesh)
+    setback = np.array([limits.setback_mm(a) for a in angles])
+    e = polymesh.edges
+    return (setback[e[:, 0]] + setback[e[:, 1]] + limits.min_cut_length_mm) / 1000.0
