@@ -1,0 +1,189 @@
+"""Fabrication limits as constraints of the geometry: the shortest buildable beam, the smallest
+angle at a joint, short beams collapsed with the cells kept valid, and findings in place of failures."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from engine.collapse import MAX_VALENCE, collapse_beams, collapse_short_beams
+from engine.findings import Finding, findings_table
+from engine.mesh import PolyMesh
+from fabrication.joints import JointSettings, build_joint, joint_setback_mm
+from fabrication.limits import BuildLimits, node_smallest_angles, required_beam_lengths_m
+
+
+def _honeycomb(rows: int = 6, cols: int = 6, side: float = 1.0, squeeze: dict | None = None) -> PolyMesh:
+    """A patch of regular hexagons (side ``side``, pointy-top) with shared nodes; ``squeeze``
+    maps (row, col) of a cell to the factor its first edge is shortened by (moving both ends)."""
+    points: dict[tuple, int] = {}
+    nodes, faces = [], []
+    w = np.sqrt(3) * side
+    for r in range(rows):
+        for c in range(cols):
+            cx, cy = c * w + (r % 2) * w / 2, r * 1.5 * side
+            loop = []
+            for k in range(6):
+                a = np.radians(90 + 60 * k)
+                p = (round(cx + side * np.cos(a), 6), round(cy + side * np.sin(a), 6))
+                if p not in points:
+                    points[p] = len(nodes)
+                    nodes.append([p[0], p[1], 0.0])
+                loop.append(points[p])
+            faces.append(loop)
+    nodes = np.array(nodes)
+    grid = PolyMesh(nodes=nodes, faces=tuple(np.array(f) for f in faces))
+    boundary = np.zeros(len(nodes), dtype=bool)
+    key = np.sort(np.concatenate([np.stack([f, np.roll(f, -1)], 1) for f in grid.faces]), axis=1)
+    edges, counts = np.unique(key, axis=0, return_counts=True)
+    boundary[edges[counts == 1].ravel()] = True
+    return PolyMesh(nodes=nodes, faces=grid.faces, boundary=boundary)
+
+
+def _check_valid(grid: PolyMesh) -> None:
+    for face in grid.faces:
+        assert len(face) >= 3 and len(set(face.tolist())) == len(face)
+    directed = np.concatenate([np.stack([f, np.roll(f, -1)], axis=1) for f in grid.faces])
+    assert len({tuple(d) for d in directed.tolist()}) == len(directed), "consistently oriented, manifold"
+    assert np.all(np.bincount(np.concatenate(grid.faces), minlength=grid.n_nodes) > 0), "no orphan node"
+
+
+def test_setback_grows_as_the_angle_closes_and_limits_add_up():
+    s = JointSettings()
+    wide, narrow = joint_setback_mm(s, 12.0, np.radians(120)), joint_setback_mm(s, 12.0, np.radians(30))
+    # two bores of radius 6.3 mm at 30 degrees keep the least wall 1.5 mm: (2 x 6.3 + 1.5) / (2 sin 15 deg)
+    assert narrow == pytest.approx((2 * 6.3 + 1.5) / (2 * np.sin(np.radians(15))))
+    assert narrow > wide
+    limits = BuildLimits.of(s, 12.0)
+    assert limits.min_cut_length_mm >= 12.0  # at least one tube diameter
+    assert limits.min_cut_length_mm == pytest.approx(2 * 24.0 + 6.0)  # two 24 mm sleeves + half a diameter
+    assert limits.shortest_beam_mm() == pytest.approx(2 * wide + limits.min_cut_length_mm)
+    steel = BuildLimits.of(JointSettings(kind="steel"), 114.3, min_cut_length_mm=400.0)
+    assert steel.min_cut_length_mm == 400.0 and steel.min_angle_deg == 30.0
+    # steel tubes of radius 57.15 mm at 30 degrees stay 5 mm apart at their ends
+    assert steel.setback_mm(np.radians(30)) == pytest.approx((57.15 + 2.5) / np.sin(np.radians(15)))
+
+
+def test_smallest_angles_of_a_honeycomb_are_120_degrees_inside():
+    grid = _honeycomb()
+    angles = np.degrees(node_smallest_angles(grid))
+    inner = grid.valence == 3
+    assert np.allclose(angles[inner], 120.0)
+    assert np.allclose(angles[grid.valence == 2], 120.0)  # boundary nodes with two beams
+
+
+def test_collapse_keeps_a_valid_mesh_and_merges_to_the_midpoint():
+    grid = _honeycomb()
+    lengths = grid.beam_lengths
+    interior = np.flatnonzero(~grid.boundary[grid.edges].any(axis=1))
+    beam = int(interior[0])
+    a, b = grid.edges[beam]
+    midpoint = 0.5 * (grid.nodes[a] + grid.nodes[b])
+    result, done = collapse_beams(grid, np.array([beam]))
+    assert done == 1
+    _check_valid(result)
+    assert result.n_nodes == grid.n_nodes - 1
+    assert len(result.edges) == len(grid.edges) - 1  # the beam is gone, the others kept
+    assert result.n_faces == grid.n_faces
+    assert np.min(np.linalg.norm(result.nodes - midpoint, axis=1)) < 1e-12
+    # two cells lose a side (hexagons -> pentagons), the beam's end nodes merge into valence 4
+    assert np.sort(result.face_degrees)[:2].tolist() == [5, 5]
+    assert result.valence.max() == 4
+    # the beam's length is gone and its four neighbours now start at the midpoint
+    others = [(int(u), int(v)) for u, v in grid.edges if (u in (a, b)) != (v in (a, b))]
+    old = sum(np.linalg.norm(grid.nodes[u] - grid.nodes[v]) for u, v in others)
+    new = sum(np.linalg.norm(midpoint - grid.nodes[v if u in (a, b) else u]) for u, v in others)
+    assert len(others) == 4
+    assert np.isclose(result.total_length, grid.total_length - lengths[beam] - old + new)
+
+
+def test_short_beams_collapse_until_none_is_shorter_than_required():
+    grid = _honeycomb(8, 8)
+    rng = np.random.default_rng(3)
+    x = grid.nodes.copy()
+    # shorten a dozen interior beams to a tenth by moving one end towards the other
+    interior = np.flatnonzero(~grid.boundary[grid.edges].any(axis=1))
+    chosen = rng.choice(interior, 12, replace=False)
+    moved = set()
+    for beam in chosen:
+        a, b = grid.edges[beam]
+        if a in moved or b in moved:
+            continue
+        x[b] = x[a] + 0.1 * (x[b] - x[a])
+        moved.update((a, b))
+    grid = grid.replace_nodes(x)
+    required = lambda g: np.full(len(g.edges), 0.5)  # noqa: E731
+    result, report = collapse_short_beams(grid, required)
+    _check_valid(result)
+    assert report.collapsed >= 1 and len(report.left) == 0
+    assert result.beam_lengths.min() >= 0.5
+    assert result.valence.max() <= MAX_VALENCE
+
+
+def test_corners_stay_put_and_two_corners_never_merge():
+    grid = _honeycomb(3, 3)
+    corners = np.zeros(grid.n_nodes, dtype=bool)
+    corners[grid.edges[0]] = True  # both ends of beam 0 are corners
+    boundary_beam = grid.edges[0]
+    pinned = PolyMesh(nodes=grid.nodes, faces=grid.faces, boundary=grid.boundary, corners=corners)
+    result, done = collapse_beams(pinned, np.array([0]))
+    assert done == 0 and result is pinned
+    # one corner: the merged node is at the corner
+    one = corners.copy()
+    one[boundary_beam[1]] = False
+    pinned = PolyMesh(nodes=grid.nodes, faces=grid.faces, boundary=grid.boundary, corners=one)
+    result, done = collapse_beams(pinned, np.array([0]))
+    corner_at = grid.nodes[boundary_beam[0]]
+    assert done == 1 and np.allclose(result.nodes[result.corners], corner_at)
+
+
+def test_the_mockups_required_lengths_follow_its_joints():
+    """Beams between 120-degree joints need 2 set-backs + the cut; at a narrow node more."""
+    grid = _honeycomb(4, 4, side=0.05)  # 50 mm beams: shorter than sockets of 12 mm tubes take
+    limits = BuildLimits.of(JointSettings(), 12.0)
+    required = required_beam_lengths_m(grid, limits)
+    assert np.allclose(required[~grid.boundary[grid.edges].any(axis=1)], limits.shortest_beam_mm() / 1000)
+    assert np.all(grid.beam_lengths < required)
+
+
+def test_two_joints_closer_than_the_shortest_beam_clash_and_farther_do_not():
+    """The shortest buildable beam is what keeps two socket joints' solids apart (checked on the solids)."""
+    from build123d import Location
+
+    from fabrication.clearance import joint_clashes
+
+    settings = JointSettings(engrave=False)
+    limits = BuildLimits.of(settings, 12.0)
+    axis = np.array([0.0, 0.0, 1.0])
+
+    def joint(node, position, towards):
+        d = [towards] + [np.array([np.cos(a), np.sin(a), 0.0]) for a in
+                         (np.arctan2(towards[1], towards[0]) + np.radians([120, -120]))]
+        from fabrication.joints import JointGeometry
+
+        g = JointGeometry(node=node, position_mm=position, directions=np.array(d), axis=axis, beam_size_mm=12.0)
+        solid, _ = build_joint(g, settings)
+        return solid.moved(Location(tuple(map(float, position))))
+
+    def clashes(length_mm):
+        a = joint(0, np.zeros(3), np.array([1.0, 0.0, 0.0]))
+        b = joint(1, np.array([length_mm, 0.0, 0.0]), np.array([-1.0, 0.0, 0.0]))
+        return joint_clashes({"J0001": a, "J0002": b})
+
+    shortest = limits.shortest_beam_mm()
+    assert clashes(shortest) == []
+    # the two 24 mm sleeves reach 10 mm into each other
+    reach = limits.setback_mm(np.radians(120)) + 24.0
+    assert clashes(2 * reach - 10.0)
+
+
+def test_findings_are_grouped_by_kind_with_the_worst_first():
+    findings = [Finding(kind="cut_length", parts=[f"B{i:04d}"], measure=m, limit=54.0, unit="mm").to_dict()
+                for i, m in enumerate([40.0, 10.0, 50.0])]
+    findings.append(Finding(kind="sheet_size", parts=["P0001"], measure=2036.0, limit=1180.0, unit="mm").to_dict())
+    rows = findings_table(findings)
+    assert [r["kind"] for r in rows] == ["cut_length", "sheet_size"]
+    assert rows[0]["count"] == 3 and rows[0]["worst"] == 10.0 and rows[0]["worst_parts"] == ["B0001"]
+    json.dumps(findings)  # JSON-ready
