@@ -58,7 +58,7 @@ from .planarise import PlanariseSettings, cell_planes, planarise
 from .proximity import closest_point_on_triangles
 
 __all__ = ["OptimizeSettings", "OptimizeResult", "optimize", "regular_targets", "planar_targets",
-           "optimize_quality"]
+           "optimize_quality", "lengthen_short_beams"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -70,7 +70,8 @@ class OptimizeSettings:
     distance from its cell's plane relative to the mean beam length; planarity_iterations, the
     largest number of Gauss-Newton steps of the end game (0: none); split_cells, whether boundary
     cells that the boundary holds out of plane are split by new beams first; min_beam_length (m),
-    the shortest beam the end game leaves (the shortest buildable beam; 0: none).
+    the shortest beam the end game leaves (the shortest buildable beam; 0: none); min_corner_angle_deg,
+    the smallest cell corner it closes to (the smallest angle a joint takes).
     """
 
     regularity_weight: float = 1.0
@@ -83,6 +84,7 @@ class OptimizeSettings:
     planarity_iterations: int = 80
     split_cells: bool = True
     min_beam_length: float = 0.0
+    min_corner_angle_deg: float = 20.0
 
     def __post_init__(self) -> None:
         for name in ("regularity_weight", "planarity_weight", "closeness_weight", "fairness_weight"):
@@ -141,6 +143,34 @@ def _into_band(points: np.ndarray, closest: np.ndarray, distance: np.ndarray, ba
     point at distance ``band`` on the way to their closest surface point."""
     factor = np.minimum(1.0, band / np.maximum(distance, 1e-300))
     return closest + (points - closest) * factor[:, None]
+
+
+def lengthen_short_beams(x: np.ndarray, beams: np.ndarray, minimum: float, movable: np.ndarray,
+                         sweeps: int = 3) -> np.ndarray:
+    """(n,3) nodes with every beam shorter than ``minimum`` (m) pushed back to it: both ends move
+    apart along the beam by half the deficit (a fixed end, ``movable`` False, leaves it all to the
+    other). Jacobi sweeps, vectorised over the beams; a beam with both ends fixed is left."""
+    x = np.array(x, dtype=float)
+    if minimum <= 0 or not len(beams):
+        return x
+    a, b = beams[:, 0], beams[:, 1]
+    for _ in range(sweeps):
+        d = x[b] - x[a]
+        length = np.linalg.norm(d, axis=1)
+        short = (length < minimum) & (movable[a] | movable[b]) & (length > 0)
+        if not short.any():
+            break
+        unit = d[short] / length[short, None]
+        deficit = (minimum - length[short])[:, None]
+        share_a = np.where(movable[a[short]], np.where(movable[b[short]], 0.5, 1.0), 0.0)[:, None]
+        move = np.zeros_like(x)
+        count = np.zeros(len(x))
+        np.add.at(move, a[short], -share_a * deficit * unit)
+        np.add.at(move, b[short], (1 - share_a) * deficit * unit)
+        np.add.at(count, a[short], share_a[:, 0] > 0)
+        np.add.at(count, b[short], share_a[:, 0] < 1)
+        x += move / np.maximum(count, 1.0)[:, None]
+    return x
 
 
 # ----------------------------------------------------------------------------- local steps
@@ -517,6 +547,10 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
                 accepted += 1
             del history_g[:-ANDERSON_DEPTH - 1], history_f[:-ANDERSON_DEPTH - 1]
             previous_energy, previous_plain = energy, plain
+        if settings.min_beam_length > 0:
+            new = lengthen_short_beams(new, polymesh.edges, settings.min_beam_length, interior | sliding)
+            if sliding.any():
+                new[sliding] = boundary.closest(new[sliding])[0]
         step = float(np.linalg.norm(new - x, axis=1).max())
         x = new
         done = iteration + 1
@@ -535,7 +569,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
                                          regularity_weight=SHAPE_SCALE * settings.regularity_weight,
                                          closeness_weight=settings.closeness_weight,
                                          iterations=settings.planarity_iterations,
-                                         min_beam_length=settings.min_beam_length)
+                                         min_beam_length=settings.min_beam_length,
+                                         min_angle_deg=settings.min_corner_angle_deg)
 
         def regular(x: np.ndarray, groups: dict = groups) -> np.ndarray:
             return _stack(groups, {k: regular_targets(x[faces]) for k, faces in groups.items()})
