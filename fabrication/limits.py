@@ -16,7 +16,7 @@ import numpy as np
 
 from engine.mesh import PolyMesh
 
-from .joints import JointSettings, joint_setback_mm, joint_sleeve_mm, smallest_angle
+from .joints import JointSettings, joint_hub_radius_mm, joint_setback_mm, joint_sleeve_mm, smallest_angle
 
 __all__ = ["BuildLimits", "node_smallest_angles", "required_beam_lengths_m", "default_min_cut_length_mm",
            "default_min_angle_deg"]
@@ -28,10 +28,21 @@ def default_min_cut_length_mm(settings: JointSettings, beam_size_mm: float) -> f
     return float(max(2 * joint_sleeve_mm(settings, beam_size_mm) + 0.5 * beam_size_mm, beam_size_mm))
 
 
-def default_min_angle_deg(settings: JointSettings) -> float:
-    """Smallest angle between two beams a joint takes: under it the set-back (so the shortest
-    beam) grows past three times its value at 120 degrees."""
-    return 20.0 if settings.kind == "socket" else 30.0
+def default_min_angle_deg(settings: JointSettings, beam_size_mm: float = 12.0) -> float:
+    """Smallest angle between two beams the joint takes, 5 degrees above where its own features
+    collide: two sockets' sleeves overlapping past their bores' start (the set-back grows as the
+    angle closes, the sleeves' reach faster), or two fin plates meeting at the steel hub's face."""
+    if settings.kind == "steel":
+        hub = joint_hub_radius_mm(settings, beam_size_mm)
+        collide = 2 * np.degrees(np.arcsin(min(1.0, settings.plate_thickness_mm / (2 * hub))))
+        return float(round(collide + 5.0))
+    outer = 0.5 * beam_size_mm + settings.clearance_mm + settings.wall_mm
+    sleeve = joint_sleeve_mm(settings, beam_size_mm)
+    for angle in np.arange(5.0, 90.0, 0.5):
+        half = np.radians(0.5 * angle)
+        if outer / np.tan(half) <= joint_setback_mm(settings, beam_size_mm, 2 * half) + 0.5 * sleeve:
+            return float(round(angle + 5.0))
+    return 90.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -51,7 +62,8 @@ class BuildLimits:
         return cls(joints=joints, beam_size_mm=float(beam_size_mm),
                    min_cut_length_mm=float(default_min_cut_length_mm(joints, beam_size_mm)
                                            if min_cut_length_mm is None else min_cut_length_mm),
-                   min_angle_deg=float(default_min_angle_deg(joints) if min_angle_deg is None else min_angle_deg))
+                   min_angle_deg=float(default_min_angle_deg(joints, beam_size_mm) if min_angle_deg is None
+                                       else min_angle_deg))
 
     def setback_mm(self, angle_rad: float) -> float:
         """Set-back of a joint whose smallest angle between beams is ``angle_rad``, mm."""

@@ -61,9 +61,29 @@ def test_setback_grows_as_the_angle_closes_and_limits_add_up():
     assert limits.min_cut_length_mm == pytest.approx(2 * 24.0 + 6.0)  # two 24 mm sleeves + half a diameter
     assert limits.shortest_beam_mm() == pytest.approx(2 * wide + limits.min_cut_length_mm)
     steel = BuildLimits.of(JointSettings(kind="steel"), 114.3, min_cut_length_mm=400.0)
-    assert steel.min_cut_length_mm == 400.0 and steel.min_angle_deg == 30.0
+    # fin plates 10 mm thick meet at the face of the 0.75 D hub at 2 asin(t / 2r); the joint takes 5 degrees more
+    assert steel.min_cut_length_mm == 400.0
+    assert steel.min_angle_deg == round(2 * np.degrees(np.arcsin(10.0 / (2 * 0.75 * 114.3))) + 5.0)
     # steel tubes of radius 57.15 mm at 30 degrees stay 5 mm apart at their ends
     assert steel.setback_mm(np.radians(30)) == pytest.approx((57.15 + 2.5) / np.sin(np.radians(15)))
+
+
+def test_socket_min_angle_is_where_its_sleeves_start_to_overlap():
+    """Below the angle, two sleeves of radius R overlap farther than the set-back plus half a
+    sleeve from the node (the joint's own sleeve-clash check); above it they do not."""
+    from fabrication.joints import _clashes
+
+    s = JointSettings()
+    limits = BuildLimits.of(s, 12.0)
+    outer, sleeve = 6.0 + 0.3 + 2.0, 24.0
+
+    def overlap(angle_deg):
+        a = np.radians(angle_deg)
+        d = np.array([[1.0, 0.0, 0.0], [np.cos(a), np.sin(a), 0.0]])
+        return bool(_clashes(d, outer, joint_setback_mm(s, 12.0, a), sleeve))
+
+    assert not overlap(limits.min_angle_deg) and not overlap(limits.min_angle_deg - 4.5)
+    assert overlap(limits.min_angle_deg - 6.0)
 
 
 def test_smallest_angles_of_a_honeycomb_are_120_degrees_inside():

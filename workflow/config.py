@@ -290,7 +290,8 @@ class AnalysisConfig(_Section):
 class JointsConfig(_Section):
     """Joint kind: printed sockets ("socket", small tubes) or steel hub nodes with fin plates
     ("steel"); unset, steel for steel beams over 30 mm and sockets otherwise. min_angle: the
-    smallest angle between two beams at a node (degrees; unset, 20 for sockets, 30 for steel)."""
+    smallest angle between two beams at a node (degrees; unset, 5 degrees above where the joint's
+    own sleeves or fin plates collide, see fabrication.limits)."""
 
     kind: Literal["socket", "steel"] | None = None
     min_angle: float | None = Field(None, gt=0.0, lt=120.0)

@@ -168,6 +168,21 @@ def _joint_findings(reports: list[dict], limits) -> list[Finding]:
     return out
 
 
+def _panel_over_sheets(panel, stocks) -> tuple[float, float, float]:
+    """(width, height) of the panel's tightest rotation (mm) and by how much it is over the stock sheet
+    it comes closest to fitting: the largest of its width and height over the sheet's usable ones."""
+    from fabrication.nesting_sheets import _orientations
+
+    best = (np.inf, 0.0, 0.0)
+    for stock in stocks:
+        usable = np.array([stock.width_mm, stock.height_mm]) - 2 * stock.margin_mm
+        for o in _orientations(np.asarray(panel.outline_mm, float), stock.rotations):
+            over = max(o.width / usable[0], o.height / usable[1])
+            if over < best[0]:
+                best = (over, o.width, o.height)
+    return best[1], best[2], float(best[0])
+
+
 def sheet_stock(project: Project):
     """The stock sheet sizes (SheetSettings, mm) in the order panels are given to them."""
     from fabrication.nesting_sheets import SheetSettings
@@ -200,8 +215,9 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     write_cut_list(table, folder / "beams")
     cut = table["cut_length_mm"].to_numpy()
     ids = table["id"].tolist()
-    fix_short = ("lower [remesh] n_cells or raise [field] max_size_ratio limits; the grid's shortest beams are "
-                 "collapsed down to [fabrication.beams] min_cut_length plus the joints' set-backs")
+    fix_short = ("no valid collapse could remove this beam (its cells or joints would break): fewer cells "
+                 "([remesh] n_cells) or another [remesh] seed; or, if the fabricator accepts it, a smaller "
+                 "[fabrication.beams] min_cut_length or [fabrication.joints] sleeve_length")
     for i in np.flatnonzero(cut < limits.min_cut_length_mm - 0.05):
         a, z = table["start_node"].iloc[i], table["end_node"].iloc[i]
         findings.append(Finding(kind="cut_length", parts=[ids[i], a, z], measure=float(cut[i]),
@@ -250,13 +266,11 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
         stock_nesting = nest_on_stock(panels, stocks)
         largest = max(stocks, key=lambda s: s.width_mm * s.height_mm)
         for i in stock_nesting.unfit:
-            outline = np.asarray(panels[i].outline_mm)
-            extent = outline.max(axis=0) - outline.min(axis=0)
+            w, h, over = _panel_over_sheets(panels[i], stocks)
             findings.append(Finding(
-                kind="sheet_size", parts=[panels[i].id], measure=float(extent.max()),
-                limit=float(max(largest.width_mm, largest.height_mm) - 2 * largest.margin_mm), unit="mm",
+                kind="sheet_size", parts=[panels[i].id], measure=over, limit=1.0, unit="x sheet",
                 stage="fabrication",
-                message=(f"panel {panels[i].id} ({extent[0]:.0f} x {extent[1]:.0f} mm) fits no stock sheet "
+                message=(f"panel {panels[i].id} ({w:.0f} x {h:.0f} mm) fits no stock sheet "
                          f"(largest {largest.width_mm:g} x {largest.height_mm:g} mm); its DXF is written"),
                 fix="add a larger size to [fabrication.sheets] sizes, or more cells ([remesh] n_cells)"))
         clock.start("panels: sheet DXFs, picture, CSV")

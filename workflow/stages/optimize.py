@@ -31,11 +31,13 @@ __all__ = ["run", "load", "optimize_settings"]
 def optimize_settings(project: Project):
     OptimizeSettings = require("optimize", "engine.optimize", "OptimizeSettings")
     c = project.optimize
+    limits = build_limits_of(project)
     return OptimizeSettings(regularity_weight=c.regularity_weight, planarity_weight=c.planarity_weight,
                             closeness_weight=c.closeness_weight, fairness_weight=c.fairness_weight,
                             iterations=c.iterations, planar=c.planar, planarity_tolerance=c.planarity_tolerance,
                             planarity_iterations=c.planarity_iterations, split_cells=c.split_cells,
-                            min_beam_length=MIN_LENGTH_MARGIN * build_limits_of(project).shortest_beam_mm() / 1000)
+                            min_beam_length=MIN_LENGTH_MARGIN * limits.shortest_beam_mm() / 1000,
+                            min_corner_angle_deg=max(20.0, MIN_LENGTH_MARGIN * limits.min_angle_deg))
 
 
 def run(ctx):

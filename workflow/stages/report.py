@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from engine.findings import findings_table
 from fabrication.files import atomic_path, write_bytes_atomic, write_text_atomic
 
 from ..config import Project
@@ -24,7 +25,7 @@ __all__ = ["run", "load", "published"]
 published = ("report.html",)
 
 FIGURES = {
-    "surface": [("01-surface/surface.png", "The surface and its supports (black)")],
+    "surface": [("01-surface/surface.png", "The surface and its supports (red)")],
     "shell": [("02-shell/stress.png", "Principal membrane forces of the continuous shell: compression red, "
                                       "tension blue")],
     "field": [("03-field/field.png", "Guiding field: cell size and anisotropy with its direction")],
@@ -103,8 +104,19 @@ def _summary(project: Project, surface, polymesh, analysis: dict, fabrication: d
         tables.insert(0, Table(name="verdicts", caption="Verdicts", columns=["check", "value", "limit", "unit", "result"],
                                rows=rows, verdict_column="result"))
     passed = all(bool(v.get("pass")) for v in verdicts) if verdicts else None
-    text = {True: "Every check passes.", False: "At least one check fails: see the verdicts below.",
+    text = {True: "Every structural check passes.", False: "At least one structural check fails: see the verdicts below.",
             None: "No structural verdicts (the analysis did not run)."}[passed]
+    findings = list(analysis.get("findings", [])) + list(fabrication.get("findings", []))
+    if findings:
+        rows = [[r["kind"], r["count"], r["worst"], r["limit"], r["unit"], ", ".join(r["worst_parts"]),
+                 r["message"], r["fix"]] for r in findings_table(findings)]
+        tables.insert(0, Table(name="findings", caption=f"Findings: {len(findings)} failing checks and parts that cannot "
+                                                        "be built as drawn (every file is still written)",
+                               columns=["kind", "count", "worst", "limit", "unit", "worst at", "what", "fix"],
+                               rows=rows))
+        text = f"{len(findings)} findings, listed first below. " + text
+    else:
+        text = "No findings: every part can be built as drawn. " + text
     return Section(title="Summary", text=text, tables=tables)
 
 
@@ -152,7 +164,8 @@ def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
         sections.append(Section(title="7. Same-length comparison", figures=_figures(out_dir, "compare"),
                                 tables=[compare], links=[("compare.md", "compare/compare.md")]))
     sections.append(_fabrication_section(out_dir))
-    return sections
+    return [Section(title=f"{k}. {section.title.split('. ', 1)[-1]}", text=section.text, figures=section.figures,
+                    tables=section.tables, links=section.links) for k, section in enumerate(sections, start=1)]
 
 
 def _fabrication_section(out_dir: Path) -> Section:
@@ -177,6 +190,14 @@ def _fabrication_section(out_dir: Path) -> Section:
     summary = {k: fabrication.get(k) for k in ("joints", "panels", "sheets", "sheet_utilisation") if k in fabrication}
     problems = fabrication.get("joint_problems", [])
     summary["joints with a problem"] = len(problems)
+    summary["joint clashes (solids intersecting)"] = len(fabrication.get("joint_clashes", []))
+    limits = fabrication.get("limits", {})
+    for key, label in (("min_cut_length_mm", "minimum cut length (mm)"), ("min_angle_deg", "smallest angle at a joint (deg)"),
+                       ("shortest_beam_mm_at_120deg", "shortest buildable beam between 120-degree joints (mm)")):
+        if key in limits:
+            summary[label] = limits[key]
+    if "shortest_cut_length_mm" in fabrication:
+        summary["shortest cut length (mm)"] = fabrication["shortest_cut_length_mm"]
     tables.insert(0, _pairs("fabrication", "Fabrication", summary))
     sequence = _csv_table(folder / "assembly/sequence.csv", "assembly", "Assembly sequence", max_rows=10)
     if sequence:
