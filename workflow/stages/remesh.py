@@ -46,6 +46,9 @@ def run(ctx):
     write_polymesh_obj(polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: statics-aware Voronoi grid-shell (remesh)")
     quality = dict(result.quality)
+    if buildable["collapsed_beams"]:  # the figures of the grid as written
+        polymesh_quality = require("remesh", "engine.voronoi", "polymesh_quality")
+        quality.update(polymesh_quality(polymesh, mesh=surface.mesh, field=field))
     quality["buildable"] = buildable
     quality.update({"max_size_ratio_D": project.field.max_size_ratio, "max_aspect_A": project.field.max_aspect})
     write_text_atomic(ctx.folder / "remesh.json", json.dumps(quality, indent=1, default=float))
