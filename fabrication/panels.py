@@ -321,10 +321,12 @@ def write_panel_dxfs(panels: list[Panel], folder: str | os.PathLike,
 
 
 def write_panels_csv(panels: list[Panel], nesting: "SheetNesting | None", settings: PanelSettings | None,
-                     path: str | os.PathLike, *, sheet_names: dict[str, str] | None = None) -> Path:
+                     path: str | os.PathLike, *, sheet_names: dict[str, str] | None = None,
+                     cells: dict[str, tuple[int, int]] | None = None) -> Path:
     """Panel schedule: id, area_mm2, perimeter_mm, vertex_count, planarity_mm, thickness_mm,
     mass_kg (cut area less drill holes x thickness x density), sheet (S01... or empty).
-    ``sheet_names`` (panel id -> sheet) replaces the nesting's names (several stock sizes)."""
+    ``sheet_names`` (panel id -> sheet) replaces the nesting's names (several stock sizes);
+    ``cells`` (panel id -> (cell number, piece index; 0 = the whole cell)) adds columns cell, piece."""
     settings = settings or PanelSettings()
     sheet_of: dict[int, str] = {}
     if sheet_names is not None:
@@ -335,14 +337,14 @@ def write_panels_csv(panels: list[Panel], nesting: "SheetNesting | None", settin
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(["id", "area_mm2", "perimeter_mm", "vertex_count", "planarity_mm", "thickness_mm",
-                     "mass_kg", "sheet"])
+                     "mass_kg", "sheet"] + (["cell", "piece"] if cells is not None else []))
     hole_area = math.pi * (0.5 * settings.hole_diameter_mm) ** 2
     for i, panel in enumerate(panels):
         net_area = panel.area_mm2 - hole_area * len(panel.holes_mm)
         mass = net_area * 1e-6 * settings.thickness_mm * 1e-3 * settings.density
         writer.writerow([panel.id, f"{panel.area_mm2:.2f}", f"{panel.perimeter_mm:.2f}", panel.vertex_count,
                          f"{panel.planarity_mm:.3f}", f"{settings.thickness_mm:g}", f"{mass:.4f}",
-                         sheet_of.get(i, "")])
+                         sheet_of.get(i, "")] + (list(cells.get(panel.id, ("", ""))) if cells is not None else []))
     return write_text_atomic(path, buffer.getvalue())
 
 

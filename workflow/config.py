@@ -253,10 +253,14 @@ class RemeshConfig(_Section):
 
 
 class OptimizeConfig(_Section):
-    """Face optimisation (METHOD.md 4). With ``planar``: planarity_tolerance is the largest node
-    distance from its cell's plane relative to the mean beam length (the end game's goal),
-    planarity_iterations its largest number of Gauss-Newton steps (0: local/global only), and
-    split_cells whether boundary cells held out of plane by the boundary get new beams."""
+    """Face optimisation (METHOD.md 4). Beams and panels are separate: the beam grid is made
+    regular and close to the surface, and with ``planar`` every panel is planar within
+    planarity_tolerance (relative to the mean beam length): a cell that is not planar and convex is
+    glazed with planar convex pieces split along node-to-node diagonals (05-optimize/panels.obj),
+    adding no beam. planarise_cells (off by default) also moves the nodes for planar cells (the
+    planarity end game, planarity_iterations Gauss-Newton steps) and, with split_cells, adds beams
+    where the boundary holds cells out of plane; it closes cell corners and shortens beams, which the
+    joints may not take."""
 
     iterations: int = Field(50, ge=0)
     regularity_weight: float = Field(1.0, ge=0)
@@ -267,6 +271,7 @@ class OptimizeConfig(_Section):
     planarity_tolerance: float = Field(0.005, gt=0, lt=1)
     planarity_iterations: int = Field(80, ge=0)
     split_cells: bool = True
+    planarise_cells: bool = False
 
 
 class AnalysisConfig(_Section):

@@ -17,6 +17,7 @@ import numpy as np
 
 from engine.structure import node_normals
 from engine.findings import Finding
+from engine.mesh import PolyMesh
 from fabrication.files import write_text_atomic
 
 from ..config import Project
@@ -168,6 +169,18 @@ def _joint_findings(reports: list[dict], limits) -> list[Finding]:
     return out
 
 
+def panels_of(ctx, polymesh):
+    """The panels the optimize stage chose (05-optimize/panels.obj: cells and planar pieces)."""
+    from .optimize import panel_pieces_of, read_panels_obj
+
+    path = Path(ctx.out_dir) / "05-optimize" / "panels.obj"
+    if path.is_file():
+        pieces = read_panels_obj(path)
+        if all(len(p.loop) and p.loop.max() < polymesh.n_nodes for p in pieces):
+            return pieces
+    return panel_pieces_of(polymesh, ctx.project)
+
+
 def _panel_over_sheets(panel, stocks) -> tuple[float, float, float]:
     """(width, height) of the panel's tightest rotation (mm) and by how much it is over the stock sheet
     it comes closest to fitting: the largest of its width and height over the sheet's usable ones."""
@@ -256,7 +269,9 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
                                        hole_inset_mm=MM * p.hole_inset, planarity_tolerance_mm=MM * p.planarity_tolerance,
                                        split_nonplanar=p.split_nonplanar)
         problems: list[tuple[str, str]] = []
-        panels = flatten_panels(polymesh, panel_settings, problems=problems)
+        pieces = panels_of(ctx, polymesh)
+        glazing = PolyMesh(nodes=polymesh.nodes, faces=tuple(p.loop for p in pieces))
+        panels = flatten_panels(glazing, panel_settings, problems=problems)
         findings += [Finding(kind="panel_outline", parts=[pid], stage="fabrication", message=message,
                              fix="[fabrication.panels] clearance, or a new grid ([remesh] seed)")
                      for pid, message in problems]
@@ -281,7 +296,8 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
             _, members, nesting_0 = stock_nesting.groups[0]
             write_sheets_picture(nesting_0, [panels[i] for i in members], folder / "panels" / "sheets.png")
         write_panels_csv(panels, None, panel_settings, folder / "panels" / "panels.csv",
-                         sheet_names=stock_nesting.sheet_of(panels))
+                         sheet_names=stock_nesting.sheet_of(panels),
+                         cells={panel.id: (pieces[panel.face].cell + 1, pieces[panel.face].piece) for panel in panels})
         summary.update({"panels": len(panels), "sheets": int(stock_nesting.n_sheets),
                         "sheet_sizes_mm": [[s.width_mm, s.height_mm, n.n_sheets] for s, _, n in stock_nesting.groups],
                         "sheet_utilisation": float(stock_nesting.utilisation),

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import dataclasses
 
+import numpy as np
+
 from fabrication.files import write_text_atomic
 
 from ..config import Project
@@ -25,7 +27,7 @@ MIN_LENGTH_MARGIN = 1.05
 #: Rounds of (collapse the beams the optimiser left too short, optimise again).
 BUILDABLE_ROUNDS = 2
 
-__all__ = ["run", "load", "optimize_settings"]
+__all__ = ["run", "load", "optimize_settings", "panel_pieces_of", "write_panels_obj", "read_panels_obj"]
 
 
 def optimize_settings(project: Project):
@@ -34,7 +36,8 @@ def optimize_settings(project: Project):
     limits = build_limits_of(project)
     return OptimizeSettings(regularity_weight=c.regularity_weight, planarity_weight=c.planarity_weight,
                             closeness_weight=c.closeness_weight, fairness_weight=c.fairness_weight,
-                            iterations=c.iterations, planar=c.planar, planarity_tolerance=c.planarity_tolerance,
+                            iterations=c.iterations, planar=c.planar and c.planarise_cells,
+                            planarity_tolerance=c.planarity_tolerance,
                             planarity_iterations=c.planarity_iterations, split_cells=c.split_cells,
                             min_beam_length=MIN_LENGTH_MARGIN * limits.shortest_beam_mm() / 1000,
                             min_corner_angle_deg=max(20.0, MIN_LENGTH_MARGIN * limits.min_angle_deg))
@@ -67,8 +70,16 @@ def run(ctx):
     buildable.update({"collapsed_beams": collapsed, "reoptimised": rounds})
     write_polymesh_obj(result.polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: optimised grid-shell")
+    ctx.step("panels: planar convex pieces of the cells that are not")
+    pieces = panel_pieces_of(result.polymesh, project)
+    write_panels_obj(result.polymesh, pieces, ctx.folder / "panels.obj",
+                     header=f"{project.project.name}: panels (cells, and planar pieces of the cells that are not)")
+    split = sorted({p.cell for p in pieces if p.piece})
     quality = dict(result.quality)
     quality["buildable"] = buildable
+    quality["panels"] = {"panels": len(pieces), "cells_split": len(split), "split_cells": [c + 1 for c in split],
+                         "planar_panels": bool(project.optimize.planar),
+                         "planarity_tolerance_m": _piece_tolerance(result.polymesh, project)}
     quality["shortest_beam_m"] = buildable["shortest_beam_m"]
     quality["smallest_beam_angle_deg"] = buildable["smallest_beam_angle_deg"]
     quality["weights"] = project.optimize.model_dump(mode="json")
@@ -81,6 +92,48 @@ def run(ctx):
     plot_gridshell(result.polymesh, ctx.folder / "degree.png", color_by="degree",
                    title=f"{project.project.name}: optimised grid-shell, cells by number of sides")
     return result.polymesh
+
+
+def _piece_tolerance(polymesh, project: Project) -> float:
+    """Largest node distance from a panel's plane (m): the planarity tolerance times the mean beam."""
+    return float(project.optimize.planarity_tolerance * polymesh.beam_lengths.mean())
+
+
+def panel_pieces_of(polymesh, project: Project):
+    """The panels of the grid: with ``[optimize] planar``, every cell planar and convex within the
+    tolerance, else its planar convex pieces; without, the cells as they are."""
+    from engine.panel_pieces import PanelPiece, panel_pieces
+
+    if not project.optimize.planar:
+        return [PanelPiece(cell=c, piece=0, loop=np.asarray(f)) for c, f in enumerate(polymesh.faces)]
+    return panel_pieces(polymesh, _piece_tolerance(polymesh, project))
+
+
+def write_panels_obj(polymesh, pieces, path: Path, *, header: str) -> Path:
+    """05-optimize/panels.obj: the grid's nodes and one face per panel (node loop); a comment line
+    before each face names its cell and piece (``# panel P0001 cell 1 piece 0``, piece 0: the whole cell)."""
+    lines = [f"# {header}", "# units: m; one face per panel (node loop over the grid's nodes)",
+             f"# nodes {polymesh.n_nodes} panels {len(pieces)}"]
+    lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in polymesh.nodes.tolist()]
+    for k, p in enumerate(pieces):
+        lines.append(f"# panel P{k + 1:04d} cell {p.cell + 1} piece {p.piece}")
+        lines.append("f " + " ".join(str(i + 1) for i in p.loop.tolist()))
+    return write_text_atomic(path, "\n".join(lines) + "\n")
+
+
+def read_panels_obj(path: Path):
+    """The pieces (engine.panel_pieces.PanelPiece) of a panels.obj written by :func:`write_panels_obj`."""
+    from engine.panel_pieces import PanelPiece
+
+    pieces, cell, piece = [], 0, 0
+    for line in Path(path).read_text(encoding="ascii").splitlines():
+        if line.startswith("# panel "):
+            words = line.split()
+            cell, piece = int(words[4]) - 1, int(words[6])
+        elif line.startswith("f "):
+            pieces.append(PanelPiece(cell=cell, piece=piece,
+                                     loop=np.array([int(t) - 1 for t in line.split()[1:]], dtype=np.int64)))
+    return pieces
 
 
 def load(folder: Path, ctx):

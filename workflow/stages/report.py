@@ -226,7 +226,10 @@ def run(ctx):
     summary = _summary(project, surface, polymesh, analysis.figures, fabrication or {}, shell)
     sections = _stage_sections(out_dir, project)
     axial = np.asarray(analysis.axial_forces, dtype=float)
-    viewer = Viewer(nodes=polymesh.nodes, beams=polymesh.edges, panels=list(polymesh.faces), supports=polymesh.supports,
+    from .fabrication import panels_of
+
+    viewer = Viewer(nodes=polymesh.nodes, beams=polymesh.edges, panels=[p.loop for p in panels_of(ctx, polymesh)],
+                    supports=polymesh.supports,
                     beam_values=axial if len(axial) == len(polymesh.edges) else None,
                     beam_value_label="axial force (N), tension +")
     title = project.report.title or f"{project.project.name}: grid-shell design report"
