@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from shapely.geometry import LineString, Polygon
 
 from .mesh import PolyMesh, best_fit_plane
 
@@ -70,16 +71,16 @@ def planar_pieces(nodes: np.ndarray, loop: np.ndarray, tolerance: float) -> list
     k = len(loop)
     best = None
     local = _plane_coordinates(nodes[loop])
-    whole = _signed_area(local)
-    position = {int(node): row for row, node in enumerate(loop)}
+    cell = Polygon(local)
+    if not cell.is_valid:  # a self-intersecting outline in its plane: no diagonal is safe
+        cell = None
     for i in range(k):
         for j in range(i + 2, k):
             if i == 0 and j == k - 1:
                 continue
             parts = (loop[i:j + 1], np.r_[loop[j:], loop[:i + 1]])
-            areas = [_signed_area(local[[position[int(n)] for n in part]]) for part in parts]
-            # the diagonal runs inside the cell: both parts turn the cell's way and add up to it
-            if min(a * np.sign(whole) for a in areas) <= 0 or abs(sum(areas) - whole) > 1e-9 * abs(whole):
+            # the diagonal runs inside the cell (in its best-fit plane)
+            if cell is None or not cell.contains(LineString([local[i], local[j]])):
                 continue
             figures = [piece_flatness(nodes[p]) for p in parts]
             bad = sum(1 for d, c in figures if not (d <= tolerance and c))

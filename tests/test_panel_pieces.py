@@ -1,0 +1,65 @@
+"""Planar convex panels of cells that are not (engine.panel_pieces): closed forms on a saddle, a
+flat cell kept whole, pieces that tile the cell exactly."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine.mesh import PolyMesh
+from engine.panel_pieces import panel_pieces, piece_flatness, planar_pieces
+
+
+def _hexagon(z):
+    a = np.radians(np.arange(6) * 60.0)
+    x, y = np.cos(a), np.sin(a)
+    return np.c_[x, y, z(x, y)]
+
+
+def _area(points):
+    return 0.5 * np.linalg.norm(np.cross(points, np.roll(points, -1, axis=0)).sum(axis=0))
+
+
+def test_a_flat_convex_cell_is_one_panel():
+    nodes = _hexagon(lambda x, y: 0.2 * x + 0.1 * y)  # planar, tilted
+    assert [p.tolist() for p in planar_pieces(nodes, np.arange(6), 1e-9)] == [list(range(6))]
+
+
+def test_a_saddle_hexagon_splits_into_planar_convex_pieces_that_tile_it():
+    nodes = _hexagon(lambda x, y: x**2 - y**2)
+    distance, convex = piece_flatness(nodes)
+    assert distance > 0.5  # far from planar
+    pieces = planar_pieces(nodes, np.arange(6), 1e-6)
+    assert 2 <= len(pieces) <= 4
+    for piece in pieces:
+        d, c = piece_flatness(nodes[piece])
+        assert d <= 1e-6 and c
+    # every cell edge is an edge of exactly one piece, every diagonal of exactly two (a tiling)
+    edges = {}
+    for piece in pieces:
+        for a, b in zip(piece, np.roll(piece, -1)):
+            key = tuple(sorted((int(a), int(b))))
+            edges[key] = edges.get(key, 0) + 1
+    cell_edges = {tuple(sorted((i, (i + 1) % 6))) for i in range(6)}
+    assert all(edges[e] == 1 for e in cell_edges)
+    assert all(n == 2 for e, n in edges.items() if e not in cell_edges)
+    # in plan the pieces cover the hexagon: plan areas add up to 3 sqrt(3) / 2
+    plan = nodes.copy()
+    plan[:, 2] = 0
+    assert sum(_area(plan[p]) for p in pieces) == pytest.approx(3 * np.sqrt(3) / 2)
+
+
+def test_a_non_convex_cell_is_split_inside_itself():
+    # an arrow-head: reflex corner at node 3; the split must not use a diagonal outside the cell
+    nodes = np.array([[0, 0, 0], [2, 0, 0], [2, 2, 0], [1, 0.8, 0], [0, 2, 0]], dtype=float)
+    pieces = planar_pieces(nodes, np.arange(5), 1e-6)
+    assert all(piece_flatness(nodes[p])[1] for p in pieces)
+    assert sum(_area(nodes[p]) for p in pieces) == pytest.approx(_area(nodes))
+
+
+def test_panel_pieces_name_their_cells():
+    flat, saddle = _hexagon(lambda x, y: 0 * x), _hexagon(lambda x, y: x**2 - y**2) + [3.0, 0.0, 0.0]
+    grid = PolyMesh(nodes=np.r_[flat, saddle], faces=(np.arange(6), np.arange(6, 12)))
+    pieces = panel_pieces(grid, 1e-6)
+    assert [(p.cell, p.piece) for p in pieces][0] == (0, 0)
+    assert {p.cell for p in pieces[1:]} == {1} and [p.piece for p in pieces[1:]] == list(range(1, len(pieces)))
