@@ -9,7 +9,7 @@ from __future__ import annotations
 import sys
 import time
 
-__all__ = ["Progress"]
+__all__ = ["Progress", "format_number"]
 
 
 class Progress:
@@ -68,8 +68,8 @@ class Progress:
                             "(failing checks and parts that cannot be built as drawn):")
         for row in rows[:limit]:
             unit = f" {row['unit']}" if row["unit"] else ""
-            worst = "" if row["worst"] is None else f": {_number(row['worst'])}{unit}"
-            limit_text = "" if row["limit"] is None else f" (limit {_number(row['limit'])}{unit})"
+            worst = "" if row["worst"] is None else f": {format_number(row['worst'])}{unit}"
+            limit_text = "" if row["limit"] is None else f" (limit {format_number(row['limit'])}{unit})"
             parts = escape(", ".join(row["worst_parts"][:3]))
             self._console.print(f"  [red]{row['kind']}[/red] x{row['count']}{worst}{limit_text}"
                                 f"{' at ' + parts if parts else ''}")
@@ -82,7 +82,7 @@ class Progress:
             self._console.print(text)
 
 
-def _number(value: float) -> str:
+def format_number(value: float) -> str:
     """A value as an engineer writes it: 3 significant figures, no scientific notation for
     everyday magnitudes."""
     value = float(value)

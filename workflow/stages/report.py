@@ -108,7 +108,10 @@ def _summary(project: Project, surface, polymesh, analysis: dict, fabrication: d
             None: "No structural verdicts (the analysis did not run)."}[passed]
     findings = list(analysis.get("findings", [])) + list(fabrication.get("findings", []))
     if findings:
-        rows = [[r["kind"], r["count"], r["worst"], r["limit"], r["unit"], ", ".join(r["worst_parts"]),
+        from ..progress import format_number
+
+        rows = [[r["kind"], r["count"], None if r["worst"] is None else format_number(r["worst"]),
+                 None if r["limit"] is None else format_number(r["limit"]), r["unit"], ", ".join(r["worst_parts"]),
                  r["message"], r["fix"]] for r in findings_table(findings)]
         tables.insert(0, Table(name="findings", caption=f"Findings: {len(findings)} failing checks and parts that cannot "
                                                         "be built as drawn (every file is still written)",
