@@ -17,8 +17,9 @@ long as the boolean (0.23 against 0.20 s a pair; 0.11 against 0.09 s on the one 
 not touch), and most pairs whose boxes overlap do clash. Reading dominates, so there are two
 faster paths: ``stl_boxes`` takes the boxes from the joints' STL files (1.4 ms a joint) and
 reads only the STEP files of overlapping joints (mock-up 5 s instead of 20-24 s; the mock-up's
-joints copied 4 times, 488 joints, 12 s instead of 87 s), and ``joint_clashes_parallel`` reads in worker processes (488 joints on
-2 free cores 47 s instead of 87 s; with ``stl_boxes`` 8 s instead of 12 s).
+joints copied 4 times, 488 joints, 12 s instead of 87 s), and ``joint_clashes_parallel`` reads
+in worker processes (488 joints on 2 free cores 47 s instead of 87 s; with ``stl_boxes`` 8 s
+instead of 12 s).
 
 Everything a worker needs is picklable (names, paths, pairs); the functions are pure and never
 raise for a failed boolean: the pair is reported with ``volume_mm3`` None and the ``error``.
