@@ -139,7 +139,8 @@ def _joint_clashes(folder: Path, names: list[str], ctx) -> list[dict]:
     """Pairs of joint solids (as written) that intersect by more than CLASH_MM3."""
     from fabrication.clearance import joint_clashes_from_step
 
-    return joint_clashes_from_step(folder, names, min_volume_mm3=CLASH_MM3)
+    # boxes from the STL each worker wrote beside the STEP (same solid): only touching joints are read
+    return joint_clashes_from_step(folder, names, min_volume_mm3=CLASH_MM3, stl_boxes=True)
 
 
 def _joint_findings(reports: list[dict], limits) -> list[Finding]:
