@@ -10,6 +10,7 @@ allowed.
 
 from __future__ import annotations
 
+import re
 import tomllib
 import types
 import typing
@@ -466,25 +467,100 @@ def _model_for(loc: tuple, model: type[BaseModel] = Project) -> type[BaseModel] 
     return current if isinstance(current, type) and issubclass(current, BaseModel) else None
 
 
+_TAG = re.compile(r"(function-[a-z-]+|list|dict|tuple|set|frozenset|float|int|str|bool|literal|is-instance|"
+                  r"nullable|lax-or-strict|json-or-python|chain|union|constrained-[a-z]+)(\[.*\])?")
+_TAG_WORDS = {"float": "a number", "int": "a whole number", "str": "a text", "bool": "true or false",
+              "list": "a list", "tuple": "a list", "dict": "a table"}
+
+
+def _is_tag(part: Any) -> bool:
+    """A pydantic location part that names a union branch or a validator, not a TOML key."""
+    return isinstance(part, str) and _TAG.fullmatch(part) is not None
+
+
+def _tag_word(tag: str) -> str:
+    if tag.startswith("function-"):
+        inner = tag[tag.index("[") + 1:-1].split(",")[-1].strip()
+        return _TAG_WORDS.get(inner.split("[")[0], "a value")
+    return _TAG_WORDS.get(tag.split("[")[0], "a value")
+
+
+def _shape_matches(tag: str, value: Any) -> bool:
+    """Whether a union branch takes values of the given value's shape: a list, a table or one value."""
+    base = tag.split("[")[0]
+    if isinstance(value, (list, tuple)):
+        return base in ("list", "tuple", "set", "frozenset")
+    if isinstance(value, dict):
+        return base == "dict"
+    return base not in ("list", "tuple", "set", "frozenset", "dict")
+
+
+def _one_branch(items: list[dict]) -> list[dict]:
+    """Of the errors of every branch of a union field, those of the branch the user meant: one
+    whose own check has something to say (a unit), else the one whose shape (list or single value)
+    matches the value; where no branch takes the value at all, one line listing what is allowed."""
+    by_branch: dict[str, list[dict]] = {}
+    for item in items:
+        by_branch.setdefault(item["branch"], []).append(item)
+    if len(by_branch) == 1:
+        return items
+    value = items[0]["field_input"]
+    shaped = {tag: errs for tag, errs in by_branch.items() if _shape_matches(tag, value)}
+    told = {tag: errs for tag, errs in (shaped or by_branch).items() if any(e["type"] == "value_error" for e in errs)}
+    if told:
+        return next(iter(told.values()))
+    if len(shaped) == 1:
+        errs = next(iter(shaped.values()))
+        wrong_type = all(e["type"].endswith(("_type", "_parsing")) and e["clean"] == e["field"] for e in errs)
+        if not wrong_type:
+            return errs
+    words = list(dict.fromkeys(_tag_word(tag) for tag in by_branch))
+    expected = ", ".join(words[:-1]) + f" or {words[-1]}" if len(words) > 1 else words[0]
+    return [{**items[0], "clean": items[0]["field"], "input": value, "type": "union", "msg": f"expected {expected}"}]
+
+
 def _format_errors(error: ValidationError, source: str) -> str:
-    lines = [f"{source}: invalid project file"]
+    """One line per mistake: the key, the value given and what is allowed, in TOML words
+    (pydantic's union branches and validator names are left out)."""
+    header = f"{source}: invalid project file" if not source.startswith("--") else f"{source}: invalid input"
+    lines = [header]
+    items: list[dict] = []
     for item in error.errors():
-        loc = tuple(p for p in item["loc"] if not (isinstance(p, str) and p.startswith("function-")))
-        key = ".".join(str(p) if not isinstance(p, int) else f"[{p}]" for p in loc).replace(".[", "[") or "(top level)"
-        value = item.get("input")
-        shown = repr(value) if not isinstance(value, dict) else "{...}"
-        if item["type"] == "extra_forbidden":
-            owner = _model_for(loc)
-            allowed = ", ".join(owner.model_fields) if owner else "see the template"
-            lines.append(f"  {key} = {shown}: unknown key; allowed keys here: {allowed}")
-        elif item["type"] == "missing":
-            lines.append(f"  {key}: required key is missing")
-        elif item["type"] == "literal_error":
-            expected = item.get("ctx", {}).get("expected", "")
-            lines.append(f"  {key} = {shown}: not allowed; expected one of {expected}")
-        else:
-            message = item["msg"].removeprefix("Value error, ")
-            lines.append(f"  {key} = {shown}: {message}")
+        loc = tuple(item["loc"])
+        tag_at = next((i for i, p in enumerate(loc) if _is_tag(p)), None)
+        clean = tuple(p for p in loc if not _is_tag(p))
+        field_loc = loc[:tag_at] if tag_at is not None else clean
+        items.append({**item, "clean": clean, "field": field_loc,
+                      "branch": loc[tag_at] if tag_at is not None else "",
+                      "field_input": item.get("input") if tag_at is None or tag_at == len(loc) - 1 else None})
+    groups: dict[tuple, list[dict]] = {}
+    for item in items:
+        groups.setdefault(item["field"], []).append(item)
+    for group in groups.values():
+        if any(i["branch"] for i in group):
+            field_inputs = [i for i in group if i["field_input"] is not None]
+            whole = field_inputs[0]["field_input"] if field_inputs else group[0].get("input")
+            group = _one_branch([{**i, "field_input": whole} for i in group])
+        for item in group:
+            loc = item["clean"]
+            key = ".".join(str(p) if not isinstance(p, int) else f"[{p}]" for p in loc).replace(".[", "[")
+            key = key or "(top level)"
+            value = item.get("input")
+            shown = repr(value) if not isinstance(value, dict) else "{...}"
+            if item["type"] == "extra_forbidden":
+                owner = _model_for(loc)
+                allowed = ", ".join(owner.model_fields) if owner else "see the template"
+                line = f"  {key} = {shown}: unknown key; allowed keys here: {allowed}"
+            elif item["type"] == "missing":
+                line = f"  {key}: required key is missing"
+            elif item["type"] == "literal_error":
+                expected = item.get("ctx", {}).get("expected", "")
+                line = f"  {key} = {shown}: not allowed; expected one of {expected}"
+            else:
+                message = item["msg"].removeprefix("Value error, ")
+                line = f"  {key}: {message}" if isinstance(value, dict) else f"  {key} = {shown}: {message}"
+            if line not in lines:
+                lines.append(line)
     return "\n".join(lines)
 
 

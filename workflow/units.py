@@ -35,23 +35,44 @@ def _registry():
     return pint.UnitRegistry()
 
 
+def _a(noun: str) -> str:
+    """The noun with its indefinite article ("a length", "an area load")."""
+    return f"{'an' if noun[0] in 'aeiou' else 'a'} {noun}"
+
+
+_OTHER_KINDS = {"mass": "kg", "time": "s", "area": "m^2", "volume": "m^3", "temperature": "K",
+                "mass per length": "kg/m", "speed": "m/s"}
+
+
+def _kind(quantity, expected: str) -> str | None:
+    """What a quantity of the wrong dimension measures, in words ("force", "mass"), if known."""
+    ureg = _registry()
+    named = {name: si for name, (_, si, _) in DIMENSIONS.items() if name != expected}
+    for name, unit in {**named, **_OTHER_KINDS}.items():
+        if quantity.dimensionality == ureg.Quantity(1, unit.replace("^", "**")).dimensionality:
+            return name
+    return None
+
+
 def to_si(value: Any, dimension: str) -> float:
     """The SI magnitude of ``value`` (number or string with unit) of the named dimension.
 
-    Raises ``ValueError`` with a message naming the expected dimension and an example.
+    Raises ``ValueError`` with a message naming the expected dimension and an example; it does
+    not repeat the value (the caller names the key and the value).
     """
     dimensionality, si_unit, example = DIMENSIONS[dimension]
+    expected = f"expected {_a(dimension)} such as {example} or a number in {si_unit}"
     if isinstance(value, bool):
-        raise ValueError(f"expected a {dimension} such as {example} or a number in {si_unit}, got a boolean")
+        raise ValueError(f"{expected}, got true/false")
     if isinstance(value, (int, float)):
         return float(value)
     if not isinstance(value, str):
-        raise ValueError(f"expected a {dimension} such as {example} or a number in {si_unit}")
+        raise ValueError(expected)
     ureg = _registry()
     try:
         quantity = ureg.Quantity(value.replace("^", "**"))
     except Exception:
-        raise ValueError(f"cannot read {value!r} as a {dimension}; write it like {example}") from None
+        raise ValueError(f"cannot read {value!r} as {_a(dimension)}; write it like {example}") from None
     if not hasattr(quantity, "dimensionality"):
         return float(quantity)
     if quantity.dimensionless and dimensionality == "":
@@ -59,8 +80,9 @@ def to_si(value: Any, dimension: str) -> float:
     if quantity.dimensionless:
         return float(quantity.magnitude)
     if quantity.dimensionality != ureg.Quantity(1, si_unit.replace("^", "**")).dimensionality:
-        raise ValueError(f"{value!r} is not a {dimension} (its unit {quantity.units:~} measures "
-                         f"{quantity.dimensionality}); write it like {example}")
+        kind = _kind(quantity, dimension)
+        what = f"a unit of {kind}, not of {dimension}" if kind else f"not a unit of {dimension}"
+        raise ValueError(f"{quantity.units:~} is {what}; write {_a(dimension)} like {example}")
     return float(quantity.to(si_unit.replace("^", "**")).magnitude)
 
 
