@@ -58,3 +58,154 @@ def test_a_value_no_branch_takes_gets_one_line_saying_what_is_allowed(where, key
     lines = _config_error({"surface": {"template": "cap"}, **where})
     assert len(lines) == 1 and lines[0].startswith(key) and expected in lines[0], lines
     assert not INTERNALS.search(lines[0]), lines
+
+
+# --- 1. validate catches what run would reject; run says the same before any stage --------------
+
+def _cli(capsys, *argv) -> tuple[int, str, str]:
+    from workflow.cli import main
+
+    code = main(list(argv))
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def _project(tmp_path, text: str, name: str = "p.toml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def _validate_and_run(capsys, tmp_path, project) -> str:
+    """validate and run of a bad project: both exit 2 with the same one message and no traceback,
+    and run writes nothing (no stage ran)."""
+    code, out, err = _cli(capsys, "validate", str(project))
+    assert code == 2 and out == "" and "Traceback" not in err, (code, out, err)
+    assert err.count("error:") == 1, err
+    out_dir = tmp_path / "out"
+    code, run_out, run_err = _cli(capsys, "run", str(project), "--out", str(out_dir), "--quiet")
+    assert code == 2 and run_err == err, (run_err, err)
+    assert not out_dir.exists()
+    return err
+
+
+def _mesh(path, scale: float = 1.0):
+    """A 10 m hypar (engine.parametric) written to ``path`` with its coordinates times ``scale``."""
+    from engine.parametric import hypar
+
+    mesh = hypar(divisions=4).to_trimesh()
+    mesh.apply_scale(scale)
+    mesh.export(path)
+    return path
+
+
+def test_a_missing_surface_file_is_named_with_its_key_and_resolved_from_the_project_folder(
+        capsys, tmp_path, monkeypatch):
+    (tmp_path / "job").mkdir()
+    project = _project(tmp_path / "job", '[surface]\nfile = "meshes/roof.obj"\n')
+    monkeypatch.chdir(tmp_path)                          # not the project's folder
+    err = _validate_and_run(capsys, tmp_path, project)
+    assert "[surface] file" in err and str(tmp_path / "job" / "meshes" / "roof.obj") in err
+    (tmp_path / "job" / "meshes").mkdir()
+    _mesh(tmp_path / "job" / "meshes" / "roof.obj")
+    code, out, err = _cli(capsys, "validate", str(project))
+    assert code == 0 and "valid" in out and "10 m across" in out, (out, err)
+
+
+@pytest.mark.parametrize("section, key", [
+    ('diameter = "50 mm"\nthickness = "30 mm"', "diameter"),
+    ('diameter = "50 mm"\nthickness = "25 mm"', "diameter"),
+    ('kind = "rectangular_hollow"\nheight = "100 mm"\nwidth = "60 mm"\nthickness = "30 mm"', "width"),
+])
+def test_a_wall_not_thinner_than_half_the_section_is_caught_before_the_engine(capsys, tmp_path, section, key):
+    project = _project(tmp_path, f'[surface]\ntemplate = "cap"\n[section]\n{section}\n')
+    err = _validate_and_run(capsys, tmp_path, project)
+    assert "section" in err and "thickness" in err and key in err and "lower thickness" in err
+
+
+def test_the_wall_check_agrees_with_the_engine_section():
+    """Just thinner than the radius passes both this check and engine.sections; the radius fails both."""
+    from engine.errors import InputError
+    from engine.sections import section_from_spec
+
+    ok = parse_project({"surface": {"template": "cap"}, "section": {"diameter": 0.05, "thickness": 0.02499}})
+    section_from_spec("circular_hollow", **ok.section.dimensions())
+    with pytest.raises(InputError):
+        section_from_spec("circular_hollow", diameter=0.05, thickness=0.025)
+    (line,) = _config_error({"surface": {"template": "cap"}, "section": {"diameter": 0.05, "thickness": 0.025}})
+    assert "thickness" in line and "diameter" in line
+
+
+@pytest.mark.parametrize("section, key, fix", [
+    ("diameter = 50\nthickness = \"3 mm\"", "section.diameter = 50", '"50 mm"'),
+    ("diameter = \"50 mm\"\nthickness = 3", "section.thickness = 3", '"3 mm"'),
+    ('kind = "solid_rectangle"\nheight = 300\nwidth = "100 mm"', "section.height = 300", '"300 mm"'),
+])
+def test_a_bare_millimetre_value_is_caught_as_metres(capsys, tmp_path, section, key, fix):
+    project = _project(tmp_path, f'[surface]\ntemplate = "cap"\n[section]\n{section}\n')
+    err = _validate_and_run(capsys, tmp_path, project)
+    assert key in err and "bare numbers are metres" in err and f"write {fix}" in err
+
+
+@pytest.mark.parametrize("section", ['diameter = 0.05\nthickness = 0.003', 'diameter = "50 m"\nthickness = "3 mm"',
+                                     'kind = "solid_rectangle"\nheight = 1.2\nwidth = 0.2'])
+def test_bare_metres_and_lengths_with_units_are_taken_as_given(section):
+    import tomllib
+
+    parse_project(tomllib.loads(f'[surface]\ntemplate = "cap"\n[section]\n{section}\n'))
+
+
+def test_a_mesh_in_millimetres_read_as_metres_names_file_units(capsys, tmp_path):
+    import trimesh
+
+    mesh = _mesh(tmp_path / "roof.ply", scale=1000.0)           # 10 m modelled in mm: 10 000 units
+    across = float(trimesh.load(mesh, process=False).extents.max())
+    assert across == pytest.approx(10_000.0)
+    project = _project(tmp_path, '[surface]\nfile = "roof.ply"\n')
+    err = _validate_and_run(capsys, tmp_path, project)
+    assert 'file_units = "mm"' in err and "10 km across" in err and "10 m" in err
+    project = _project(tmp_path, '[surface]\nfile = "roof.ply"\nfile_units = "mm"\n')
+    code, out, err = _cli(capsys, "validate", str(project))
+    assert code == 0 and "10 m across" in out, err
+
+
+def test_a_mesh_in_metres_read_as_millimetres_names_file_units(capsys, tmp_path):
+    _mesh(tmp_path / "roof.obj")
+    project = _project(tmp_path, '[surface]\nfile = "roof.obj"\nfile_units = "mm"\n')
+    err = _validate_and_run(capsys, tmp_path, project)
+    assert 'file_units = "m"' in err and "10 mm across" in err
+
+
+def test_flagged_supports_on_a_mesh_without_red_vertices(capsys, tmp_path):
+    _mesh(tmp_path / "roof.obj")
+    project = _project(tmp_path, '[surface]\nfile = "roof.obj"\n[[supports]]\nselect = "flagged"\n')
+    err = _validate_and_run(capsys, tmp_path, project)
+    assert 'supports[0]: select = "flagged"' in err and "red" in err and 'select = "boundary"' in err
+
+
+# --- 4. the quick start speaks of its options, not of a project file ------------------------------
+
+def _quick_start(capsys, tmp_path, *argv) -> str:
+    out_dir = tmp_path / "out"
+    code, out, err = _cli(capsys, "run", *argv, "--out", str(out_dir), "--quiet")
+    assert code == 2 and "Traceback" not in err and err.count("error:") == 1, err
+    assert not out_dir.exists()
+    assert "project file" not in err and "supports = " not in err and "[[supports]]" not in err, err
+    return err
+
+
+def test_quick_start_missing_mesh(capsys, tmp_path):
+    err = _quick_start(capsys, tmp_path, "--surface", str(tmp_path / "nope.obj"))
+    assert "--surface" in err and "nope.obj" in err
+
+
+def test_quick_start_flagged_without_red_vertices_says_the_option(capsys, tmp_path):
+    _mesh(tmp_path / "roof.obj")
+    err = _quick_start(capsys, tmp_path, "--surface", str(tmp_path / "roof.obj"), "--supports", "flagged")
+    assert "--supports flagged" in err and "--supports boundary" in err and "red" in err
+
+
+def test_quick_start_mesh_in_millimetres(capsys, tmp_path):
+    _mesh(tmp_path / "roof.stl", scale=1000.0)
+    err = _quick_start(capsys, tmp_path, "--surface", str(tmp_path / "roof.stl"))
+    assert "--surface" in err and "10 km across" in err and 'file_units = "mm"' in err

@@ -49,7 +49,7 @@ def _write_json(data: dict, path: str) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .config import load_project, project_from_surface
+    from .config import check_inputs, load_project, project_from_surface
     from .progress import Progress
     from .runner import run_project
     from .stages import STAGES
@@ -69,6 +69,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         project = load_project(project_path)
         default_out = Path("out") / (project_path.stem if args.project else "mockup")
         project_file = str(project_path.resolve())
+    check_inputs(project, quick_start=bool(args.surface))   # what validate checks, before any stage runs
     out_dir = Path(args.out) if args.out else default_out
     progress = Progress(enabled=not args.quiet)
     progress.message(f"gridshell: {project.project.name} -> {out_dir}")
@@ -89,10 +90,13 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from .config import load_project
+    from .config import check_inputs, load_project
 
     project = load_project(args.project)
+    across = check_inputs(project)
     source = project.surface.file or f"template {project.surface.template}"
+    if across is not None:
+        source += f", {across:.3g} m across"
     print(f"{args.project}: valid ({project.project.name}; surface {source}; "
           f"{len(project.supports)} support selection(s); {len(project.loads.cases)} load case(s))")
     return 0

@@ -17,6 +17,7 @@ import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from engine.errors import GridshellError
@@ -24,7 +25,7 @@ from engine.supports import restraint_flags
 
 from .units import AreaLoad, Density, Force, Length, Stress, to_si
 
-__all__ = ["ConfigError", "Project", "load_project", "parse_project", "project_from_surface",
+__all__ = ["ConfigError", "Project", "load_project", "parse_project", "project_from_surface", "check_inputs",
            "STAGE_SECTIONS"]
 
 
@@ -199,10 +200,32 @@ class SectionConfig(_Section):
         for k in needs:
             if getattr(self, k) <= 0:
                 raise ValueError(f"section {k} must be positive")
+        if "thickness" in needs:
+            sides = ["diameter"] if self.kind == "circular_hollow" else ["height", "width"]
+            side = min(sides, key=lambda k: getattr(self, k))
+            if 2 * self.thickness >= getattr(self, side):
+                raise ValueError(f"thickness = {_mm(self.thickness)} is not less than half of {side} = "
+                                 f"{_mm(getattr(self, side))}: the wall must be thinner than half the "
+                                 f"{'tube' if side == 'diameter' else 'section'}; lower thickness or raise {side}")
         return self
+
+    @field_validator("diameter", "height", "width", "thickness", mode="before")
+    @classmethod
+    def _bare_metres(cls, value: Any, info) -> Any:
+        """A bare number is metres: a section dimension over 2 m (a thickness over 0.2 m) is a
+        millimetre value written without its unit."""
+        limit = 0.2 if info.field_name == "thickness" else 2.0
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and value > limit:
+            what = {"thickness": "wall", "diameter": "tube"}.get(info.field_name, "section")
+            raise ValueError(f'bare numbers are metres, so this is a {value:g} m {what}; write "{value:g} mm"')
+        return value
 
     def dimensions(self) -> dict[str, float]:
         return {k: getattr(self, k) for k in ("diameter", "thickness", "height", "width") if getattr(self, k) is not None}
+
+
+def _mm(value: float) -> str:
+    return f"{value * 1000:g} mm"
 
 
 class ShellConfig(_Section):
@@ -602,3 +625,63 @@ def project_from_surface(surface: str | Path, supports: str = "boundary") -> Pro
                           "surface": {"file": str(Path(surface).resolve())},
                           "supports": [{"select": supports, "restraint": "pinned"}]},
                          source=f"--surface {surface}")
+
+
+_FILE_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
+SURFACE_EXTENT_M = (0.1, 2000.0)
+"""The sizes a surface may have across, in metres; outside them its file_units are taken to be wrong."""
+
+
+def _distance(metres: float) -> str:
+    if metres >= 1000:
+        return f"{metres / 1000:.3g} km"
+    return f"{metres:.3g} m" if metres >= 1 else f"{metres * 1000:.3g} mm"
+
+
+def check_inputs(project: Project, *, quick_start: bool = False) -> float | None:
+    """The checks that read the input files but compute nothing, so that ``validate`` and ``run``
+    stop at once where a stage would: the surface file exists and reads, its size across is
+    plausible for its ``file_units`` (a mesh in millimetres read as metres is kilometres across),
+    and ``flagged`` supports have flagged vertices to select. ``quick_start``: the project came
+    from ``--surface``, so messages name the command-line options. Returns the surface's size
+    across in metres (None for a template surface). Raises ``ConfigError``."""
+    from .surface_io import read_surface
+
+    config = project.surface
+    if config.file is None:
+        return None
+    path = Path(config.file)
+    if not path.is_file():
+        if quick_start:
+            raise ConfigError(f"--surface {path}: no such file",
+                              hint="give the path of a mesh file (OBJ, PLY, STL, OFF or 3DM)")
+        raise ConfigError(f"[surface] file: {path} does not exist",
+                          hint="a relative path is read from the project file's folder; correct [surface] file")
+    vertices, _, flagged = read_surface(path)
+    finite = vertices[np.isfinite(vertices).all(axis=1)]
+    raw = float(np.ptp(finite, axis=0).max()) if len(finite) else 0.0
+    unit = config.file_units
+    across = raw * _FILE_UNITS[unit]
+    low, high = SURFACE_EXTENT_M
+    if raw > 0 and not low <= across <= high:
+        likely = next((u for u in ("m", "mm", "cm", "ft", "in") if u != unit
+                       and low <= raw * _FILE_UNITS[u] <= high), "mm" if across > high else "m")
+        if quick_start:
+            raise ConfigError(f"--surface {path}: the surface is {_distance(across)} across, read in metres "
+                              f"(the quick start reads meshes in metres); in {likely} it would be "
+                              f"{_distance(raw * _FILE_UNITS[likely])}",
+                              hint=f"for a mesh in {likely}, start a project (gridshell init DIR), set its "
+                                   f'[surface] file and file_units = "{likely}", and run that')
+        raise ConfigError(f'[surface] file_units = "{unit}": the surface {path.name} is {_distance(across)} across; '
+                          f'with file_units = "{likely}" it would be {_distance(raw * _FILE_UNITS[likely])}',
+                          hint=f'set [surface] file_units = "{likely}" (the unit the mesh was modelled in: '
+                               "m, cm, mm, in or ft)")
+    if not flagged.any():
+        for index, spec in enumerate(project.supports):
+            if spec.select == "flagged":
+                if quick_start:
+                    raise ConfigError(f"--supports flagged: {path.name} has no red (255, 0, 0) vertices to support",
+                                      hint="use --supports boundary, or colour the support vertices red in a PLY")
+                raise ConfigError(f'supports[{index}]: select = "flagged", but {path.name} has no red (255, 0, 0) '
+                                  "vertices", hint='use select = "boundary", or select the supports by plane or box')
+    return across
