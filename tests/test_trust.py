@@ -209,3 +209,66 @@ def test_quick_start_mesh_in_millimetres(capsys, tmp_path):
     _mesh(tmp_path / "roof.stl", scale=1000.0)
     err = _quick_start(capsys, tmp_path, "--surface", str(tmp_path / "roof.stl"))
     assert "--surface" in err and "10 km across" in err and 'file_units = "mm"' in err
+
+
+# --- 5. through a pipe, a long stage prints a line at least every 10 s ----------------------------
+
+class _FakeClock:
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def _plain_lines(err: str, stage: str) -> list[str]:
+    return [line for line in err.splitlines() if line.startswith(f"  {stage} ") and "ran" not in line]
+
+
+def test_a_plain_line_at_least_every_interval_from_the_steps(capsys):
+    from workflow.progress import PLAIN_INTERVAL_S, Progress
+
+    assert PLAIN_INTERVAL_S <= 10.0
+    clock = _FakeClock()
+    progress = Progress(enabled=True, live=False, heartbeat=False, clock=clock)
+    progress.stage_start("analysis")
+    for i in range(1, 71):                                   # a step every 0.5 s for 35 s
+        clock.now = 0.5 * i
+        progress.step(f"non-linear, imperfection {i}", i / 70)
+    progress.stage_done("analysis", "ran", clock.now)
+    lines = _plain_lines(capsys.readouterr().err, "analysis")
+    assert lines == ["  analysis     non-linear, imperfection 20  29%  (10 s)",
+                     "  analysis     non-linear, imperfection 40  57%  (20 s)",
+                     "  analysis     non-linear, imperfection 60  86%  (30 s)"]
+
+
+def test_the_heartbeat_prints_the_current_step_when_no_step_comes(capsys):
+    """One long step (a GNL run, a STEP export) still gives lines; none after the stage ends."""
+    import time
+
+    from workflow.progress import Progress
+
+    progress = Progress(enabled=True, live=False, interval=0.05)
+    progress.stage_start("fabrication")
+    progress.step("joint solids", 0.5)
+    time.sleep(0.5)
+    progress.stage_done("fabrication", "ran", 0.5)
+    time.sleep(0.2)
+    err = capsys.readouterr().err
+    lines = _plain_lines(err, "fabrication")
+    assert len(lines) >= 3, err
+    assert all("joint solids  50%" in line and line.endswith(" s)") for line in lines), lines
+    assert err.rstrip().splitlines()[-1].split()[:2] == ["fabrication", "ran"], err
+
+
+def test_no_plain_lines_when_quiet_or_live(capsys):
+    from workflow.progress import Progress
+
+    clock = _FakeClock()
+    for progress in (Progress(enabled=False, clock=clock), Progress(enabled=True, live=True, clock=clock)):
+        progress.stage_start("remesh")
+        clock.now += 30.0
+        progress.step("lloyd", 0.5)
+        progress.stage_done("remesh", "ran", 30.0)
+        assert progress._beating is None
+    assert _plain_lines(capsys.readouterr().err, "remesh") == []
