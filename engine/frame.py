@@ -104,7 +104,8 @@ class LinearResult:
 
 @dataclass(frozen=True, kw_only=True)
 class BucklingResult:
-    """Positive buckling load factors (k,) ascending and mode shapes (k,n,6), largest translation 1."""
+    """Positive buckling load factors (k,) ascending and mode shapes (k,n,6), largest translation 1,
+    each mode signed so that its largest translation component is positive (``_signed_modes``)."""
 
     factors: np.ndarray
     modes: np.ndarray
@@ -556,7 +557,25 @@ def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_
     modes = modes.reshape(len(factors), -1, 6)[:, :el.n_original]
     peak = np.linalg.norm(modes[:, :, :3], axis=2).max(axis=1)
     modes = modes / np.where(peak > 0, peak, 1.0)[:, None, None]
-    return BucklingResult(factors=factors, modes=modes)
+    return BucklingResult(factors=factors, modes=_signed_modes(modes))
+
+
+MODE_SIGN_TIE = 1e-3
+"""Translation components within this share of a mode's largest count as equally large."""
+
+
+def _signed_modes(modes: np.ndarray) -> np.ndarray:
+    """Modes (k, n, 6) with a sign that does not depend on the eigensolver's start vector: each
+    mode's translation component of largest magnitude is positive, of components equal to within
+    ``MODE_SIGN_TIE`` the one of lowest index (node, then x, y, z), so a symmetric mode's sign does
+    not follow rounding either."""
+    if len(modes) == 0:
+        return modes
+    translations = np.abs(modes[:, :, :3].reshape(len(modes), -1))
+    largest = translations.max(axis=1, keepdims=True)
+    first = np.argmax(translations >= (1.0 - MODE_SIGN_TIE) * largest, axis=1)
+    value = modes[:, :, :3].reshape(len(modes), -1)[np.arange(len(modes)), first]
+    return modes * np.where(value < 0, -1.0, 1.0)[:, None, None]
 
 
 def _free_stiffness(state: _Linear) -> sp.csr_matrix:

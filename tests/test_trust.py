@@ -272,3 +272,98 @@ def test_no_plain_lines_when_quiet_or_live(capsys):
         progress.stage_done("remesh", "ran", 30.0)
         assert progress._beating is None
     assert _plain_lines(capsys.readouterr().err, "remesh") == []
+
+
+# --- 6. buckling modes: the same sign whatever the eigensolver's start ----------------------------
+
+def _frame():
+    """A two-storey 3D frame with a diagonal (no symmetry, so no repeated buckling factors),
+    fixed feet, downward loads."""
+    import numpy as np
+
+    from engine.frame import FrameModel
+    from engine.supports import Supports
+
+    plan = np.array([[0.0, 0, 0], [4, 0, 0], [4, 3, 0], [0, 3, 0]])
+    nodes = np.vstack([plan, plan + [0, 0, 3.5], plan + [0.2, 0.1, 6.5]])
+    beams = [(i, i + 4) for i in range(4)] + [(i + 4, i + 8) for i in range(4)]
+    beams += [(4 + i, 4 + (i + 1) % 4) for i in range(4)] + [(8 + i, 8 + (i + 1) % 4) for i in range(4)] + [(0, 5)]
+    beams = np.array(beams)
+    up = np.where(np.abs(nodes[beams[:, 1], 2] - nodes[beams[:, 0], 2])[:, None] > 1.0, [1.0, 0, 0], [0, 0, 1.0])
+    b = len(beams)
+    d, t = 0.1, 0.005                                      # a 100 x 5 mm steel tube
+    A = np.pi / 4 * (d**2 - (d - 2 * t) ** 2)
+    I = np.pi / 64 * (d**4 - (d - 2 * t) ** 4)
+    model = FrameModel(nodes=nodes, beams=beams, E=np.full(b, 210e9), G=np.full(b, 81e9), A=np.full(b, A),
+                       Iy=np.full(b, I), Iz=np.full(b, I), J=np.full(b, 2 * I), up=up, elements_per_beam=2)
+    loads = np.zeros((len(nodes), 6))
+    loads[4:, 2] = -np.linspace(1e5, 2e5, 8)
+    loads[8:, 0] = 2e3
+    return model, Supports(nodes=np.arange(4), restraints=np.ones((4, 6), bool)), loads
+
+
+def _modes(monkeypatch, seed: int, flip: bool):
+    """Buckling modes with the eigensolver started from ``seed``; ``flip`` negates every vector it
+    returns (an eigenvector is one only up to its sign)."""
+    from engine import frame
+
+    eigsh = frame.spla.eigsh
+
+    def seeded(*args, **kwargs):
+        kwargs["rng"] = seed
+        out = eigsh(*args, **kwargs)
+        if flip and isinstance(out, tuple):
+            return out[0], -out[1]
+        return out
+
+    monkeypatch.setattr(frame.spla, "eigsh", seeded)
+    frame._last_stiffness.clear()
+    model, supports, loads = _frame()
+    result = frame.linear_buckling(model, supports, loads, n_modes=4)
+    monkeypatch.setattr(frame.spla, "eigsh", eigsh)
+    return result
+
+
+def test_buckling_modes_have_the_same_sign_from_differently_seeded_starts(monkeypatch):
+    import numpy as np
+
+    first = _modes(monkeypatch, seed=1, flip=False)
+    factors = first.factors
+    assert len(factors) == 4 and np.all(np.diff(factors) > 1e-3 * factors[:-1])   # distinct: each mode is unique
+    for seed, flip in ((2, False), (3, True), (12345, True)):
+        again = _modes(monkeypatch, seed=seed, flip=flip)
+        assert np.allclose(again.factors, factors, rtol=1e-8)
+        assert np.allclose(again.modes, first.modes, atol=1e-6), (seed, flip)
+    for mode in first.modes:                                # the rule itself, from the modes
+        translations = mode[:, :3].ravel()
+        assert translations[np.argmax(np.abs(translations))] > 0
+
+
+def test_the_sign_rule_breaks_ties_by_the_lowest_index():
+    import numpy as np
+
+    from engine.frame import _signed_modes
+
+    modes = np.zeros((3, 2, 6))
+    modes[0, 0, 2], modes[0, 1, 0] = -1.0, 1.0              # a tie: node 0's uz wins, so it turns positive
+    modes[1, 0, 1], modes[1, 1, 1] = 1.0, -0.99995          # within the tie share: node 0 again
+    modes[2, 0, 3], modes[2, 1, 2] = -5.0, -0.5             # rotations do not count
+    signed = _signed_modes(modes)
+    assert signed[0, 0, 2] == 1.0 and signed[0, 1, 0] == -1.0
+    assert signed[1, 0, 1] == 1.0
+    assert signed[2, 1, 2] == 0.5 and signed[2, 0, 3] == 5.0
+    assert _signed_modes(np.zeros((0, 2, 6))).shape == (0, 2, 6)
+
+
+def test_imperfection_names_follow_the_signed_mode():
+    import numpy as np
+
+    from engine.protocol import ProtocolSettings, imperfection_shapes
+
+    modes = np.zeros((1, 3, 6))
+    modes[0, 1, 2] = -1.0
+    settings = ProtocolSettings(amplitude=0.01, shapes=("mode1",))
+    from engine.frame import _signed_modes
+
+    shapes = imperfection_shapes(settings, np.zeros((3, 6)), None, _signed_modes(modes))
+    assert shapes["mode1+"][1, 2] == 0.01 and shapes["mode1-"][1, 2] == -0.01
