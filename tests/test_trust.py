@@ -367,3 +367,33 @@ def test_imperfection_names_follow_the_signed_mode():
 
     shapes = imperfection_shapes(settings, np.zeros((3, 6)), None, _signed_modes(modes))
     assert shapes["mode1+"][1, 2] == 0.01 and shapes["mode1-"][1, 2] == -0.01
+
+
+# --- 3. hints name TOML keys, not Python classes ----------------------------------------------------
+
+SETTINGS_HINTS_LEFT = {"fabrication/nesting_sheets.py", "fabrication/panels.py"}
+"""Hints that still name a Settings class (reported on issue 18; outside this change's files)."""
+
+
+def _hints_naming_classes() -> dict[str, list[int]]:
+    """Files and lines of ``hint=``/``fix=`` texts that name a Python class (``SheetSettings``)."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    classes = re.compile(r"\b[A-Z][A-Za-z]*(Settings|Config|Spec)\b")
+    found: dict[str, list[int]] = {}
+    for package in ("engine", "fabrication", "workflow"):
+        for path in sorted((root / package).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                if isinstance(node, ast.keyword) and node.arg in ("hint", "fix"):
+                    texts = [n.value for n in ast.walk(node.value) if isinstance(n, ast.Constant)
+                             and isinstance(n.value, str)]
+                    if any(classes.search(text) for text in texts):
+                        found.setdefault(str(path.relative_to(root)), []).append(node.value.lineno)
+    return found
+
+
+def test_hints_name_toml_keys_not_settings_classes():
+    found = _hints_naming_classes()
+    assert set(found) <= SETTINGS_HINTS_LEFT, found
