@@ -20,7 +20,7 @@ from ..config import Project
 from ._require import require
 from .polymesh_io import read_polymesh_obj, write_polymesh_obj
 from .fabrication import build_limits_of
-from .remesh import buildable_grid
+from .remesh import buildable_grid, too_fine_finding
 
 #: The end game keeps beams this much above the shortest buildable beam between 120-degree joints.
 MIN_LENGTH_MARGIN = 1.05
@@ -68,6 +68,8 @@ def run(ctx):
         result = dataclasses.replace(result, polymesh=grid)
         result.quality["after"].update(optimize_quality(grid, surface.mesh))
     buildable.update({"collapsed_beams": collapsed, "reoptimised": rounds})
+    if buildable["too_fine"]:
+        ctx.report_findings([too_fine_finding(buildable, "optimize")])
     write_polymesh_obj(result.polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: optimised grid-shell")
     ctx.step("panels: planar convex pieces of the cells that are not")

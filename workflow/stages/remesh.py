@@ -60,21 +60,48 @@ def run(ctx):
     return polymesh
 
 
+#: Collapse short beams only while they are at most this share of the grid: beyond it the joints
+#: are too big for the grid, and collapsing would unmake it (a finding says so instead).
+MAX_COLLAPSE_SHARE = 0.2
+
+
 def buildable_grid(polymesh, project: Project):
     """(grid, record): ``polymesh`` with every beam shorter than its joints and the shortest cut
     take collapsed where a valid collapse exists; the record (JSON-ready) has the limits, the
-    collapses, the shortest beam and the smallest angle between two beams at a node."""
-    from engine.collapse import collapse_short_beams
+    collapses, the shortest beam and the smallest angle between two beams at a node. When more than
+    MAX_COLLAPSE_SHARE of the beams are short, nothing is collapsed and ``too_fine`` is set."""
+    from engine.collapse import CollapseReport, collapse_short_beams
     from fabrication.limits import node_smallest_angles, required_beam_lengths_m
 
     from .fabrication import build_limits_of
 
     limits = build_limits_of(project)
-    grid, report = collapse_short_beams(polymesh, lambda g: required_beam_lengths_m(g, limits))
-    record = {**limits.to_dict(), **report.to_dict(),
+    short = polymesh.beam_lengths < required_beam_lengths_m(polymesh, limits)
+    too_fine = bool(short.mean() > MAX_COLLAPSE_SHARE) if len(short) else False
+    if too_fine:
+        grid, report = polymesh, CollapseReport(collapsed=0, passes=0, left=np.flatnonzero(short))
+    else:
+        grid, report = collapse_short_beams(polymesh, lambda g: required_beam_lengths_m(g, limits))
+    record = {**limits.to_dict(), **report.to_dict(), "too_fine": too_fine,
+              "short_share_before": float(short.mean()) if len(short) else 0.0,
               "shortest_beam_m": float(grid.beam_lengths.min()) if len(grid.edges) else 0.0,
+              "mean_beam_m": float(grid.beam_lengths.mean()) if len(grid.edges) else 0.0,
               "smallest_beam_angle_deg": float(np.degrees(node_smallest_angles(grid).min()))}
     return grid, record
+
+
+def too_fine_finding(record: dict, stage: str) -> dict:
+    """The finding that the joints are too big for the grid (JSON-ready)."""
+    from engine.findings import Finding
+
+    return Finding(kind="grid_too_fine", parts=["grid"], measure=record["shortest_beam_mm_at_120deg"],
+                   limit=1000 * record["mean_beam_m"], unit="mm", stage=stage,
+                   message=(f"{100 * record['short_share_before']:.0f} % of the beams are shorter than the joints "
+                            f"and the shortest cut take ({record['shortest_beam_mm_at_120deg']:.0f} mm between "
+                            f"120-degree joints, the mean beam is {1000 * record['mean_beam_m']:.0f} mm): "
+                            "they are not collapsed"),
+                   fix="fewer cells ([remesh] n_cells), a smaller tube ([section] diameter) or smaller joints "
+                       "([fabrication.joints] kind, hub_radius, sleeve_length)").to_dict()
 
 
 def load(folder: Path, ctx):
