@@ -519,10 +519,12 @@ def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_
         return none
     K_free = _free_stiffness(state)
     stiffness_inverse = spla.LinearOperator((size, size), matvec=state.lu.solve, dtype=float)
+    # a fixed start vector: ARPACK's own is drawn from OS entropy, and runs would differ in the last digits
+    start = np.random.default_rng(0).standard_normal(size)
     with _single_threaded_blas():
         try:
             mu = spla.eigsh(minus_KG, k=1, M=K_free, Minv=stiffness_inverse, which="LA", tol=1e-2,
-                            maxiter=max(2000, 20 * size), return_eigenvectors=False)
+                            maxiter=max(2000, 20 * size), return_eigenvectors=False, v0=start)
         except spla.ArpackNoConvergence as exc:
             mu = exc.eigenvalues
             if len(mu) == 0:
@@ -541,7 +543,7 @@ def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_
         operator = spla.LinearOperator((size, size), matvec=shifted.solve, dtype=float)
         try:
             values, vectors = spla.eigsh(K_free, k=k, M=minus_KG, sigma=sigma, OPinv=operator, mode="buckling",
-                                         which="LA", tol=1e-10, maxiter=max(2000, 20 * size))
+                                         which="LA", tol=1e-10, maxiter=max(2000, 20 * size), v0=start)
         except spla.ArpackNoConvergence as exc:
             values, vectors = exc.eigenvalues, exc.eigenvectors
             if len(values) == 0:

@@ -295,7 +295,7 @@ def nest_sheets(panels: list["Panel"], settings: SheetSettings | None = None) ->
             raise InputError(
                 f"panel {p.id} ({o.width:.0f} x {o.height:.0f} mm) does not fit on a "
                 f"{settings.width_mm:g} x {settings.height_mm:g} mm sheet with {settings.margin_mm:g} mm margin",
-                hint="use larger sheets (SheetSettings), allow rotations, or split the cell")
+                hint="add a larger size to [fabrication.sheets] sizes, or set [fabrication.sheets] rotations = true")
     areas = np.array([float(p.area_mm2) for p in panels])
     order = np.argsort(-areas, kind="stable")
     sheets: list[_Sheet] = []

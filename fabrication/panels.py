@@ -200,7 +200,7 @@ def _make_panel(panel_id: str, face: int, loop_m: np.ndarray, settings: PanelSet
         cut = face_polygon.buffer(-settings.clearance_mm, join_style="mitre", mitre_limit=10.0)
     if cut.is_empty:
         raise InputError(f"panel {panel_id}: the clearance {settings.clearance_mm} mm removes the whole panel",
-                         hint="lower PanelSettings.clearance_mm")
+                         hint="lower [fabrication.panels] clearance")
     if cut.geom_type == "MultiPolygon":
         cut = max(cut.geoms, key=lambda g: g.area)
     cut = shapely.geometry.polygon.orient(cut, 1.0)

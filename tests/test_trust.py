@@ -397,3 +397,25 @@ def _hints_naming_classes() -> dict[str, list[int]]:
 def test_hints_name_toml_keys_not_settings_classes():
     found = _hints_naming_classes()
     assert set(found) <= SETTINGS_HINTS_LEFT, found
+
+
+def test_the_same_input_gives_the_same_analysis_files(tmp_path):
+    """Two cold runs of the same project write byte-identical analysis CSVs and name the same
+    worst imperfection (ARPACK starts from a fixed vector; modes are signed deterministically)."""
+    from workflow.progress import Progress
+    from workflow.runner import run_project
+    from workflow.stages import STAGES
+
+    from .conftest import small_project
+
+    project = small_project()
+    outs = [tmp_path / "a", tmp_path / "b"]
+    for out in outs:
+        run_project(project, out, STAGES, until="analysis", progress=Progress(enabled=False))
+    for name in ("members.csv", "response.csv"):
+        assert (outs[0] / "06-analysis" / name).read_bytes() == (outs[1] / "06-analysis" / name).read_bytes(), name
+    import json
+
+    first, second = (json.loads((o / "06-analysis" / "analysis.json").read_text()) for o in outs)
+    assert first["worst_imperfection"] == second["worst_imperfection"]
+    assert first["buckling_factors"] == second["buckling_factors"]
