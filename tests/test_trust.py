@@ -371,8 +371,8 @@ def test_imperfection_names_follow_the_signed_mode():
 
 # --- 3. hints name TOML keys, not Python classes ----------------------------------------------------
 
-SETTINGS_HINTS_LEFT = {"fabrication/nesting_sheets.py", "fabrication/panels.py"}
-"""Hints that still name a Settings class (reported on issue 18; outside this change's files)."""
+SETTINGS_HINTS_LEFT: set[str] = set()
+"""Hints that still name a Settings class (none)."""
 
 
 def _hints_naming_classes() -> dict[str, list[int]]:
