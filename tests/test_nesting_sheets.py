@@ -144,3 +144,24 @@ def test_nonconvex_panels_and_picture(tmp_path):
     assert nesting.sheet_of == {panels[p.panel].id: f"S{p.sheet + 1:02d}" for p in nesting.placements}
     path = write_sheets_picture(nesting, panels, tmp_path / "sheets.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_panels_go_on_the_first_stock_size_they_fit_and_the_rest_are_left_out():
+    """Stock 600 x 400 then 1200 x 800 (margin 10): 300 x 200 panels on the small sheets, 900 x 500
+    on the large, 1500 x 100 on none; sheets numbered across the sizes, small ones first."""
+    from fabrication.nesting_sheets import fits_sheet, nest_on_stock
+
+    panels = flatten_panels(_rectangles([(300, 200), (900, 500), (300, 200), (1500, 100)]),
+                            PanelSettings(clearance_mm=0))
+    small, large = SheetSettings(width_mm=600, height_mm=400), SheetSettings(width_mm=1200, height_mm=800)
+    assert fits_sheet(panels[0], small) and not fits_sheet(panels[1], small) and fits_sheet(panels[1], large)
+    stock = nest_on_stock(panels, [small, large])
+    assert stock.unfit == [3]
+    (s0, members0, nesting0), (s1, members1, nesting1) = stock.groups
+    assert (s0, members0, s1, members1) == (small, [0, 2], large, [1])
+    check_nesting(nesting0, [panels[i] for i in members0], small)
+    check_nesting(nesting1, [panels[i] for i in members1], large)
+    names = stock.sheet_of(panels)
+    assert names[panels[1].id] == f"S{nesting0.n_sheets + 1:02d}" and panels[3].id not in names
+    area = 2 * 300 * 200 + 900 * 500
+    assert stock.utilisation == pytest.approx(area / (nesting0.n_sheets * 600 * 400 + 1200 * 800))
