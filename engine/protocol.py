@@ -67,6 +67,7 @@ class ProtocolResult:
     control_node: int
     perfect: ImperfectionCase | None
     imperfect: list[ImperfectionCase] = field(default_factory=list)
+    buckling_error: str | None = None
 
     @property
     def delta_L(self) -> float:
@@ -124,7 +125,8 @@ def run_protocol(model, supports: Supports, sls_loads: np.ndarray, uls_loads: np
     """Run LS (SLS and ULS), LB and GNL with imperfections on a frame model (engine.frame)."""
     from dataclasses import replace
 
-    from .frame import linear_buckling, linear_static, nonlinear_static
+    from .errors import ConvergenceError
+    from .frame import BucklingResult, linear_buckling, linear_static, nonlinear_static
 
     def say(text: str, fraction: float | None = None) -> None:
         if progress is not None:
@@ -135,7 +137,12 @@ def run_protocol(model, supports: Supports, sls_loads: np.ndarray, uls_loads: np
     say("linear static, ULS")
     uls = linear_static(model, supports, uls_loads)
     say("linear buckling")
-    buckling = linear_buckling(model, supports, uls_loads, n_modes=settings.n_modes)
+    buckling_error = None
+    try:
+        buckling = linear_buckling(model, supports, uls_loads, n_modes=settings.n_modes)
+    except ConvergenceError as error:  # reported by the caller; the non-linear paths go on without modes
+        buckling_error = str(error).splitlines()[0]
+        buckling = BucklingResult(factors=np.zeros(0), modes=np.zeros((0, len(model.nodes), 6)))
     vertical = np.abs(uls.displacements[:, 2])
     control_node = int(np.argmax(vertical))
     perfect = None
@@ -159,4 +166,5 @@ def run_protocol(model, supports: Supports, sls_loads: np.ndarray, uls_loads: np
                           uls_beam_end_forces=uls.beam_end_forces, uls_reactions=uls.reactions,
                           equilibrium_error=float(uls.equilibrium_error),
                           buckling_factors=np.asarray(buckling.factors), buckling_modes=np.asarray(buckling.modes),
-                          control_node=control_node, perfect=perfect, imperfect=imperfect)
+                          control_node=control_node, perfect=perfect, imperfect=imperfect,
+                          buckling_error=buckling_error)

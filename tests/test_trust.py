@@ -419,3 +419,29 @@ def test_the_same_input_gives_the_same_analysis_files(tmp_path):
     first, second = (json.loads((o / "06-analysis" / "analysis.json").read_text()) for o in outs)
     assert first["worst_imperfection"] == second["worst_imperfection"]
     assert first["buckling_factors"] == second["buckling_factors"]
+
+
+def test_a_buckling_solve_that_fails_is_a_finding_and_the_analysis_completes(tmp_path, monkeypatch):
+    """When the eigensolver does not converge, the analysis still writes its files, with a
+    buckling_not_solved finding (the non-linear paths run without mode-shaped imperfections)."""
+    import json
+
+    import engine.frame as frame
+    from engine.errors import ConvergenceError
+    from workflow.progress import Progress
+    from workflow.runner import run_project
+    from workflow.stages import STAGES
+
+    from .conftest import small_project
+
+    def fails(*args, **kwargs):
+        raise ConvergenceError("linear buckling: the eigenvalue solver did not converge")
+
+    monkeypatch.setattr(frame, "linear_buckling", fails)
+    out = tmp_path / "out"
+    summary = run_project(small_project(), out, STAGES, until="analysis", progress=Progress(enabled=False))
+    analysis = json.loads((out / "06-analysis" / "analysis.json").read_text())
+    assert analysis["lambda_LB"] is None
+    kinds = [f["kind"] for f in summary.findings]
+    assert "buckling_not_solved" in kinds
+    assert all(not i["shape"].startswith("mode") for i in analysis["imperfections"])

@@ -128,6 +128,12 @@ def run(ctx):
          "part": f"N{int(np.abs(result.sls_displacements[:, 2]).argmax()) + 1:04d}",
          "fix": f"{stiffer}; or [analysis] deflection_limit_ratio if the limit is not the project's"},
     ]
+    if result.buckling_error is not None:
+        verdicts.append({"check": "linear buckling factor lambda_LB (not solved)", "kind": "buckling_not_solved",
+                         "value": None, "limit": config.required_load_factor, "part": "mode 1",
+                         "pass": False, "error": result.buckling_error,
+                         "fix": "check the supports ([[supports]]) for a near-mechanism, or fewer [analysis] n_modes; "
+                                "the non-linear paths ran without mode-shaped imperfections"})
     if result.lambda_LB is not None:
         verdicts.append({"check": "linear buckling factor lambda_LB", "kind": "buckling", "value": result.lambda_LB,
                          "limit": config.required_load_factor, "part": "mode 1",
@@ -157,9 +163,11 @@ def run(ctx):
         "imperfections": [{"shape": c.name, "lambda_NL": c.capacity, "limit_point": c.limit_load_factor is not None,
                            "path_complete": c.converged} for c in result.imperfect],
         "verdicts": verdicts,
-        "findings": [Finding(kind=v["kind"], parts=[v["part"]], measure=v["value"], limit=v["limit"],
+        "findings": [Finding(kind=v["kind"], parts=[v["part"]],
+                             measure=v["value"], limit=v["limit"],
                              unit=v.get("unit", ""), stage="analysis", fix=v["fix"],
-                             message=f"{v['check']}: {v['value']:.3g} against {v['limit']:.3g}").to_dict()
+                             message=v["error"] if "error" in v else
+                             f"{v['check']}: {v['value']:.3g} against {v['limit']:.3g}").to_dict()
                      for v in verdicts if not v["pass"]],
     }
     ctx.report_findings(figures["findings"])
