@@ -445,3 +445,14 @@ def test_a_buckling_solve_that_fails_is_a_finding_and_the_analysis_completes(tmp
     kinds = [f["kind"] for f in summary.findings]
     assert "buckling_not_solved" in kinds
     assert all(not i["shape"].startswith("mode") for i in analysis["imperfections"])
+
+
+def test_a_project_folder_stands_for_its_project_toml(tmp_path, capsys):
+    from workflow.cli import main
+    from workflow.config import load_project
+
+    assert main(["init", str(tmp_path / "roof"), "--template", "cap"]) == 0
+    assert load_project(tmp_path / "roof") == load_project(tmp_path / "roof" / "project.toml")
+    (tmp_path / "empty").mkdir()
+    assert main(["validate", str(tmp_path / "empty")]) == 2
+    assert "folder without a project.toml" in capsys.readouterr().err

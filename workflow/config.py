@@ -603,8 +603,14 @@ def parse_project(data: dict, *, source: str = "project", base_dir: Path | None 
 
 
 def load_project(path: str | Path) -> Project:
-    """Read and validate a TOML project file."""
+    """Read and validate a TOML project file (a folder stands for its project.toml, as
+    ``gridshell init DIR`` writes it)."""
     path = Path(path)
+    if path.is_dir():
+        if not (path / "project.toml").is_file():
+            raise ConfigError(f"{path} is a folder without a project.toml",
+                              hint=f"give the project file, or create one with: gridshell init {path} --template mockup")
+        path = path / "project.toml"
     if not path.is_file():
         raise ConfigError(f"project file {path} does not exist",
                           hint="create one with: gridshell init DIR --template mockup")
