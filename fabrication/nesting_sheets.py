@@ -33,7 +33,7 @@ from fabrication.files import atomic_path
 if TYPE_CHECKING:  # pragma: no cover
     from fabrication.panels import Panel, PanelSettings
 
-__all__ = ["SheetSettings", "Placement", "SheetNesting", "StockNesting", "nest_sheets", "nest_on_stock", "fits_sheet", "write_sheet_dxfs", "write_sheets_picture",
+__all__ = ["SheetSettings", "Placement", "SheetNesting", "StockNesting", "nest_sheets", "nest_on_stock", "fits_sheet", "sheet_overshoot", "write_sheet_dxfs", "write_sheets_picture",
            "placed_outline", "rotation"]
 
 #: buffer arcs are drawn with this many segments per quarter circle
@@ -220,12 +220,30 @@ def _place(sheet: _Sheet, k: int, i: int, options: list[_Orientation], settings:
     return True
 
 
-def fits_sheet(panel: "Panel", settings: SheetSettings) -> bool:
-    """Whether the panel's cut outline fits the sheet less its margins in one of its rotations."""
+def _closest_fit(options: list[_Orientation], settings: SheetSettings) -> tuple[bool, float, _Orientation]:
+    """(whether one of the rotations fits the sheet less its margins, how many times the usable size
+    the rotation closest to fitting needs (the larger of width and height over the usable ones), that rotation)."""
     usable_w = settings.width_mm - 2 * settings.margin_mm
     usable_h = settings.height_mm - 2 * settings.margin_mm
-    return any(o.width <= usable_w + 1e-9 and o.height <= usable_h + 1e-9
-               for o in _orientations(np.asarray(panel.outline_mm, float), settings.rotations))
+    fits = any(o.width <= usable_w + 1e-9 and o.height <= usable_h + 1e-9 for o in options)
+    closest = min(options, key=lambda o: max(o.width / usable_w, o.height / usable_h))
+    return fits, max(closest.width / usable_w, closest.height / usable_h), closest
+
+
+def fits_sheet(panel: "Panel", settings: SheetSettings) -> bool:
+    """Whether the panel's cut outline fits the sheet less its margins in one of its rotations."""
+    return _closest_fit(_orientations(np.asarray(panel.outline_mm, float), settings.rotations), settings)[0]
+
+
+def sheet_overshoot(panel: "Panel", stocks: list[SheetSettings]) -> tuple[float, float, float]:
+    """(width, height) in mm of the panel's rotation that comes closest to fitting one of the stock
+    sheets, and how many times that sheet's usable size it needs (over 1: it fits none)."""
+    best = None
+    for stock in stocks:
+        _, over, o = _closest_fit(_orientations(np.asarray(panel.outline_mm, float), stock.rotations), stock)
+        if best is None or over < best[2]:
+            best = (o.width, o.height, over)
+    return float(best[0]), float(best[1]), float(best[2])
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -287,11 +305,9 @@ def nest_sheets(panels: list["Panel"], settings: SheetSettings | None = None) ->
     settings = settings or SheetSettings()
     n = len(panels)
     orientations = [_orientations(np.asarray(p.outline_mm, float), settings.rotations) for p in panels]
-    usable_w = settings.width_mm - 2 * settings.margin_mm
-    usable_h = settings.height_mm - 2 * settings.margin_mm
     for p, options in zip(panels, orientations):
-        if not any(o.width <= usable_w + 1e-9 and o.height <= usable_h + 1e-9 for o in options):
-            o = min(options, key=lambda o: max(o.width / usable_w, o.height / usable_h))
+        fits, _, o = _closest_fit(options, settings)
+        if not fits:
             raise InputError(
                 f"panel {p.id} ({o.width:.0f} x {o.height:.0f} mm) does not fit on a "
                 f"{settings.width_mm:g} x {settings.height_mm:g} mm sheet with {settings.margin_mm:g} mm margin",

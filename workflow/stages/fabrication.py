@@ -182,21 +182,6 @@ def panels_of(ctx, polymesh):
     return panel_pieces_of(polymesh, ctx.project)
 
 
-def _panel_over_sheets(panel, stocks) -> tuple[float, float, float]:
-    """(width, height) of the panel's tightest rotation (mm) and by how much it is over the stock sheet
-    it comes closest to fitting: the largest of its width and height over the sheet's usable ones."""
-    from fabrication.nesting_sheets import _orientations
-
-    best = (np.inf, 0.0, 0.0)
-    for stock in stocks:
-        usable = np.array([stock.width_mm, stock.height_mm]) - 2 * stock.margin_mm
-        for o in _orientations(np.asarray(panel.outline_mm, float), stock.rotations):
-            over = max(o.width / usable[0], o.height / usable[1])
-            if over < best[0]:
-                best = (over, o.width, o.height)
-    return best[1], best[2], float(best[0])
-
-
 def sheet_stock(project: Project):
     """The stock sheet sizes (SheetSettings, mm) in the order panels are given to them."""
     from fabrication.nesting_sheets import SheetSettings
@@ -262,7 +247,7 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
         clock.start("panels: flatten and DXFs")
         (PanelSettings, flatten_panels, write_panel_dxfs, write_panels_csv) = require(
             "fabrication", "fabrication.panels", "PanelSettings", "flatten_panels", "write_panel_dxfs", "write_panels_csv")
-        from fabrication.nesting_sheets import nest_on_stock, write_sheet_dxfs, write_sheets_picture
+        from fabrication.nesting_sheets import nest_on_stock, sheet_overshoot, write_sheet_dxfs, write_sheets_picture
 
         p = config.panels
         panel_settings = PanelSettings(thickness_mm=MM * p.thickness, material_name=p.material, density=p.density,
@@ -282,7 +267,7 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
         stock_nesting = nest_on_stock(panels, stocks)
         largest = max(stocks, key=lambda s: s.width_mm * s.height_mm)
         for i in stock_nesting.unfit:
-            w, h, over = _panel_over_sheets(panels[i], stocks)
+            w, h, over = sheet_overshoot(panels[i], stocks)
             findings.append(Finding(
                 kind="sheet_size", parts=[panels[i].id], measure=over, limit=1.0, unit="x sheet",
                 stage="fabrication",
