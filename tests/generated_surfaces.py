@@ -35,7 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["KINDS", "OUTLINES", "SUPPORT_PATTERNS", "GeneratedSurface", "GeneratorError", "boundary_loops",
+from engine.mesh import boundary_loops
+
+__all__ = ["KINDS", "OUTLINES", "SUPPORT_PATTERNS", "GeneratedSurface", "GeneratorError",
            "generate_surface", "surfaces", "triangle_angles_deg", "write_ply"]
 
 KINDS = ("dome", "saddle", "ridge", "wave", "hole")
@@ -444,26 +446,6 @@ def triangle_angles_deg(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return angles
 
 
-def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
-    """Vertex ids of each boundary loop (edges in exactly one triangle), in order."""
-    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    key = np.sort(edges, axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    directed = edges[counts[inverse.ravel()] == 1]
-    following = dict(zip(directed[:, 0].tolist(), directed[:, 1].tolist()))
-    loops, seen = [], set()
-    for start in following:
-        if start in seen:
-            continue
-        loop, v = [], start
-        while v not in seen:
-            seen.add(v)
-            loop.append(v)
-            v = following[v]
-        loops.append(np.array(loop, dtype=np.int64))
-    return loops
-
-
 def _check(vertices: np.ndarray, faces: np.ndarray, n_holes: int) -> None:
     """Raise GeneratorError unless the mesh is a valid up-facing disc or annulus with good angles."""
     from scipy.sparse import coo_matrix
@@ -560,22 +542,12 @@ def surfaces(n: int = 20) -> list[GeneratedSurface]:
 
 
 def write_ply(surface: GeneratedSurface, path: str | Path) -> Path:
-    """ASCII PLY in metres, flagged vertices pure red (255, 0, 0), others white: the format of
-    ``workflow.surface_io.write_surface_ply``, which ``workflow.surface_io.read_surface`` reads."""
+    """ASCII PLY in metres, flagged vertices pure red (255, 0, 0), others white, written by the
+    product's ``workflow.surface_io.write_surface_ply`` (which ``read_surface`` reads)."""
+    from engine.mesh import TriMesh
+    from workflow.surface_io import write_surface_ply
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    colours = np.full((surface.n_vertices, 4), 255, dtype=np.uint8)
-    colours[surface.flagged, 1:3] = 0
-    header = "\n".join([
-        "ply", "format ascii 1.0", f"comment gridshell generated surface {surface.name}, metres; "
-        "red vertices are flagged supports",
-        f"element vertex {surface.n_vertices}", "property double x", "property double y", "property double z",
-        "property uchar red", "property uchar green", "property uchar blue", "property uchar alpha",
-        f"element face {surface.n_faces}", "property list uchar int vertex_indices", "end_header"])
-    vertex_lines = [f"{x:.9g} {y:.9g} {z:.9g} {r} {g} {b} {a}"
-                    for (x, y, z), (r, g, b, a) in zip(surface.vertices.tolist(), colours.tolist())]
-    face_lines = [f"3 {a} {b} {c}" for a, b, c in surface.faces.tolist()]
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text("\n".join([header, *vertex_lines, *face_lines]) + "\n", encoding="ascii")
-    tmp.replace(path)
-    return path
+    mesh = TriMesh(vertices=surface.vertices, faces=surface.faces, flagged=surface.flagged, name=surface.name)
+    return write_surface_ply(mesh, path)
