@@ -269,15 +269,21 @@ def test_elastica_of_a_buckled_cantilever_column():
     assert deflection == pytest.approx(2 * k / ellipk(k**2), rel=0.01)
 
 
-def _space_frame() -> tuple[FrameModel, Supports, np.ndarray]:
-    """A one-bay, two-storey 3D frame with a diagonal, fixed feet, loads and moments in all
-    directions."""
+def space_frame_geometry() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(nodes, beams, up vectors) of a one-bay, two-storey 3D frame with a diagonal (no symmetry);
+    nodes 0-3 are its feet."""
     plan = np.array([[0.0, 0, 0], [4, 0, 0], [4, 3, 0], [0, 3, 0]])
     nodes = np.vstack([plan, plan + [0, 0, 3.5], plan + [0.2, 0.1, 6.5]])
     beams = [(i, i + 4) for i in range(4)] + [(i + 4, i + 8) for i in range(4)]
     beams += [(4 + i, 4 + (i + 1) % 4) for i in range(4)] + [(8 + i, 8 + (i + 1) % 4) for i in range(4)] + [(0, 5)]
     beams = np.array(beams)
     up = np.where(np.abs(nodes[beams[:, 1], 2] - nodes[beams[:, 0], 2])[:, None] > 1.0, [1.0, 0, 0], [0, 0, 1.0])
+    return nodes, beams, up
+
+
+def _space_frame() -> tuple[FrameModel, Supports, np.ndarray]:
+    """The space frame with fixed feet, loads and moments in all directions."""
+    nodes, beams, up = space_frame_geometry()
     model = FrameModel(nodes=nodes, beams=beams, E=E, G=G, A=A, Iy=IY, Iz=IZ, J=J, up=up, elements_per_beam=2)
     loads = np.random.default_rng(7).normal(size=(len(nodes), 6)) * [2e3, 2e3, 5e3, 1e3, 1e3, 1e3]
     loads[:4] = 0.0

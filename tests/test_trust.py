@@ -284,12 +284,9 @@ def _frame():
     from engine.frame import FrameModel
     from engine.supports import Supports
 
-    plan = np.array([[0.0, 0, 0], [4, 0, 0], [4, 3, 0], [0, 3, 0]])
-    nodes = np.vstack([plan, plan + [0, 0, 3.5], plan + [0.2, 0.1, 6.5]])
-    beams = [(i, i + 4) for i in range(4)] + [(i + 4, i + 8) for i in range(4)]
-    beams += [(4 + i, 4 + (i + 1) % 4) for i in range(4)] + [(8 + i, 8 + (i + 1) % 4) for i in range(4)] + [(0, 5)]
-    beams = np.array(beams)
-    up = np.where(np.abs(nodes[beams[:, 1], 2] - nodes[beams[:, 0], 2])[:, None] > 1.0, [1.0, 0, 0], [0, 0, 1.0])
+    from .test_frame import space_frame_geometry
+
+    nodes, beams, up = space_frame_geometry()
     b = len(beams)
     d, t = 0.1, 0.005                                      # a 100 x 5 mm steel tube
     A = np.pi / 4 * (d**2 - (d - 2 * t) ** 2)
