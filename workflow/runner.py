@@ -68,7 +68,8 @@ def file_digest(path: Path) -> str:
 
 @dataclass
 class StageContext:
-    """What a stage sees: the project, its folder to write into, upstream results, progress."""
+    """What a stage sees: the project, its folder to write into, upstream results, progress, and the
+    findings of the stages before it (``earlier_findings``, run or cached)."""
 
     project: Project
     folder: Path
@@ -77,6 +78,7 @@ class StageContext:
     _results: dict[str, Any]
     _loader: Callable[[str], Any]
     findings: list[dict] = field(default_factory=list)
+    earlier_findings: list[dict] = field(default_factory=list)
 
     def result(self, stage: str) -> Any:
         """The in-memory result of an earlier stage (reloaded from its artifacts if cached)."""
@@ -207,8 +209,10 @@ def run_project(project: Project, out_dir: Path, stages: list[Stage], *, until: 
         return stage.load(folder, context(stage, folder))
 
     def context(stage: Stage, folder: Path) -> StageContext:
+        earlier = names[:names.index(stage.name)]
         return StageContext(project=project, folder=folder, out_dir=out_dir, progress=progress,
-                            _results=results, _loader=loader)
+                            _results=results, _loader=loader,
+                            earlier_findings=[f for n in earlier for f in (records.get(n) or {}).get("findings", [])])
 
     def write_manifest() -> None:
         ordered = [records.get(n) or {"name": n, "folder": by_name[n].folder, "status": STATUS_NOT_RUN}

@@ -78,7 +78,8 @@ def _pairs(name: str, caption: str, values: dict) -> Table:
     return Table(name=name, caption=caption, columns=["item", "value"], rows=[[k, v] for k, v in values.items()])
 
 
-def _summary(project: Project, surface, polymesh, analysis: dict, fabrication: dict, shell: dict) -> Section:
+def _summary(project: Project, surface, polymesh, analysis: dict, fabrication: dict, shell: dict,
+             findings: list[dict]) -> Section:
     supports = surface.supports
     loads = ", ".join(surface.load_cases) or "-"
     combos = ", ".join(f"{n} ({c.limit_state.value})" for n, c in surface.combinations.items())
@@ -106,7 +107,6 @@ def _summary(project: Project, surface, polymesh, analysis: dict, fabrication: d
     passed = all(bool(v.get("pass")) for v in verdicts) if verdicts else None
     text = {True: "Every structural check passes.", False: "At least one structural check fails: see the verdicts below.",
             None: "No structural verdicts (the analysis did not run)."}[passed]
-    findings = list(analysis.get("findings", [])) + list(fabrication.get("findings", []))
     if findings:
         from ..progress import format_number
 
@@ -226,7 +226,7 @@ def run(ctx):
     fabrication = ctx.result("fabrication")
     shell = _json(out_dir / "02-shell/shell.json")
     ctx.step("collecting")
-    summary = _summary(project, surface, polymesh, analysis.figures, fabrication or {}, shell)
+    summary = _summary(project, surface, polymesh, analysis.figures, fabrication or {}, shell, ctx.earlier_findings)
     sections = _stage_sections(out_dir, project)
     axial = np.asarray(analysis.axial_forces, dtype=float)
     from .fabrication import panels_of
