@@ -142,15 +142,18 @@ def collapse_short_beams(polymesh: PolyMesh, required: Callable[[PolyMesh], np.n
                          max_passes: int = 50) -> tuple[PolyMesh, CollapseReport]:
     """Collapse beams shorter than ``required(grid)`` ((n_beams,) m, evaluated on the grid as it is
     at each pass), shortest relative to its requirement first, until none is left or none can go."""
-    total, passes = 0, 0
+    total, passes, left = 0, 0, None
     for passes in range(1, max_passes + 1):
         ratio = polymesh.beam_lengths / np.maximum(required(polymesh), 1e-300)
         short = np.flatnonzero(ratio < 1.0)
         if not len(short):
+            left = short
             break
         polymesh, done = collapse_beams(polymesh, short[np.argsort(ratio[short], kind="stable")])
         total += done
-        if not done:
+        if not done:  # the grid is unchanged: these are the beams left
+            left = short
             break
-    left = np.flatnonzero(polymesh.beam_lengths < required(polymesh))
+    if left is None:
+        left = np.flatnonzero(polymesh.beam_lengths < required(polymesh))
     return polymesh, CollapseReport(collapsed=total, passes=passes, left=left)
