@@ -113,7 +113,7 @@ def run(ctx):
     findings += _joint_findings(joint_reports, limits)
     clock.start("joints: clearance between neighbours")
     summary["joint_clashes"] = _joint_clashes(folder / "joints", [r["id"] for r in joint_reports
-                                                                  if r.get("built", True)], ctx)
+                                                                  if r.get("built", True)])
     findings += [Finding(kind="joint_clash", parts=list(c["parts"]), measure=c.get("volume_mm3"), limit=CLASH_MM3,
                          unit="mm3", stage="fabrication",
                          message=(f"joints {c['parts'][0]} and {c['parts'][1]} overlap by "
@@ -135,7 +135,7 @@ def run(ctx):
 CLASH_MM3 = 1.0
 
 
-def _joint_clashes(folder: Path, names: list[str], ctx) -> list[dict]:
+def _joint_clashes(folder: Path, names: list[str]) -> list[dict]:
     """Pairs of joint solids (as written) that intersect by more than CLASH_MM3."""
     from fabrication.clearance import joint_clashes_from_step
 
