@@ -55,6 +55,7 @@ from .errors import InputError
 from .field import GuidingField
 from .mesh import PolyMesh, TriMesh
 from .planarise import PlanariseSettings, cell_planes, planarise
+from .projections import face_corners, lengthen_short_beams, open_narrow_corners
 from .proximity import closest_point_on_triangles
 
 __all__ = ["OptimizeSettings", "OptimizeResult", "optimize", "regular_targets", "planar_targets",
@@ -71,7 +72,10 @@ class OptimizeSettings:
     largest number of Gauss-Newton steps of the end game (0: none); split_cells, whether boundary
     cells that the boundary holds out of plane are split by new beams first; min_beam_length (m),
     the shortest beam the end game leaves (the shortest buildable beam; 0: none); min_corner_angle_deg,
-    the smallest cell corner it closes to (the smallest angle a joint takes).
+    the smallest cell corner it closes to (the smallest angle a joint takes); max_cell_stretch, the
+    most a cell's regularity target is stretched along its own principal axis (the field's aspect
+    bound, with a margin: slivers are made rounder, inf: cells keep any anisotropy). The
+    local/global iterations, too, hold beams to min_beam_length and corners to min_corner_angle_deg.
     """
 
     regularity_weight: float = 1.0
@@ -85,6 +89,7 @@ class OptimizeSettings:
     split_cells: bool = True
     min_beam_length: float = 0.0
     min_corner_angle_deg: float = 20.0
+    max_cell_stretch: float = np.inf
 
     def __post_init__(self) -> None:
         for name in ("regularity_weight", "planarity_weight", "closeness_weight", "fairness_weight"):
@@ -124,6 +129,8 @@ ANDERSON_DEPTH = 6
 CLOSENESS_BAND = 0.0025
 #: Hard limit of the node distance to the surface after the iterations, relative to the diagonal.
 CLOSENESS_LIMIT = 0.0045
+#: Rounds of the limit projections (corners, then beams) after the last local/global iteration.
+FINAL_HOLD_ROUNDS = 3
 #: Planarity share in the final iterations (1: pure planarity + closeness).
 FINAL_PLANARITY = 1.0
 #: Closeness band of the end game, relative to the diagonal (below the hard limit CLOSENESS_LIMIT).
@@ -143,34 +150,6 @@ def _into_band(points: np.ndarray, closest: np.ndarray, distance: np.ndarray, ba
     point at distance ``band`` on the way to their closest surface point."""
     factor = np.minimum(1.0, band / np.maximum(distance, 1e-300))
     return closest + (points - closest) * factor[:, None]
-
-
-def lengthen_short_beams(x: np.ndarray, beams: np.ndarray, minimum: float, movable: np.ndarray,
-                         sweeps: int = 3) -> np.ndarray:
-    """(n,3) nodes with every beam shorter than ``minimum`` (m) pushed back to it: both ends move
-    apart along the beam by half the deficit (a fixed end, ``movable`` False, leaves it all to the
-    other). Jacobi sweeps, vectorised over the beams; a beam with both ends fixed is left."""
-    x = np.array(x, dtype=float)
-    if minimum <= 0 or not len(beams):
-        return x
-    a, b = beams[:, 0], beams[:, 1]
-    for _ in range(sweeps):
-        d = x[b] - x[a]
-        length = np.linalg.norm(d, axis=1)
-        short = (length < minimum) & (movable[a] | movable[b]) & (length > 0)
-        if not short.any():
-            break
-        unit = d[short] / length[short, None]
-        deficit = (minimum - length[short])[:, None]
-        share_a = np.where(movable[a[short]], np.where(movable[b[short]], 0.5, 1.0), 0.0)[:, None]
-        move = np.zeros_like(x)
-        count = np.zeros(len(x))
-        np.add.at(move, a[short], -share_a * deficit * unit)
-        np.add.at(move, b[short], (1 - share_a) * deficit * unit)
-        np.add.at(count, a[short], share_a[:, 0] > 0)
-        np.add.at(count, b[short], share_a[:, 0] < 1)
-        x += move / np.maximum(count, 1.0)[:, None]
-    return x
 
 
 # ----------------------------------------------------------------------------- local steps
@@ -211,13 +190,19 @@ def _unstretched(points: np.ndarray):
     return principal / spread[:, None, :], spread, vectors, axes, centroid
 
 
-def regular_targets(points: np.ndarray) -> np.ndarray:
+def regular_targets(points: np.ndarray, max_stretch: float = np.inf) -> np.ndarray:
     """(f,k,3) targets of (f,k,3) cells: the regular k-gon of equal area best fitting each cell
-    after un-stretching it by its PCA axes, stretched back. A regular cell, and an affinely
-    stretched regular cell, is its own target (either orientation)."""
+    after un-stretching it by its PCA axes, stretched back by at most ``max_stretch`` (the ratio
+    of the two principal spreads, kept at their product, so the area stays). A regular cell, and
+    a regular cell stretched affinely within ``max_stretch``, is its own target (either
+    orientation); a sliver's target is the regular cell stretched ``max_stretch`` times."""
     points = np.asarray(points, dtype=float)
     f, k, _ = points.shape
     unstretched, spread, vectors, axes, centroid = _unstretched(points)
+    if np.isfinite(max_stretch):
+        mean = np.sqrt(spread[:, 0] * spread[:, 1])
+        ratio = np.minimum(spread[:, 1] / np.maximum(spread[:, 0], 1e-300), max(float(max_stretch), 1.0))
+        spread = np.stack([mean / np.sqrt(ratio), mean * np.sqrt(ratio)], axis=1)
     angle = 2 * np.pi * np.arange(k) / k
     template = np.broadcast_to(np.stack([np.cos(angle), np.sin(angle)], axis=1), (f, k, 2))
     signed = 0.5 * np.sum(unstretched[:, :, 0] * np.roll(unstretched[:, :, 1], -1, axis=1)
@@ -430,12 +415,16 @@ def _schedule(settings: OptimizeSettings) -> tuple[float, list[tuple[float, floa
 
 
 def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, settings: OptimizeSettings, *,
-             progress: Callable[[str, float | None], None] | None = None) -> OptimizeResult:
+             progress: Callable[[str, float | None], None] | None = None,
+             beam_length_limits: Callable[[PolyMesh], np.ndarray] | None = None) -> OptimizeResult:
     """Regularise and (with ``settings.planar``) planarise the cells of ``polymesh`` on the
     reference surface ``mesh``; corners and supports stay put, boundary nodes on the boundary.
 
     ``field`` is accepted for the workflow's sake (cells keep their own anisotropy).
     ``progress(text, fraction)`` is called once per iteration (fraction None in the end game).
+    ``beam_length_limits(grid)`` gives each beam's shortest length (m) on the grid as it stands
+    (the joints' set-backs grow as their angles close); the iterations hold every beam to the larger
+    of it and ``settings.min_beam_length``.
     With ``settings.iterations == 0`` the grid passes unchanged.
 
     quality: "before" (the grid as given) and "after" figures (see :func:`optimize_quality`),
@@ -499,7 +488,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
         target = np.zeros((C.shape[0], 3))
         if shape > 0:
             if t < 1.0:
-                target += (1 - t) * _stack(groups, {k: regular_targets(p) for k, p in points.items()})
+                target += (1 - t) * _stack(groups, {k: regular_targets(p, settings.max_cell_stretch)
+                                                    for k, p in points.items()})
             if t > 0.0:
                 target += t * _stack(groups, {k: planar_targets(p) for k, p in points.items()})
         node_target = _into_band(x, *surface.closest(x), band)
@@ -515,6 +505,23 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
         if sliding.any():
             new[sliding] = boundary.closest(new[sliding])[0]
         return new
+
+    corners = face_corners(polymesh.faces)
+    movable = interior | sliding
+    min_corner = np.radians(settings.min_corner_angle_deg)
+
+    def hold_limits(x: np.ndarray, sweeps: int = 3) -> np.ndarray:
+        """x with narrow corners opened and short beams lengthened, boundary nodes back on the boundary."""
+        if min_corner > 0:
+            x = open_narrow_corners(x, corners, min_corner, movable, sweeps=sweeps)
+        minimum = settings.min_beam_length
+        if beam_length_limits is not None:
+            minimum = np.maximum(minimum, beam_length_limits(polymesh.replace_nodes(x)))
+        if np.any(np.asarray(minimum) > 0):
+            x = lengthen_short_beams(x, polymesh.edges, minimum, movable, sweeps=sweeps)
+        if sliding.any():
+            x[sliding] = boundary.closest(x[sliding])[0]
+        return x
 
     step, done, accepted, rejected = 0.0, 0, 0, 0
     first_final = next((i for i, (t, f) in enumerate(plan) if f == 0.0 and t == FINAL_PLANARITY), len(plan))
@@ -547,10 +554,7 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
                 accepted += 1
             del history_g[:-ANDERSON_DEPTH - 1], history_f[:-ANDERSON_DEPTH - 1]
             previous_energy, previous_plain = energy, plain
-        if settings.min_beam_length > 0:
-            new = lengthen_short_beams(new, polymesh.edges, settings.min_beam_length, interior | sliding)
-            if sliding.any():
-                new[sliding] = boundary.closest(new[sliding])[0]
+        new = hold_limits(new)
         step = float(np.linalg.norm(new - x, axis=1).max())
         x = new
         done = iteration + 1
@@ -558,6 +562,9 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
             progress(f"optimize: iteration {done}/{len(plan)}", done / len(plan))
     if previous_plain is not None and local(x, *plan[-1])[1] > previous_energy:
         x = previous_plain  # never end on an accelerated point that raised the energy
+    if done:
+        for _ in range(FINAL_HOLD_ROUNDS):  # the limits once more, to convergence of the sweeps
+            x = hold_limits(x, sweeps=10)
     end = {"steps": 0, "rejected_steps": 0, "factorisations": 0, "planarity_weight": 0.0, "reached": False}
     repair_splits = 0
     ran_end_game = planar_panels and settings.planarity_iterations > 0
@@ -573,7 +580,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
                                          min_angle_deg=settings.min_corner_angle_deg)
 
         def regular(x: np.ndarray, groups: dict = groups) -> np.ndarray:
-            return _stack(groups, {k: regular_targets(x[faces]) for k, faces in groups.items()})
+            return _stack(groups, {k: regular_targets(x[faces], settings.max_cell_stretch)
+                                   for k, faces in groups.items()})
 
         def said(steps: int, base: int = end["steps"]) -> None:
             if progress is not None:

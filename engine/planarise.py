@@ -43,6 +43,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .projections import corner_angles
+
 __all__ = ["PlanariseSettings", "PlanariseReport", "planarise", "cell_planes", "corner_angles"]
 
 #: Guards and the band enter the Gauss-Newton model (curvature only) once within this factor of
@@ -104,12 +106,6 @@ def cell_planes(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     _, _, vt = np.linalg.svd(q, full_matrices=False)
     normal = vt[:, 2]
     return centroid, vt[:, :2], normal, np.einsum("fki,fi->fk", q, normal)
-
-
-def corner_angles(x: np.ndarray, corners: np.ndarray) -> np.ndarray:
-    """(c,) angle at node o of each (a, o, b) row of ``corners`` (c,3) between o->a and o->b, rad."""
-    u, v = x[corners[:, 0]] - x[corners[:, 1]], x[corners[:, 2]] - x[corners[:, 1]]
-    return np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.einsum("ij,ij->i", u, v))
 
 
 def planarity_terms(groups: dict[int, np.ndarray], x: np.ndarray, weights: dict[int, np.ndarray] | None = None,

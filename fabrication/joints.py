@@ -101,17 +101,19 @@ def joint_sleeve_mm(settings: JointSettings, beam_size_mm: float) -> float:
     return (STEEL_PLATE_ENGAGEMENT if settings.kind == "steel" else 2.0) * beam_size_mm
 
 
-def joint_setback_mm(settings: JointSettings, beam_size_mm: float, smallest_angle_rad: float = 2 * np.pi / 3) -> float:
+def joint_setback_mm(settings: JointSettings, beam_size_mm: float,
+                     smallest_angle_rad: float | np.ndarray = 2 * np.pi / 3) -> float | np.ndarray:
     """Distance from the node to where a beam ends (the socket's bore start, the steel tube's end), mm:
     outside the hub, and far enough that two beams at the smallest angle keep apart (sockets: the
-    least wall between two bores; steel: 5 mm between two tubes)."""
-    half = max(np.sin(0.5 * smallest_angle_rad), 0.05)
+    least wall between two bores; steel: 5 mm between two tubes). Vectorised over the angles."""
+    half = np.maximum(np.sin(0.5 * np.asarray(smallest_angle_rad, dtype=float)), 0.05)
     hub = joint_hub_radius_mm(settings, beam_size_mm)
     if settings.kind == "steel":
-        return float(max(hub + 5.0, (0.5 * beam_size_mm + 2.5) / half))
-    bore = 0.5 * beam_size_mm + settings.clearance_mm
-    setback = (2 * bore + settings.min_wall_mm) / (2 * half)
-    return float(max(setback, 0.8 * hub))
+        setback = np.maximum(hub + 5.0, (0.5 * beam_size_mm + 2.5) / half)
+    else:
+        bore = 0.5 * beam_size_mm + settings.clearance_mm
+        setback = np.maximum((2 * bore + settings.min_wall_mm) / (2 * half), 0.8 * hub)
+    return float(setback) if setback.ndim == 0 else setback
 
 
 def joint_geometry(polymesh: PolyMesh, normals: np.ndarray, beam_size_mm: float) -> list[JointGeometry]:

@@ -16,7 +16,7 @@ import numpy as np
 
 from engine.mesh import PolyMesh
 
-from .joints import JointSettings, joint_hub_radius_mm, joint_setback_mm, joint_sleeve_mm, smallest_angle
+from .joints import JointSettings, joint_hub_radius_mm, joint_setback_mm, joint_sleeve_mm
 
 __all__ = ["BuildLimits", "node_smallest_angles", "required_beam_lengths_m", "default_min_cut_length_mm",
            "default_min_angle_deg"]
@@ -65,8 +65,8 @@ class BuildLimits:
                    min_angle_deg=float(default_min_angle_deg(joints, beam_size_mm) if min_angle_deg is None
                                        else min_angle_deg))
 
-    def setback_mm(self, angle_rad: float) -> float:
-        """Set-back of a joint whose smallest angle between beams is ``angle_rad``, mm."""
+    def setback_mm(self, angle_rad: float | np.ndarray) -> float | np.ndarray:
+        """Set-back of a joint whose smallest angle between beams is ``angle_rad``, mm (vectorised)."""
         return joint_setback_mm(self.joints, self.beam_size_mm, angle_rad)
 
     def shortest_beam_mm(self, angle_rad: float = 2 * np.pi / 3) -> float:
@@ -81,22 +81,27 @@ class BuildLimits:
 
 
 def node_smallest_angles(polymesh: PolyMesh) -> np.ndarray:
-    """(n_nodes,) smallest angle (radians) between two beams at each node; pi with fewer than two."""
+    """(n_nodes,) smallest angle (radians) between two beams at each node; pi with fewer than two.
+    Vectorised over the nodes of each valence."""
     e = polymesh.edges
     x = polymesh.nodes
     out = np.full(polymesh.n_nodes, np.pi)
     if not len(e):
         return out
-    # incident beam directions grouped by node, one group per node
     ends = np.r_[e[:, 0], e[:, 1]]
     others = np.r_[e[:, 1], e[:, 0]]
     d = x[others] - x[ends]
     d /= np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
     order = np.argsort(ends, kind="stable")
     ends, d = ends[order], d[order]
-    starts = np.flatnonzero(np.r_[True, ends[1:] != ends[:-1]])
-    for first, last in zip(starts, np.r_[starts[1:], len(ends)]):
-        out[ends[first]] = smallest_angle(d[first:last])
+    valence = np.bincount(ends, minlength=polymesh.n_nodes)
+    first = np.r_[0, np.cumsum(valence)[:-1]]
+    for k in np.unique(valence[valence >= 2]):
+        nodes = np.flatnonzero(valence == k)
+        directions = d[first[nodes, None] + np.arange(k)]  # (m, k, 3)
+        cosine = np.clip(np.einsum("mik,mjk->mij", directions, directions), -1.0, 1.0)
+        cosine[:, np.arange(k), np.arange(k)] = -1.0
+        out[nodes] = np.arccos(cosine.reshape(len(nodes), -1).max(axis=1))
     return out
 
 
@@ -104,6 +109,6 @@ def required_beam_lengths_m(polymesh: PolyMesh, limits: BuildLimits) -> np.ndarr
     """(n_beams,) shortest buildable node-to-node length of each beam of the grid as it is, m:
     the two set-backs at its end nodes' smallest angles plus the minimum cut length."""
     angles = node_smallest_angles(polymesh)
-    setback = np.array([limits.setback_mm(a) for a in angles])
+    setback = limits.setback_mm(angles)
     e = polymesh.edges
     return (setback[e[:, 0]] + setback[e[:, 1]] + limits.min_cut_length_mm) / 1000.0

@@ -374,7 +374,9 @@ def test_zero_regularity_weight_gives_no_regularity_change_beyond_planarity():
     (and fairness) nothing moves; with regularity the cells become more regular."""
     surface = _flat_square()
     grid = _grid_on(surface, 0.4, jitter=0.12)
-    still = optimize(grid, surface, None, OptimizeSettings(regularity_weight=0.0, fairness_weight=0.0, iterations=20))
+    # the corner limit off: the jittered honeycomb has corners under its default 20 degrees
+    still = optimize(grid, surface, None, OptimizeSettings(regularity_weight=0.0, fairness_weight=0.0, iterations=20,
+                                                           min_corner_angle_deg=0.0))
     assert np.abs(still.polymesh.nodes - grid.nodes).max() < 1e-9
     assert still.quality["after"]["regularity"] == pytest.approx(still.quality["before"]["regularity"], abs=1e-9)
     assert still.quality["end_game"]["steps"] == 0 and still.quality["corner_splits"] == 0

@@ -24,6 +24,8 @@ from .remesh import buildable_grid, too_fine_finding
 
 #: The end game keeps beams this much above the shortest buildable beam between 120-degree joints.
 MIN_LENGTH_MARGIN = 1.05
+#: A cell's regularity target is stretched at most this much beyond the field's aspect bound A.
+STRETCH_MARGIN = 1.5
 #: Rounds of (collapse the beams the optimiser left too short, optimise again).
 BUILDABLE_ROUNDS = 2
 
@@ -40,7 +42,17 @@ def optimize_settings(project: Project):
                             planarity_tolerance=c.planarity_tolerance,
                             planarity_iterations=c.planarity_iterations, split_cells=c.split_cells,
                             min_beam_length=MIN_LENGTH_MARGIN * limits.shortest_beam_mm() / 1000,
-                            min_corner_angle_deg=max(20.0, MIN_LENGTH_MARGIN * limits.min_angle_deg))
+                            min_corner_angle_deg=max(20.0, MIN_LENGTH_MARGIN * limits.min_angle_deg),
+                            max_cell_stretch=STRETCH_MARGIN * project.field.max_aspect)
+
+
+def beam_length_limits(project: Project):
+    """grid -> (n_beams,) shortest buildable length of each beam (m) at its joints' angles, with the
+    end game's margin: what the optimiser holds the beams to."""
+    from fabrication.limits import required_beam_lengths_m
+
+    limits = build_limits_of(project)
+    return lambda grid: MIN_LENGTH_MARGIN * required_beam_lengths_m(grid, limits)
 
 
 def run(ctx):
@@ -51,7 +63,8 @@ def run(ctx):
     polymesh = ctx.result("remesh")
     ctx.step("local/global iterations and the planarity end game")
     settings = optimize_settings(project)
-    result = optimize(polymesh, surface.mesh, field, settings, progress=ctx.step)
+    limits = beam_length_limits(project)
+    result = optimize(polymesh, surface.mesh, field, settings, progress=ctx.step, beam_length_limits=limits)
     # fabrication limits: collapse what the optimiser made too short, then optimise again
     grid, buildable = buildable_grid(result.polymesh, project)
     rounds, collapsed = 0, buildable["collapsed_beams"]
@@ -59,7 +72,7 @@ def run(ctx):
         rounds += 1
         ctx.step(f"{buildable['collapsed_beams']} short beams collapsed: optimising again ({rounds})")
         again = optimize(grid, surface.mesh, field, dataclasses.replace(settings, split_cells=False),
-                         progress=ctx.step)
+                         progress=ctx.step, beam_length_limits=limits)
         result = dataclasses.replace(result, polymesh=again.polymesh,
                                      quality={**again.quality, "before": result.quality["before"]})
         grid, buildable = buildable_grid(again.polymesh, project)

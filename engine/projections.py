@@ -1,0 +1,136 @@
+"""Hard limits of the grid's geometry, applied as projections between the optimiser's steps.
+
+A joint takes a beam only so short and two beams only so close in angle (see
+``fabrication.limits``). The optimiser's energy does not know either; after each of its global
+steps these projections move the nodes back inside the limits: a short beam's ends apart along
+it, a narrow cell corner's two far nodes apart about its apex. Both are Jacobi sweeps vectorised
+over the beams or corners; a node that may not move (a support, a corner) leaves the move to the
+others. A sweep that would not lower the sum of squared deficits (coupled limits can do that:
+opening one corner closes its neighbours at the same node), or for corners would narrow the
+narrowest, is halved until it does not, so the projections never leave the grid worse than they
+found it. Lengths in m, angles in radians.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+#: A sweep is halved at most this many times before the projection stops.
+MAX_HALVINGS = 5
+
+__all__ = ["lengthen_short_beams", "open_narrow_corners", "face_corners", "corner_angles"]
+
+
+def face_corners(faces) -> np.ndarray:
+    """(c,3) corners (previous node, node, next node) of every face of ``faces`` (a sequence of
+    node loops), in face order."""
+    rows = [np.stack([np.roll(f, 1), f, np.roll(f, -1)], axis=1) for f in map(np.asarray, faces) if len(f) >= 3]
+    return np.concatenate(rows).astype(np.int64) if rows else np.zeros((0, 3), dtype=np.int64)
+
+
+def corner_angles(x: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(c,) angle at node o of each (a, o, b) row of ``corners`` between o->a and o->b, rad."""
+    u, v = x[corners[:, 0]] - x[corners[:, 1]], x[corners[:, 2]] - x[corners[:, 1]]
+    return np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.einsum("ij,ij->i", u, v))
+
+
+def _guarded(x: np.ndarray, sweeps: int, deficits: Callable[[np.ndarray], np.ndarray],
+             move: Callable[[np.ndarray], np.ndarray], keep_largest: bool) -> np.ndarray:
+    """Jacobi sweeps x + relax * move(x), each kept only if it lowers the sum of squared deficits
+    (and, with ``keep_largest``, does not raise the largest); a sweep that does not is retried at
+    half the step (MAX_HALVINGS times at most, then the sweeps stop)."""
+    d = deficits(x)
+    total, largest = float(np.sum(d**2)), float(d.max(initial=0.0))
+    relax = 1.0
+    for _ in range(sweeps):
+        if largest <= 0:
+            break
+        step = move(x)
+        for _ in range(MAX_HALVINGS + 1):
+            trial = x + relax * step
+            d = deficits(trial)
+            if float(np.sum(d**2)) < total and (not keep_largest or float(d.max(initial=0.0)) <= largest * (1 + 1e-9)):
+                x, total, largest = trial, float(np.sum(d**2)), float(d.max(initial=0.0))
+                break
+            relax *= 0.5
+        else:
+            break
+    return x
+
+
+def lengthen_short_beams(x: np.ndarray, beams: np.ndarray, minimum: float | np.ndarray, movable: np.ndarray,
+                         sweeps: int = 3) -> np.ndarray:
+    """(n,3) nodes with every beam shorter than its ``minimum`` (m; one for all, or one per beam)
+    pushed back to it: both ends move apart along the beam by half the deficit (a fixed end,
+    ``movable`` False, leaves it all to the other). A beam with both ends fixed is left."""
+    x = np.array(x, dtype=float)
+    minimum = np.broadcast_to(np.asarray(minimum, dtype=float), (len(beams),))
+    if not len(beams) or not (minimum > 0).any():
+        return x
+    a, b = beams[:, 0], beams[:, 1]
+    free = movable[a] | movable[b]
+
+    def measure(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        d = x[b] - x[a]
+        length = np.linalg.norm(d, axis=1)
+        return d, length, np.where(free & (length > 0), np.maximum(minimum - length, 0.0), 0.0)
+
+    def move(x: np.ndarray) -> np.ndarray:
+        d, length, deficit = measure(x)
+        short = deficit > 0
+        unit = d[short] / length[short, None]
+        share_a = np.where(movable[a[short]], np.where(movable[b[short]], 0.5, 1.0), 0.0)[:, None]
+        out = np.zeros_like(x)
+        count = np.zeros(len(x))
+        np.add.at(out, a[short], -share_a * deficit[short, None] * unit)
+        np.add.at(out, b[short], (1 - share_a) * deficit[short, None] * unit)
+        np.add.at(count, a[short], share_a[:, 0] > 0)
+        np.add.at(count, b[short], share_a[:, 0] < 1)
+        return out / np.maximum(count, 1.0)[:, None]
+
+    return _guarded(x, sweeps, lambda x: measure(x)[2], move, keep_largest=False)
+
+
+def open_narrow_corners(x: np.ndarray, corners: np.ndarray, minimum: float, movable: np.ndarray,
+                        sweeps: int = 3) -> np.ndarray:
+    """(n,3) nodes with every corner (a, o, b) narrower than ``minimum`` (rad) opened to it: a and
+    b turn apart about o in the corner's plane, each by half the deficit, at their distance from o
+    (a fixed node leaves its half to the other; a corner with both far nodes fixed is left)."""
+    x = np.array(x, dtype=float)
+    if minimum <= 0 or not len(corners):
+        return x
+    a, o, b = corners.T
+    free = movable[a] | movable[b]
+
+    def measure(x: np.ndarray):
+        u, v = x[a] - x[o], x[b] - x[o]
+        lu, lv = np.linalg.norm(u, axis=1), np.linalg.norm(v, axis=1)
+        angle = corner_angles(x, corners)
+        return u, v, lu, lv, np.where(free & (lu > 0) & (lv > 0), np.maximum(minimum - angle, 0.0), 0.0)
+
+    def move(x: np.ndarray) -> np.ndarray:
+        u, v, lu, lv, deficit = measure(x)
+        narrow = deficit > 0
+        u, v, lu, lv, deficit = u[narrow], v[narrow], lu[narrow, None], lv[narrow, None], deficit[narrow]
+        eu, ev = u / lu, v / lv
+        # in the corner's plane, the unit direction away from the other beam, normal to each beam
+        cosine = np.einsum("ij,ij->i", eu, ev)[:, None]
+        away_u, away_v = eu * cosine - ev, ev * cosine - eu
+        away_u /= np.maximum(np.linalg.norm(away_u, axis=1), 1e-300)[:, None]
+        away_v /= np.maximum(np.linalg.norm(away_v, axis=1), 1e-300)[:, None]
+        ma, mb = movable[a[narrow]], movable[b[narrow]]
+        turn_a = np.where(ma, np.where(mb, 0.5, 1.0), 0.0) * deficit
+        turn_b = deficit - turn_a
+        new_u = lu * (np.cos(turn_a)[:, None] * eu + np.sin(turn_a)[:, None] * away_u)
+        new_v = lv * (np.cos(turn_b)[:, None] * ev + np.sin(turn_b)[:, None] * away_v)
+        out = np.zeros_like(x)
+        count = np.zeros(len(x))
+        np.add.at(out, a[narrow], new_u - u)
+        np.add.at(out, b[narrow], new_v - v)
+        np.add.at(count, a[narrow], turn_a > 0)
+        np.add.at(count, b[narrow], turn_b > 0)
+        return out / np.maximum(count, 1.0)[:, None]
+
+    return _guarded(x, sweeps, lambda x: measure(x)[4], move, keep_largest=True)

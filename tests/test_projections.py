@@ -1,0 +1,84 @@
+"""The optimiser's hard limits: narrow corners opened, short beams lengthened, slivers' targets
+made rounder; checked against closed forms and on a jittered honeycomb."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine.optimize import OptimizeSettings, optimize, regular_targets
+from engine.projections import face_corners, lengthen_short_beams, open_narrow_corners
+from tests.test_optimize import _flat_square, _grid_on
+
+
+def _angle(x, a, o, b) -> float:
+    u, v = x[a] - x[o], x[b] - x[o]
+    return float(np.degrees(np.arccos(u @ v / np.linalg.norm(u) / np.linalg.norm(v))))
+
+
+def test_a_narrow_corner_opens_to_the_minimum_in_its_plane_at_the_same_beam_lengths():
+    tilt = np.radians(30)
+    plane = np.array([[1, 0, 0], [0, np.cos(tilt), np.sin(tilt)]])  # a tilted plane through the apex
+    x = np.array([[2.0, 0.2], [0.0, 0.0], [1.5, -0.1]]) @ plane + [1.0, 2.0, 3.0]
+    before = _angle(x, 0, 1, 2)
+    assert before < 15
+    moved = open_narrow_corners(x, np.array([[0, 1, 2]]), np.radians(40), np.ones(3, bool), sweeps=1)
+    assert _angle(moved, 0, 1, 2) == pytest.approx(40, abs=1e-9)
+    for k in (0, 2):  # beams keep their length, the apex stays, the corner stays in its plane
+        assert np.linalg.norm(moved[k] - moved[1]) == pytest.approx(np.linalg.norm(x[k] - x[1]), rel=1e-12)
+    assert np.allclose(moved[1], x[1])
+    normal = np.cross(*plane)
+    assert np.allclose((moved - x) @ normal, 0, atol=1e-12)
+    # with one far node fixed the other turns the whole deficit
+    fixed = open_narrow_corners(x, np.array([[0, 1, 2]]), np.radians(40), np.array([False, True, True]), sweeps=1)
+    assert np.allclose(fixed[0], x[0]) and _angle(fixed, 0, 1, 2) == pytest.approx(40, abs=1e-9)
+
+
+def test_short_beams_lengthen_to_their_own_minimum():
+    x = np.array([[0.0, 0, 0], [1.0, 0, 0], [1.0, 0.5, 0]])
+    beams = np.array([[0, 1], [1, 2]])
+    moved = lengthen_short_beams(x, beams, np.array([0.5, 0.8]), np.array([False, False, True]), sweeps=1)
+    assert np.allclose(moved[:2], x[:2]), "fixed nodes stay; the first beam (1 m) is long enough"
+    assert np.linalg.norm(moved[2] - moved[1]) == pytest.approx(0.8)
+
+
+@pytest.mark.parametrize("stretch, cap", [(1.8, 2.0), (6.0, 2.0)])
+def test_the_regularity_target_is_stretched_at_most_the_cap_at_the_cells_area(stretch, cap):
+    t = 2 * np.pi * np.arange(6) / 6 + 0.3
+    cell = np.c_[stretch * np.cos(t), np.sin(t), np.zeros(6)][None]
+    target = regular_targets(cell, max_stretch=cap)[0]
+
+    def spreads_and_area(p):
+        c = p[:, :2] - p[:, :2].mean(axis=0)
+        area = 0.5 * abs(np.sum(c[:, 0] * np.roll(c[:, 1], -1) - np.roll(c[:, 0], -1) * c[:, 1]))
+        return np.sqrt(np.linalg.eigvalsh(c.T @ c / len(c))), area
+
+    (s0, s1), area = spreads_and_area(target)
+    assert s1 / s0 == pytest.approx(min(stretch, cap), rel=1e-9)
+    assert area == pytest.approx(spreads_and_area(cell[0])[1], rel=1e-9)
+    if stretch <= cap:
+        assert np.allclose(target, cell[0], atol=1e-9), "within the cap a stretched regular cell is its own target"
+
+
+@pytest.mark.parametrize("regularity", [0.0, 1.0])
+def test_the_optimiser_holds_corners_and_beams_to_their_limits(regularity):
+    """A jittered honeycomb (corners from 11 degrees, beams from 7 % of the median): with its
+    limits the optimiser leaves no inner corner under 20 degrees and no inner beam under 60 % of the
+    median; without them, at no regularity, nothing moves."""
+    from engine.projections import corner_angles
+
+    surface = _flat_square()
+    grid = _grid_on(surface, 0.3, jitter=0.2, seed=4)
+    corners = face_corners(grid.faces)
+    interior = ~grid.boundary & ~grid.corners & ~grid.supports
+    inner = interior[corners].all(axis=1)
+    inner_beams = interior[grid.edges].all(axis=1)
+    wanted = 0.6 * float(np.median(grid.beam_lengths))
+    assert np.degrees(corner_angles(grid.nodes, corners[inner])).min() < 15
+    assert grid.beam_lengths[inner_beams].min() < 0.2 * wanted
+    settings = dict(regularity_weight=regularity, fairness_weight=0.0, iterations=30, planar=False)
+    held = optimize(grid, surface, None, OptimizeSettings(**settings, min_corner_angle_deg=20.0),
+                    beam_length_limits=lambda g: np.full(len(g.edges), wanted)).polymesh
+    # the Jacobi sweeps share a node's moves among its limits: within a degree and 2 %
+    assert np.degrees(corner_angles(held.nodes, corners[inner])).min() >= 19.0
+    assert held.beam_lengths[inner_beams].min() >= 0.98 * wanted
