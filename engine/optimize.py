@@ -3,17 +3,20 @@
 Local/global iterations in the manner of Shape-Up (Bouaziz et al. 2012) and ShapeOp.
 
 Local step, per cell: (regularity) the PCA of its nodes in its best-fit plane, un-stretched by
-the square roots of the eigenvalues so that the cell's own anisotropy is kept, a regular polygon
-of equal area fitted by a rigid rotation (2-D Procrustes), stretched back; (planarity) the nodes
-projected onto the best-fit plane. Per node: (closeness) the nearest point of the reference
-surface; (fairness) the mean of its neighbours (interior nodes).
+the square roots of the eigenvalues so that the cell's own anisotropy is kept (up to
+``max_cell_stretch``), a regular polygon of the cell's area *in the grid as given* (the remesher's
+grading under the field) fitted by a rigid rotation (2-D Procrustes), stretched back; (planarity)
+the nodes projected onto the best-fit plane. Per node: (closeness) the nearest point of the
+reference surface; (fairness) the given position plus the mean of its neighbours' displacements
+(interior nodes): the displacement is smoothed, not the grid, so fairness does not even out the
+cell sizes either.
 
 Global step: the weighted least-squares fit of all targets,
 
     S * sum_cells ||C x - ((1 - t) R + t P)||^2 + sum_nodes E * ||x_i - ((1 - f) s_i + f m_i)||^2,
 
 C the translation-free rows (x_j - mean of the cell), R, P the mean-free regular and planar
-targets, s_i the closest surface point, m_i the neighbours' mean. The shape weight
+targets, s_i the closest surface point, m_i = x0_i + mean_j (x_j - x0_j) over the neighbours. The shape weight
 S = K (w_regularity + w_planarity) and the node weight E = w_closeness + w_fairness are constant;
 only the blends t (planarity share) and f (fairness share) change over the iterations, so the
 matrix is the same every iteration and is factored ONCE. The planarity share is ramped from
@@ -21,7 +24,9 @@ w_p / (w_r + w_p) up to 1, and the last iterations are pure planarity + closenes
 
 Constraints: corners and supports are fixed (their DOFs are eliminated); a free boundary node
 moves along the tangent of the surface's boundary polyline at its start position (one DOF) and is
-projected back onto the polyline after each step (exact on straight boundary edges).
+projected back onto the polyline after each step (exact on straight boundary edges). After each
+step, too, the fabrication limits are projections (:mod:`engine.projections`): narrow corners
+open to ``min_corner_angle_deg``, short beams lengthen to their buildable length.
 
 For planar panels (``planar``) two more steps, both reported in the quality record:
 
@@ -162,6 +167,11 @@ def _groups(faces: tuple[np.ndarray, ...]) -> dict[int, np.ndarray]:
     return {k: np.array(v, dtype=np.int64) for k, v in sorted(groups.items())}
 
 
+def cell_areas(points: np.ndarray) -> np.ndarray:
+    """(f,) areas of (f,k,3) cells (the vector area's length: the area projected on the best-fit plane), m2."""
+    return 0.5 * np.linalg.norm(np.cross(points, np.roll(points, -1, axis=1)).sum(axis=1), axis=1)
+
+
 def _frames(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centroids (f,3), in-plane axes (f,2,3) and normals (f,3) of (f,k,3) point sets (PCA)."""
     centroid = points.mean(axis=1)
@@ -190,7 +200,7 @@ def _unstretched(points: np.ndarray):
     return principal / spread[:, None, :], spread, vectors, axes, centroid
 
 
-def regular_targets(points: np.ndarray, max_stretch: float = np.inf) -> np.ndarray:
+def regular_targets(points: np.ndarray, max_stretch: float = np.inf, areas: np.ndarray | None = None) -> np.ndarray:
     """(f,k,3) targets of (f,k,3) cells: the regular k-gon of equal area best fitting each cell
     after un-stretching it by its PCA axes, stretched back by at most ``max_stretch`` (the ratio
     of the two principal spreads, kept at their product, so the area stays). A regular cell, and
@@ -209,7 +219,10 @@ def regular_targets(points: np.ndarray, max_stretch: float = np.inf) -> np.ndarr
                           - np.roll(unstretched[:, :, 0], -1, axis=1) * unstretched[:, :, 1], axis=1)
     template = np.where((signed < 0)[:, None, None], template * [1.0, -1.0], template)
     unit_area = 0.5 * k * np.sin(2 * np.pi / k)
-    scale = np.sqrt(np.abs(signed) / unit_area)
+    if areas is None:
+        scale = np.sqrt(np.abs(signed) / unit_area)
+    else:  # the given area: in the un-stretched frame, divided by the spreads' product
+        scale = np.sqrt(np.asarray(areas, float) / (spread[:, 0] * spread[:, 1]) / unit_area)
     # best rotation of the template onto the cell (2-D Procrustes, node j <-> template corner j)
     dot = np.einsum("fki,fki->f", template, unstretched)
     cross = np.einsum("fk,fk->f", template[:, :, 0], unstretched[:, :, 1]) - np.einsum(
@@ -465,6 +478,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
         x[sliding], tangents[sliding] = boundary.closest(x[sliding])
 
     groups = _groups(polymesh.faces)
+    x0 = x.copy()
+    areas0 = {k: cell_areas(x0[f]) for k, f in groups.items()}  # the remeshed cells' areas: the grading
     C = _centering(groups, n)
     neighbours = _neighbour_mean(polymesh.edges, n)
     shape, plan = _schedule(settings)
@@ -488,13 +503,13 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
         target = np.zeros((C.shape[0], 3))
         if shape > 0:
             if t < 1.0:
-                target += (1 - t) * _stack(groups, {k: regular_targets(p, settings.max_cell_stretch)
+                target += (1 - t) * _stack(groups, {k: regular_targets(p, settings.max_cell_stretch, areas0[k])
                                                     for k, p in points.items()})
             if t > 0.0:
                 target += t * _stack(groups, {k: planar_targets(p) for k, p in points.items()})
         node_target = _into_band(x, *surface.closest(x), band)
         if f > 0:
-            smooth = neighbours @ x
+            smooth = x0 + neighbours @ (x - x0)  # a smooth displacement: sizes keep their grading
             node_target[interior] = (1 - f) * node_target[interior] + f * smooth[interior]
         energy = shape * float(np.sum((C @ x - target) ** 2)) + node_weight * float(np.sum((x - node_target) ** 2))
         return shape * (C.T @ target) + node_weight * node_target + damping * x, energy
@@ -580,7 +595,7 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
                                          min_angle_deg=settings.min_corner_angle_deg)
 
         def regular(x: np.ndarray, groups: dict = groups) -> np.ndarray:
-            return _stack(groups, {k: regular_targets(x[faces], settings.max_cell_stretch)
+            return _stack(groups, {k: regular_targets(x[faces], settings.max_cell_stretch, cell_areas(x0[faces]))
                                    for k, faces in groups.items()})
 
         def said(steps: int, base: int = end["steps"]) -> None:
