@@ -14,6 +14,12 @@ buildable length). A collapse is made only where the result stays a valid polygo
 The merged node keeps the place of its more constrained end (corner, then support, then boundary),
 else takes the midpoint; it keeps the flags of both ends. Collapses of one pass touch disjoint
 neighbourhoods; passes repeat until no short beam can be collapsed.
+
+A collapse makes a node of four or five beams, and such a joint has narrower angles (and longer
+set-backs) than the three-beam joints of a Voronoi grid. So a short beam between two interior
+three-beam nodes whose two cells have six sides or more is *flipped* instead (a T1 transition,
+as in foams): its two cells lose a side, the two cells at its ends gain one and share the beam,
+which is turned across and given its buildable length. Every node keeps three beams.
 """
 
 from __future__ import annotations
@@ -25,10 +31,16 @@ import numpy as np
 
 from .mesh import PolyMesh
 
-__all__ = ["CollapseReport", "collapse_beams", "collapse_short_beams", "MAX_VALENCE"]
+__all__ = ["CollapseReport", "collapse_beams", "flip_beams", "collapse_short_beams", "MAX_VALENCE"]
 
 #: Most beams a merged node may have (a joint with more is crowded, its angles small).
 MAX_VALENCE = 5
+#: A flipped beam is given this many times its buildable length.
+FLIP_MARGIN = 1.1
+#: A beam is flipped only if its two cells have at least FLIP_SIDES[0] sides (they lose one) and the
+#: cells at its ends at most FLIP_SIDES[1] (they gain one): hexagons become pentagons and
+#: heptagons, never quads or octagons, and flips do not cascade.
+FLIP_SIDES = (6, 6)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -39,10 +51,11 @@ class CollapseReport:
     collapsed: int
     passes: int
     left: np.ndarray
+    flipped: int = 0
 
     def to_dict(self) -> dict:
-        return {"collapsed_beams": int(self.collapsed), "collapse_passes": int(self.passes),
-                "short_beams_left": int(len(self.left))}
+        return {"collapsed_beams": int(self.collapsed), "flipped_beams": int(self.flipped),
+                "collapse_passes": int(self.passes), "short_beams_left": int(len(self.left))}
 
 
 def _rank(polymesh: PolyMesh) -> np.ndarray:
@@ -138,22 +151,120 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray) -> tuple[PolyMesh, int
     return result, collapsed
 
 
+def _other(loop: list[int], node: int, not_this: int) -> int:
+    """The neighbour of ``node`` in the cell ``loop`` that is not ``not_this``."""
+    k = len(loop)
+    i = loop.index(node)
+    before, after = loop[i - 1], loop[(i + 1) % k]
+    return after if before == not_this else before
+
+
+def _insert_between(loop: list[int], a: int, b: int, new: int) -> None:
+    """Insert ``new`` between the neighbours ``a`` and ``b`` of the cell ``loop`` (in place)."""
+    i, j = sorted((loop.index(a), loop.index(b)))
+    loop.insert(len(loop) if (i, j) == (0, len(loop) - 1) else j, new)
+
+
+def flip_beams(polymesh: PolyMesh, beams: np.ndarray, lengths: np.ndarray) -> tuple[PolyMesh, int, np.ndarray]:
+    """Flip (T1), in the order given, those of ``beams`` that join two interior three-beam nodes,
+    whose two cells and two end cells have the sides of FLIP_SIDES, where the four cells around
+    the beam are distinct and the two end cells share no node, touching no node near an earlier
+    flip of this call. A
+    flipped beam keeps its node ids, is centred where it was, turned to run from one former cell
+    towards the other, and is ``lengths[beam]`` long (m). Returns the grid (same nodes, new cells),
+    the number flipped and the ids of the flipped beams in the new grid."""
+    edges = polymesh.edges
+    n = polymesh.n_nodes
+    faces = [list(map(int, f)) for f in polymesh.faces]
+    node_faces: list[list[int]] = [[] for _ in range(n)]
+    for i, f in enumerate(faces):
+        for v in f:
+            node_faces[v].append(i)
+    valence = np.bincount(edges.ravel(), minlength=n)
+    free = ~(polymesh.boundary | polymesh.supports | polymesh.corners) & (valence == 3)
+    x = np.array(polymesh.nodes, dtype=float)
+    busy = np.zeros(n, dtype=bool)
+    flipped: list[tuple[int, int]] = []
+    for beam in np.asarray(beams, dtype=int):
+        p, q = map(int, edges[beam])
+        if not (free[p] and free[q]) or busy[p] or busy[q]:
+            continue
+        if len(node_faces[p]) != 3 or len(node_faces[q]) != 3:
+            continue
+        shared = [i for i in node_faces[p] if i in node_faces[q]]
+        if len(shared) != 2:
+            continue
+        left, right = shared
+        if min(len(faces[left]), len(faces[right])) < FLIP_SIDES[0]:
+            continue
+        below = next(i for i in node_faces[p] if i not in shared)
+        above = next(i for i in node_faces[q] if i not in shared)
+        if below == above or set(faces[below]) & set(faces[above]):
+            continue
+        if max(len(faces[below]), len(faces[above])) > FLIP_SIDES[1]:
+            continue
+        p1, q1 = _other(faces[left], p, q), _other(faces[left], q, p)
+        p2, q2 = _other(faces[right], p, q), _other(faces[right], q, p)
+        if len({p1, q1, p2, q2}) != 4:
+            continue
+        # cells: left loses q, right loses p; below gets q between p and p2, above p between q and q1
+        faces[left].remove(q)
+        faces[right].remove(p)
+        _insert_between(faces[below], p, p2, q)
+        _insert_between(faces[above], q, q1, p)
+        centre = 0.5 * (x[p] + x[q])
+        across = x[faces[right]].mean(axis=0) - x[faces[left]].mean(axis=0)
+        axis = x[q] - x[p]
+        axis /= max(np.linalg.norm(axis), 1e-300)
+        across -= (across @ axis) * axis  # in the plane of the two cells, normal to the old beam
+        across /= max(np.linalg.norm(across), 1e-300)
+        half = 0.5 * float(lengths[beam])
+        x[p], x[q] = centre - half * across, centre + half * across
+        for v in (p, q):
+            node_faces[v] = [i for i in node_faces[v] if i not in ((right,) if v == p else (left,))]
+        node_faces[q].append(below)
+        node_faces[p].append(above)
+        busy[[p, q, p1, q1, p2, q2]] = True
+        busy[[v for c in (left, right, below, above) for v in faces[c]]] = True
+        flipped.append((min(p, q), max(p, q)))
+    if not flipped:
+        return polymesh, 0, np.zeros(0, dtype=np.int64)
+    result = PolyMesh(nodes=x, faces=tuple(np.asarray(f, dtype=np.int64) for f in faces),
+                      boundary=polymesh.boundary, supports=polymesh.supports, corners=polymesh.corners)
+    index = {tuple(e): k for k, e in enumerate(np.sort(result.edges, axis=1).tolist())}
+    return result, len(flipped), np.array([index[e] for e in flipped], dtype=np.int64)
+
+
 def collapse_short_beams(polymesh: PolyMesh, required: Callable[[PolyMesh], np.ndarray], *,
-                         max_passes: int = 50) -> tuple[PolyMesh, CollapseReport]:
-    """Collapse beams shorter than ``required(grid)`` ((n_beams,) m, evaluated on the grid as it is
-    at each pass), shortest relative to its requirement first, until none is left or none can go."""
-    total, passes, left = 0, 0, None
+                         max_passes: int = 50, flip: bool = True) -> tuple[PolyMesh, CollapseReport]:
+    """Remove beams shorter than ``required(grid)`` ((n_beams,) m, evaluated on the grid as it is at
+    each pass), shortest relative to its requirement first, until none is left or none can go:
+    each pass flips those that can be flipped (``flip``, :func:`flip_beams`, at FLIP_MARGIN times
+    their requirement), then collapses the others. A beam once flipped is not flipped again."""
+    total, flips, passes, left = 0, 0, 0, None
+    done_flips: set[tuple[int, int]] = set()
     for passes in range(1, max_passes + 1):
-        ratio = polymesh.beam_lengths / np.maximum(required(polymesh), 1e-300)
+        need = required(polymesh)
+        ratio = polymesh.beam_lengths / np.maximum(need, 1e-300)
         short = np.flatnonzero(ratio < 1.0)
         if not len(short):
             left = short
             break
-        polymesh, done = collapse_beams(polymesh, short[np.argsort(ratio[short], kind="stable")])
+        order = short[np.argsort(ratio[short], kind="stable")]
+        done = 0
+        if flip:
+            pairs = [tuple(sorted(map(int, polymesh.edges[b]))) for b in order]
+            candidates = np.array([b for b, e in zip(order, pairs) if e not in done_flips], dtype=np.int64)
+            polymesh, done, new = flip_beams(polymesh, candidates, FLIP_MARGIN * need)
+            flips += done
+            done_flips.update(tuple(sorted(map(int, polymesh.edges[b]))) for b in new)
+        if done:  # the next pass sees the flipped grid, and collapses what could not be flipped
+            continue
+        polymesh, done = collapse_beams(polymesh, order)
         total += done
         if not done:  # the grid is unchanged: these are the beams left
             left = short
             break
     if left is None:
         left = np.flatnonzero(polymesh.beam_lengths < required(polymesh))
-    return polymesh, CollapseReport(collapsed=total, passes=passes, left=left)
+    return polymesh, CollapseReport(collapsed=total, passes=passes, left=left, flipped=flips)

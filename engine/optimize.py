@@ -79,8 +79,11 @@ class OptimizeSettings:
     the shortest beam the end game leaves (the shortest buildable beam; 0: none); min_corner_angle_deg,
     the smallest cell corner it closes to (the smallest angle a joint takes); max_cell_stretch, the
     most a cell's regularity target is stretched along its own principal axis (the field's aspect
-    bound, with a margin: slivers are made rounder, inf: cells keep any anisotropy). The
-    local/global iterations, too, hold beams to min_beam_length and corners to min_corner_angle_deg.
+    bound, with a margin: slivers are made rounder, inf: cells keep any anisotropy); keep_grading,
+    whether the regularity targets keep each cell's given area and fairness smooths the
+    displacement (the field's grading stays), or take each cell's current area and smooth the grid
+    (sizes even out). The local/global iterations, too, hold beams to min_beam_length and corners
+    to min_corner_angle_deg.
     """
 
     regularity_weight: float = 1.0
@@ -95,6 +98,7 @@ class OptimizeSettings:
     min_beam_length: float = 0.0
     min_corner_angle_deg: float = 20.0
     max_cell_stretch: float = np.inf
+    keep_grading: bool = True
 
     def __post_init__(self) -> None:
         for name in ("regularity_weight", "planarity_weight", "closeness_weight", "fairness_weight"):
@@ -479,7 +483,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
 
     groups = _groups(polymesh.faces)
     x0 = x.copy()
-    areas0 = {k: cell_areas(x0[f]) for k, f in groups.items()}  # the remeshed cells' areas: the grading
+    # the remeshed cells' areas: the grading (None: each cell's current area)
+    areas0 = {k: cell_areas(x0[f]) if settings.keep_grading else None for k, f in groups.items()}
     C = _centering(groups, n)
     neighbours = _neighbour_mean(polymesh.edges, n)
     shape, plan = _schedule(settings)
@@ -509,7 +514,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
                 target += t * _stack(groups, {k: planar_targets(p) for k, p in points.items()})
         node_target = _into_band(x, *surface.closest(x), band)
         if f > 0:
-            smooth = x0 + neighbours @ (x - x0)  # a smooth displacement: sizes keep their grading
+            # keep_grading: a smooth displacement, so that sizes keep their grading; else the grid
+            smooth = x0 + neighbours @ (x - x0) if settings.keep_grading else neighbours @ x
             node_target[interior] = (1 - f) * node_target[interior] + f * smooth[interior]
         energy = shape * float(np.sum((C @ x - target) ** 2)) + node_weight * float(np.sum((x - node_target) ** 2))
         return shape * (C.T @ target) + node_weight * node_target + damping * x, energy
@@ -595,7 +601,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
                                          min_angle_deg=settings.min_corner_angle_deg)
 
         def regular(x: np.ndarray, groups: dict = groups) -> np.ndarray:
-            return _stack(groups, {k: regular_targets(x[faces], settings.max_cell_stretch, cell_areas(x0[faces]))
+            return _stack(groups, {k: regular_targets(x[faces], settings.max_cell_stretch,
+                                                      cell_areas(x0[faces]) if settings.keep_grading else None)
                                    for k, faces in groups.items()})
 
         def said(steps: int, base: int = end["steps"]) -> None:

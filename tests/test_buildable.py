@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from engine.collapse import MAX_VALENCE, collapse_beams, collapse_short_beams
+from engine.collapse import MAX_VALENCE, collapse_beams, collapse_short_beams, flip_beams
 from engine.findings import Finding, findings_table
 from engine.mesh import PolyMesh
 from fabrication.joints import JointSettings, build_joint, joint_setback_mm
@@ -137,9 +137,51 @@ def test_short_beams_collapse_until_none_is_shorter_than_required():
     required = lambda g: np.full(len(g.edges), 0.5)  # noqa: E731
     result, report = collapse_short_beams(grid, required)
     _check_valid(result)
-    assert report.collapsed >= 1 and len(report.left) == 0
+    assert report.flipped >= 1 and len(report.left) == 0
     assert result.beam_lengths.min() >= 0.5
     assert result.valence.max() <= MAX_VALENCE
+    # without flips every short beam is collapsed
+    collapsed, report = collapse_short_beams(grid, required, flip=False)
+    _check_valid(collapsed)
+    assert report.collapsed >= 1 and report.flipped == 0 and len(report.left) == 0
+    assert collapsed.n_nodes < result.n_nodes <= grid.n_nodes
+
+
+def test_a_flip_keeps_three_beams_at_every_node_and_turns_the_beam_across():
+    """T1 on an interior beam of a regular honeycomb: the same nodes and beam count, Euler's
+    characteristic kept, the two cells of the beam lose a side and the two at its ends gain one,
+    the beam keeps its midpoint, turns 90 degrees and takes the given length."""
+    grid = _honeycomb()
+    interior = np.flatnonzero(~grid.boundary[grid.edges].any(axis=1))
+    beam = int(interior[len(interior) // 2])
+    a, b = grid.edges[beam]
+    midpoint = 0.5 * (grid.nodes[a] + grid.nodes[b])
+    axis = grid.nodes[b] - grid.nodes[a]
+    result, done, new = flip_beams(grid, np.array([beam]), np.full(len(grid.edges), 1.3))
+    assert done == 1
+    _check_valid(result)
+    assert result.n_nodes == grid.n_nodes and len(result.edges) == len(grid.edges)
+    assert result.n_faces == grid.n_faces
+    assert np.all(result.valence == grid.valence)
+    change = np.sort(result.face_degrees - grid.face_degrees)
+    assert change.tolist() == [-1, -1] + [0] * (grid.n_faces - 4) + [1, 1]
+    p, q = result.edges[new[0]]
+    assert {int(p), int(q)} == {int(a), int(b)}
+    turned = result.nodes[q] - result.nodes[p]
+    assert np.linalg.norm(turned) == pytest.approx(1.3)
+    assert np.allclose(0.5 * (result.nodes[p] + result.nodes[q]), midpoint)
+    assert abs(turned @ axis) < 1e-9
+    # a beam on the boundary is not flipped; the flipped beam flips back to the honeycomb's cells
+    edge = int(np.flatnonzero(grid.boundary[grid.edges].all(axis=1))[0])
+    assert flip_beams(grid, np.array([edge]), np.full(len(grid.edges), 1.3))[1] == 0
+    back, done, _ = flip_beams(result, np.array([new[0]]), np.full(len(grid.edges), 1.0))
+    assert done == 1
+
+    def segments(g: PolyMesh) -> list:  # the beams as sorted pairs of rounded end points (ids aside)
+        ends = np.round(g.nodes[g.edges], 5).tolist()
+        return sorted(tuple(sorted(map(tuple, pair))) for pair in ends)
+
+    assert segments(back) == segments(grid), "two flips, at the side's length, give the honeycomb"
 
 
 def test_corners_stay_put_and_two_corners_never_merge():

@@ -20,12 +20,15 @@ from ..config import Project
 from ._require import require
 from .polymesh_io import read_polymesh_obj, write_polymesh_obj
 from .fabrication import build_limits_of
-from .remesh import buildable_grid, too_fine_finding
+from .remesh import MAX_COLLAPSE_SHARE, buildable_grid, short_share, too_fine_finding
 
 #: The end game keeps beams this much above the shortest buildable beam between 120-degree joints.
 MIN_LENGTH_MARGIN = 1.05
 #: A cell's regularity target is stretched at most this much beyond the field's aspect bound A.
 STRETCH_MARGIN = 1.5
+#: Above this share of beams left too short for their joints with the field's grading kept, the
+#: optimiser tries again with the sizes evened out (engine.optimize.OptimizeSettings.keep_grading).
+GRADED_SHORT_SHARE = 0.02
 #: Rounds of (collapse the beams the optimiser left too short, optimise again).
 BUILDABLE_ROUNDS = 2
 
@@ -65,24 +68,50 @@ def run(ctx):
     settings = optimize_settings(project)
     limits = beam_length_limits(project)
     result = optimize(polymesh, surface.mesh, field, settings, progress=ctx.step, beam_length_limits=limits)
+    grading_kept, share_kept = True, short_share(result.polymesh, project)
+    if share_kept > GRADED_SHORT_SHARE:
+        # the field's smallest cells are too small for the joints: let the sizes even out, and keep
+        # whichever grid leaves fewer beams short (a finding says what it cost)
+        ctx.step(f"{100 * share_kept:.0f} % of the beams too short for the joints at the field's grading: "
+                 "optimising with the sizes evened out")
+        even = optimize(polymesh, surface.mesh, field, dataclasses.replace(settings, keep_grading=False),
+                        progress=ctx.step, beam_length_limits=limits)
+        if short_share(even.polymesh, project) < share_kept:
+            result, grading_kept, settings = even, False, dataclasses.replace(settings, keep_grading=False)
+    if short_share(result.polymesh, project) > MAX_COLLAPSE_SHARE:
+        # too fine for its joints even when held to their lengths, which then unmake the cells:
+        # optimised free of them instead (the grid_too_fine finding below says so)
+        ctx.step("the grid is too fine for its joints: optimising without their lengths")
+        limits = None
+        settings = dataclasses.replace(settings, min_beam_length=0.0)
+        result = optimize(polymesh, surface.mesh, field, settings, progress=ctx.step)
     # fabrication limits: collapse what the optimiser made too short, then optimise again
     grid, buildable = buildable_grid(result.polymesh, project)
-    rounds, collapsed = 0, buildable["collapsed_beams"]
-    while buildable["collapsed_beams"] and rounds < BUILDABLE_ROUNDS:
+    rounds, collapsed, flipped = 0, buildable["collapsed_beams"], buildable["flipped_beams"]
+
+    def changed(record: dict) -> int:
+        return record["collapsed_beams"] + record["flipped_beams"]
+
+    while changed(buildable) and rounds < BUILDABLE_ROUNDS:
         rounds += 1
-        ctx.step(f"{buildable['collapsed_beams']} short beams collapsed: optimising again ({rounds})")
+        ctx.step(f"{buildable['collapsed_beams']} short beams collapsed, {buildable['flipped_beams']} flipped: "
+                 f"optimising again ({rounds})")
         again = optimize(grid, surface.mesh, field, dataclasses.replace(settings, split_cells=False),
                          progress=ctx.step, beam_length_limits=limits)
         result = dataclasses.replace(result, polymesh=again.polymesh,
                                      quality={**again.quality, "before": result.quality["before"]})
         grid, buildable = buildable_grid(again.polymesh, project)
         collapsed += buildable["collapsed_beams"]
-    if buildable["collapsed_beams"]:  # the last collapse stands without a further optimisation
+        flipped += buildable["flipped_beams"]
+    if changed(buildable):  # the last collapse stands without a further optimisation
         result = dataclasses.replace(result, polymesh=grid)
         result.quality["after"].update(optimize_quality(grid, surface.mesh))
-    buildable.update({"collapsed_beams": collapsed, "reoptimised": rounds})
+    buildable.update({"collapsed_beams": collapsed, "flipped_beams": flipped, "reoptimised": rounds,
+                      "grading_kept": grading_kept, "short_share_at_grading": share_kept})
     if buildable["too_fine"]:
         ctx.report_findings([too_fine_finding(buildable, "optimize")])
+    elif not grading_kept:
+        ctx.report_findings([grading_finding(share_kept, result.quality)])
     write_polymesh_obj(result.polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: optimised grid-shell")
     ctx.step("panels: planar convex pieces of the cells that are not")
@@ -107,6 +136,22 @@ def run(ctx):
     plot_gridshell(result.polymesh, ctx.folder / "degree.png", color_by="degree",
                    title=f"{project.project.name}: optimised grid-shell, cells by number of sides")
     return result.polymesh
+
+
+def grading_finding(share: float, quality: dict) -> dict:
+    """The finding that the joints evened out the field's grading (JSON-ready)."""
+    from engine.findings import Finding
+
+    before = quality["before"].get("size_correlation")
+    after = quality["after"].get("size_correlation")
+    figures = (f" (size correlation with the field {before:.2f} remeshed, {after:.2f} optimised)"
+               if before is not None and after is not None else "")
+    return Finding(kind="grading_evened", parts=["grid"], measure=100 * share, limit=100 * GRADED_SHORT_SHARE,
+                   unit="% of beams", stage="optimize",
+                   message=(f"at the field's grading {100 * share:.0f} % of the beams are too short for their "
+                            f"joints, so the optimiser evened out the cell sizes{figures}"),
+                   fix="fewer cells ([remesh] n_cells), less grading ([field] max_size_ratio), or smaller "
+                       "joints or tubes ([fabrication.joints], [section] diameter)").to_dict()
 
 
 def _piece_tolerance(polymesh, project: Project) -> float:

@@ -41,12 +41,12 @@ def run(ctx):
     support_vertices[surface.supports.nodes] = True
     result = remesh(surface.mesh, field, remesh_settings(project), support_vertices=support_vertices,
                     progress=ctx.step)
-    ctx.step("collapsing beams shorter than the joints and the shortest cut take")
-    polymesh, buildable = buildable_grid(result.polymesh, project)
+    ctx.step("collapsing beams far shorter than the joints and the shortest cut take")
+    polymesh, buildable = buildable_grid(result.polymesh, project, share=REMESH_SHARE)
     write_polymesh_obj(polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: statics-aware Voronoi grid-shell (remesh)")
     quality = dict(result.quality)
-    if buildable["collapsed_beams"]:  # the figures of the grid as written
+    if buildable["collapsed_beams"] or buildable["flipped_beams"]:  # the figures of the grid as written
         polymesh_quality = require("remesh", "engine.voronoi", "polymesh_quality")
         quality.update(polymesh_quality(polymesh, mesh=surface.mesh, field=field))
     quality["buildable"] = buildable
@@ -60,16 +60,20 @@ def run(ctx):
     return polymesh
 
 
+#: The remesh removes only beams under this share of their buildable length: the optimiser, which
+#: holds beams to that length, lengthens the others with less change to the cells.
+REMESH_SHARE = 0.5
 #: Collapse short beams only while they are at most this share of the grid: beyond it the joints
 #: are too big for the grid, and collapsing would unmake it (a finding says so instead).
 MAX_COLLAPSE_SHARE = 0.2
 
 
-def buildable_grid(polymesh, project: Project):
-    """(grid, record): ``polymesh`` with every beam shorter than its joints and the shortest cut
-    take collapsed where a valid collapse exists; the record (JSON-ready) has the limits, the
-    collapses, the shortest beam and the smallest angle between two beams at a node. When more than
-    MAX_COLLAPSE_SHARE of the beams are short, nothing is collapsed and ``too_fine`` is set."""
+def buildable_grid(polymesh, project: Project, share: float = 1.0):
+    """(grid, record): ``polymesh`` with every beam shorter than ``share`` times what its joints and
+    the shortest cut take flipped or collapsed where a valid flip or collapse exists
+    (engine.collapse); the record (JSON-ready) has the limits, the collapses and flips, the
+    shortest beam and the smallest angle between two beams at a node. When more than
+    MAX_COLLAPSE_SHARE of the beams are short, nothing is changed and ``too_fine`` is set."""
     from engine.collapse import CollapseReport, collapse_short_beams
     from fabrication.limits import node_smallest_angles, required_beam_lengths_m
 
@@ -81,13 +85,24 @@ def buildable_grid(polymesh, project: Project):
     if too_fine:
         grid, report = polymesh, CollapseReport(collapsed=0, passes=0, left=np.flatnonzero(short))
     else:
-        grid, report = collapse_short_beams(polymesh, lambda g: required_beam_lengths_m(g, limits))
-    record = {**limits.to_dict(), **report.to_dict(), "too_fine": too_fine,
+        grid, report = collapse_short_beams(polymesh, lambda g: share * required_beam_lengths_m(g, limits))
+    record = {**limits.to_dict(), **report.to_dict(), "too_fine": too_fine, "removed_under_share": share,
               "short_share_before": float(short.mean()) if len(short) else 0.0,
               "shortest_beam_m": float(grid.beam_lengths.min()) if len(grid.edges) else 0.0,
               "mean_beam_m": float(grid.beam_lengths.mean()) if len(grid.edges) else 0.0,
               "smallest_beam_angle_deg": float(np.degrees(node_smallest_angles(grid).min()))}
     return grid, record
+
+
+def short_share(polymesh, project: Project) -> float:
+    """Share of the beams of ``polymesh`` shorter than their joints and the shortest cut take."""
+    from fabrication.limits import required_beam_lengths_m
+
+    from .fabrication import build_limits_of
+
+    if not len(polymesh.edges):
+        return 0.0
+    return float((polymesh.beam_lengths < required_beam_lengths_m(polymesh, build_limits_of(project))).mean())
 
 
 def too_fine_finding(record: dict, stage: str) -> dict:
