@@ -46,8 +46,7 @@ def main() -> int:
         print(f"cold run failed with exit code {code}")
         return 1
     cold_stages = json.loads((out / "manifest.json").read_text())["stages"]
-    fabrication = out / "07-fabrication" / "fabrication.json"
-    steps = json.loads(fabrication.read_text()).get("step_seconds", {}) if fabrication.is_file() else {}
+    steps = next((s.get("step_seconds", {}) for s in cold_stages if s["name"] == "fabrication"), {})
     load_after_cold = os.getloadavg()
     cached, cached_peak, code = _run(["run", *base])
     manifest = json.loads((out / "manifest.json").read_text())

@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .workers import exit_with_parent
+
 __all__ = ["joint_clashes", "joint_clashes_from_step", "joint_clashes_parallel", "bounding_boxes",
            "overlapping_pairs", "read_joint_step", "step_joint_names"]
 
@@ -285,7 +287,7 @@ def joint_clashes_parallel(folder: Path, names: list[str] | None = None, workers
     if workers == 1 or len(names) < 8:
         return joint_clashes_from_step(folder, names, min_volume_mm3=min_volume_mm3, stl_boxes=stl_boxes)
     pairs = _step_pairs(folder, names, stl_boxes)
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    with ProcessPoolExecutor(max_workers=workers, initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
         if pairs is None:
             # contiguous chunks, a few per worker, so that a slow chunk does not hold the others up
             chunks = _split(names, math.ceil(len(names) / (4 * workers)))

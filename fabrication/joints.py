@@ -32,6 +32,7 @@ from engine.mesh import PolyMesh
 
 from .files import atomic_path
 from .step_assembly import StepAssemblyWriter, step_part, write_step_part
+from .workers import exit_with_parent
 
 __all__ = ["JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "joint_hub_radius_mm",
            "joint_sleeve_mm", "smallest_angle", "build_joint", "build_joints",
@@ -600,7 +601,8 @@ class JointsInBackground:
                           for k, g in enumerate(self.geometries)]
             self._order = sorted(range(len(self._jobs)), key=lambda k: -len(self.geometries[k].directions))
             if self.workers > 1 and len(self._jobs) > 4:
-                self._pool = self._stack.enter_context(ProcessPoolExecutor(max_workers=self.workers))
+                self._pool = self._stack.enter_context(ProcessPoolExecutor(
+                    max_workers=self.workers, initializer=exit_with_parent, initargs=(os.getpid(),)))
                 self._futures = [self._pool.submit(_build_and_write, self._jobs[k]) for k in self._order]
                 self._thread = threading.Thread(target=self._collect_all, name="joints", daemon=True)
                 self._thread.start()

@@ -27,6 +27,7 @@ from engine.errors import GridshellError
 from fabrication.files import atomic_folder, write_text_atomic
 
 from .config import STAGE_SECTIONS, Project
+from .outdir import remove_leftovers, run_lock
 from .progress import Progress
 
 __all__ = ["Stage", "StageContext", "RunSummary", "StageNotAvailable", "run_project", "product_version",
@@ -69,7 +70,9 @@ def file_digest(path: Path) -> str:
 @dataclass
 class StageContext:
     """What a stage sees: the project, its folder to write into, upstream results, progress, and the
-    findings of the stages before it (``earlier_findings``, run or cached)."""
+    findings of the stages before it (``earlier_findings``, run or cached). A stage puts the seconds
+    of its steps in ``timings``: they go into the manifest (``step_seconds``), never into an
+    artifact, so that the same input gives the same bytes."""
 
     project: Project
     folder: Path
@@ -79,6 +82,7 @@ class StageContext:
     _loader: Callable[[str], Any]
     findings: list[dict] = field(default_factory=list)
     earlier_findings: list[dict] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
 
     def result(self, stage: str) -> Any:
         """The in-memory result of an earlier stage (reloaded from its artifacts if cached)."""
@@ -181,14 +185,25 @@ def run_project(project: Project, out_dir: Path, stages: list[Stage], *, until: 
     """Run (or skip when cached) the stages of a project in order; write OUT/manifest.json.
 
     until: stop after this stage; only: run just this stage (its inputs must be available);
-    force: ignore the cache. A stage raising ``StageNotAvailable`` ends the run there.
+    force: ignore the cache. A stage raising ``StageNotAvailable`` ends the run there. The run
+    holds OUT's lock (another run on OUT raises ``workflow.outdir.RunInProgress``) and first removes
+    what a killed run left there (workflow.outdir).
     """
     names = [s.name for s in stages]
     for option, value in (("--until", until), ("--only", only)):
         if value is not None and value not in names:
             raise GridshellError(f"{option} {value!r}: unknown stage; stages are {', '.join(names)}")
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    with run_lock(out_dir):
+        remove_leftovers(out_dir, [s.folder for s in stages], [p for s in stages for p in s.published])
+        return _run(project, out_dir, stages, until=until, only=only, force=force, progress=progress,
+                    project_file=project_file)
+
+
+def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | None, only: str | None,
+         force: bool, progress: Progress | None, project_file: str | None) -> RunSummary:
+    """run_project's body, with the lock held."""
+    names = [s.name for s in stages]
     progress = progress or Progress(enabled=False)
     version = product_version()
     manifest_path = out_dir / "manifest.json"
@@ -274,7 +289,8 @@ def run_project(project: Project, out_dir: Path, stages: list[Stage], *, until: 
         records[stage.name] = {"name": stage.name, "folder": stage.folder, "status": STATUS_RAN,
                                "duration_s": round(duration, 3), "key": keys[stage.name],
                                "artifacts": _artifacts(folder, out_dir, stage.published),
-                               "findings": ctx.findings}
+                               "findings": ctx.findings,
+                               **({"step_seconds": ctx.timings} if ctx.timings else {})}
         summary.stages.append(records[stage.name])
         progress.stage_done(stage.name, STATUS_RAN, duration, findings=len(ctx.findings))
         write_manifest()

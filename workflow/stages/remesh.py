@@ -46,6 +46,8 @@ def run(ctx):
     write_polymesh_obj(polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: statics-aware Voronoi grid-shell (remesh)")
     quality = dict(result.quality)
+    for key in ("clustering_s", "extraction_s"):  # seconds go into the manifest, not the artifact
+        ctx.timings[key.removesuffix("_s")] = round(float(quality.pop(key, 0.0)), 3)
     if buildable["collapsed_beams"] or buildable["flipped_beams"]:  # the figures of the grid as written
         polymesh_quality = require("remesh", "engine.voronoi", "polymesh_quality")
         quality.update(polymesh_quality(polymesh, mesh=surface.mesh, field=field))

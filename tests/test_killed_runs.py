@@ -1,0 +1,178 @@
+"""Killed, concurrent and damaged runs, with real processes and signals: one run per output folder,
+nothing left behind by a killed run (neither files nor worker processes), and the next run gives
+the artifacts an uninterrupted run gives."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.test_runner import _project, _stages
+from workflow.outdir import LOCK_NAME, RunInProgress, run_lock
+from workflow.runner import run_project
+
+ROOT = Path(__file__).resolve().parents[1]
+GRIDSHELL = [sys.executable, "-m", "workflow.cli"]
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` exists and is not a zombie."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError, IndexError):
+        return False
+    return state != "Z"
+
+
+def _descendants(pid: int) -> set[int]:
+    """Every process below ``pid`` (from /proc's parent ids)."""
+    parents: dict[int, int] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                parents[int(entry.name)] = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (FileNotFoundError, ProcessLookupError, IndexError, ValueError):
+                pass
+    out, frontier = set(), {pid}
+    while frontier:
+        frontier = {child for child, parent in parents.items() if parent in frontier} - out
+        out |= frontier
+    return out
+
+
+def _wait_gone(pids: set[int], seconds: float) -> set[int]:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end and any(_alive(p) for p in pids):
+        time.sleep(0.1)
+    return {p for p in pids if _alive(p)}
+
+
+def test_a_second_run_on_a_locked_folder_stops_naming_the_holder(tmp_path):
+    calls: list[str] = []
+    with run_lock(tmp_path):
+        with pytest.raises(RunInProgress, match=f"pid {os.getpid()}") as caught:
+            run_project(_project(), tmp_path, _stages(calls))
+    assert "--out" in caught.value.hint and calls == []
+    run_project(_project(), tmp_path, _stages(calls))  # released with the block
+    assert calls == ["surface", "shell", "field", "remesh"]
+
+
+def test_the_cli_exits_2_while_another_process_holds_the_folder(tmp_path):
+    (tmp_path / "project.toml").write_text('[surface]\ntemplate = "mockup"\n')
+    holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
+        import sys, time
+        from workflow.outdir import run_lock
+        with run_lock({str(tmp_path / 'out')!r}):
+            print("locked", flush=True)
+            time.sleep(60)
+        """)], cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        done = subprocess.run([*GRIDSHELL, "run", str(tmp_path / "project.toml"), "--out", str(tmp_path / "out")],
+                              cwd=ROOT, capture_output=True, text=True, timeout=120)
+        assert done.returncode == 2
+        assert f"pid {holder.pid}" in done.stderr and "Traceback" not in done.stderr
+        assert not (tmp_path / "out" / "01-surface").exists()
+    finally:
+        holder.kill()
+        holder.wait()
+    # the kernel released the killed holder's lock: the folder is free again
+    with run_lock(tmp_path / "out"):
+        pass
+
+
+def test_leftovers_of_a_killed_run_are_removed_and_nothing_else(tmp_path):
+    calls: list[str] = []
+    run_project(_project(), tmp_path, _stages(calls))
+    stale = tmp_path / ".02-shell.k3j4l5"
+    stale.mkdir()
+    (stale / ".joints.abc.step").write_text("ISO-10303-21; half")
+    (tmp_path / ".manifest.x1y2.json").write_text("{")
+    (tmp_path / ".keep").write_text("a user's file")
+    (tmp_path / "notes.txt").write_text("a user's file")
+    run_project(_project(), tmp_path, _stages(calls))
+    left = sorted(p.name for p in tmp_path.iterdir())
+    assert left == sorted([".keep", "notes.txt", LOCK_NAME, "manifest.json", "01-surface", "02-shell", "03-field",
+                           "04-remesh"])
+
+
+_POOL = """
+import os, sys, time
+from concurrent.futures import ProcessPoolExecutor
+from fabrication.workers import exit_with_parent
+
+with ProcessPoolExecutor(max_workers=2, initializer={init}, initargs=(os.getpid(),)) as pool:
+    pids = set()
+    futures = [pool.submit(time.sleep, 120) for _ in range(2)]
+    time.sleep(1.0)
+    print(" ".join(str(p) for p in pool._processes), flush=True)
+    time.sleep(120)
+"""
+
+
+@pytest.mark.parametrize("watch", [True, False])
+def test_pool_workers_end_within_seconds_of_their_parents_sigkill(watch):
+    """With exit_with_parent as the initializer the workers are gone 3 s after the parent's
+    SIGKILL; without it (the control) they are still there."""
+    script = _POOL.format(init="exit_with_parent" if watch else "None")
+    parent = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    workers = {int(p) for p in parent.stdout.readline().split()}
+    try:
+        assert len(workers) == 2 and all(_alive(p) for p in workers)
+        parent.send_signal(signal.SIGKILL)
+        parent.wait()
+        left = _wait_gone(workers, 3.0)
+        assert left == (set() if watch else workers)
+    finally:
+        for pid in workers:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+
+
+DETERMINISTIC = (".csv", ".json", ".obj", ".ply", ".npz", ".stl", ".dxf", ".nc1")
+
+
+def _hashes(out: Path, stage: str) -> dict[str, str]:
+    entry = next(s for s in json.loads((out / "manifest.json").read_text())["stages"] if s["name"] == stage)
+    return {a["path"]: a["sha256"] for a in entry["artifacts"] if a["path"].endswith(DETERMINISTIC)}
+
+
+@pytest.mark.slow
+def test_a_run_killed_during_fabrication_leaves_nothing_and_the_next_run_heals(tmp_path):
+    """SIGKILL of `gridshell run` (the default job) while its joint workers build: within 5 s no
+    process of it is left; the next run removes the temporary folder, reuses the stages that were
+    complete, and writes the same fabrication files as an uninterrupted run."""
+    reference = tmp_path / "reference"
+    subprocess.run([*GRIDSHELL, "run", "--out", str(reference), "--quiet"], cwd=ROOT, check=True, timeout=900)
+    out = tmp_path / "killed"
+    run = subprocess.Popen([*GRIDSHELL, "run", "--out", str(out), "--quiet"], cwd=ROOT)
+    try:
+        end = time.monotonic() + 600
+        while time.monotonic() < end and not list(out.glob(".07-fabrication.*/joints")):
+            time.sleep(0.2)
+        assert list(out.glob(".07-fabrication.*")), "the run reached fabrication"
+        time.sleep(3.0)  # the workers are building joints
+        below = _descendants(run.pid)
+        assert below, "the joint workers run"
+        run.send_signal(signal.SIGKILL)
+        run.wait()
+    finally:
+        if run.poll() is None:
+            run.kill()
+    assert _wait_gone(below, 5.0) == set(), "no worker outlives the killed run"
+    assert list(out.glob(".07-fabrication.*")), "the kill left its temporary folder"
+    subprocess.run([*GRIDSHELL, "run", "--out", str(out), "--quiet"], cwd=ROOT, check=True, timeout=900)
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".") and p.name != LOCK_NAME]
+    statuses = {s["name"]: s["status"] for s in json.loads((out / "manifest.json").read_text())["stages"]}
+    assert statuses["analysis"] == "cached" and statuses["fabrication"] == "ran"
+    assert _hashes(out, "fabrication") == _hashes(reference, "fabrication")
