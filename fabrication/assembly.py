@@ -419,10 +419,13 @@ def _strip(sequence: AssemblySequence, polymesh: PolyMesh, target: Path) -> None
 
     n = len(sequence.steps)
     picks = np.unique(np.linspace(0, n - 1, min(8, n)).round().astype(int)) if n else []
-    fig = Figure(figsize=(2.2 * max(len(picks), 1), 2.6))
+    cols = min(max(len(picks), 1), 4)
+    rows = -(-max(len(picks), 1) // cols)
+    fig = Figure(figsize=(3.3 * cols, 3.3 * rows + 0.4))
     FigureCanvasAgg(fig)
     for j, k in enumerate(picks):
-        _draw_state(fig.add_subplot(1, len(picks), j + 1), sequence, polymesh, int(k), thumbnail=True)
-    fig.suptitle("built (dark), added in the step (red), supports (blue), temporary props (orange)", fontsize=8)
+        _draw_state(fig.add_subplot(rows, cols, j + 1), sequence, polymesh, int(k), thumbnail=True)
+    fig.suptitle(f"{len(picks)} of the {n} steps: built (dark), added in the step (red), supports (blue), "
+                 "temporary props (orange)", fontsize=10)
     with atomic_path(target) as tmp:
         fig.savefig(tmp, dpi=100, format="png", bbox_inches="tight")

@@ -33,8 +33,9 @@ from fabrication.files import atomic_path
 if TYPE_CHECKING:  # pragma: no cover
     from fabrication.panels import Panel, PanelSettings
 
-__all__ = ["SheetSettings", "Placement", "SheetNesting", "StockNesting", "nest_sheets", "nest_on_stock", "fits_sheet", "sheet_overshoot", "write_sheet_dxfs", "write_sheets_picture",
-           "placed_outline", "rotation"]
+__all__ = ["SheetSettings", "Placement", "SheetNesting", "StockNesting", "nest_sheets", "nest_on_stock",
+           "fits_sheet", "sheet_overshoot", "write_sheet_dxfs", "write_sheets_picture",
+           "write_contact_sheet", "placed_outline", "rotation"]
 
 #: buffer arcs are drawn with this many segments per quarter circle
 _QUAD_SEGS = 4
@@ -376,31 +377,45 @@ def write_sheet_dxfs(nesting: SheetNesting, panels: list["Panel"], folder: str |
 
 
 def write_sheets_picture(nesting: SheetNesting, panels: list["Panel"], path: str | os.PathLike,
-                         max_sheets: int = 6, *, first_number: int = 1) -> Path:
-    """A PNG of the first ``max_sheets`` sheets with their parts and ids."""
+                         max_sheets: int | None = None, *, first_number: int = 1) -> Path:
+    """A PNG contact sheet of the sheets (all, or the first ``max_sheets``) with their parts and ids."""
+    return write_contact_sheet([(nesting, panels, first_number)], path, max_sheets=max_sheets)
+
+
+def write_contact_sheet(groups: list[tuple[SheetNesting, list["Panel"], int]], path: str | os.PathLike, *,
+                        max_sheets: int | None = None, columns: int = 4) -> Path:
+    """A PNG contact sheet of every sheet of every stock size (``groups``: nesting, its panels and
+    the number of its first sheet), ``columns`` sheets a row, each with its parts, ids and use."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.patches import Rectangle
 
-    count = max(1, min(nesting.n_sheets, max_sheets))
-    s = nesting.settings
-    fig = Figure(figsize=(10, 5.2 * count * s.height_mm / s.width_mm + 0.6))
+    sheets = [(nesting, panels, first + k, k) for nesting, panels, first in groups for k in range(nesting.n_sheets)]
+    sheets = sheets[:max_sheets] if max_sheets is not None else sheets
+    count = max(len(sheets), 1)
+    cols = min(columns, count)
+    rows = -(-count // cols)
+    aspect = max((n.settings.height_mm / n.settings.width_mm for n, *_ in sheets), default=0.5)
+    cell = 13.0 / cols
+    fig = Figure(figsize=(cell * cols, rows * (cell * aspect + 0.45) + 0.3))
     FigureCanvasAgg(fig)
-    axes = fig.subplots(count, 1, squeeze=False)[:, 0]
-    for k, ax in enumerate(axes):
-        ax.add_patch(Rectangle((0, 0), s.width_mm, s.height_mm, fill=False, color="k"))
-        for i in (nesting.sheets[k] if k < nesting.n_sheets else []):
+    axes = fig.subplots(rows, cols, squeeze=False).ravel()
+    label_size = max(3.0, min(6.0, 24.0 / cols))
+    for ax in axes:
+        ax.set_axis_off()
+    for ax, (nesting, panels, number, k) in zip(axes, sheets):
+        s = nesting.settings
+        ax.add_patch(Rectangle((0, 0), s.width_mm, s.height_mm, fill=False, color="k", lw=0.6))
+        for i in nesting.sheets[k]:
             outline = nesting.placed_outline(i, panels[i].outline_mm)
-            ax.fill(outline[:, 0], outline[:, 1], color="#9ecae1", ec="#08519c", lw=0.6)
+            ax.fill(outline[:, 0], outline[:, 1], color="#9ecae1", ec="#08519c", lw=0.4)
             centre = outline.mean(axis=0)
-            ax.text(centre[0], centre[1], panels[i].id, fontsize=5, ha="center", va="center")
+            ax.text(centre[0], centre[1], panels[i].id, fontsize=label_size, ha="center", va="center")
         ax.set_xlim(-10, s.width_mm + 10)
         ax.set_ylim(-10, s.height_mm + 10)
         ax.set_aspect("equal")
-        ax.set_axis_off()
-        if k < nesting.n_sheets:
-            ax.set_title(f"S{first_number + k:02d}: {len(nesting.sheets[k])} parts, "
-                         f"{100 * nesting.sheet_utilisation[k]:.0f} % used", fontsize=9)
+        ax.set_title(f"S{number:02d} ({s.width_mm:g} x {s.height_mm:g} mm): {len(nesting.sheets[k])} parts, "
+                     f"{100 * nesting.sheet_utilisation[k]:.0f} % used", fontsize=max(5.0, min(9.0, 30.0 / cols)))
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110)

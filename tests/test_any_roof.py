@@ -125,7 +125,7 @@ def test_joints_too_big_for_the_grid_are_a_finding_not_a_collapsed_grid(tmp_path
     # the report opens with every stage's findings, the optimize stage's included
     summary = run_project(project, out, STAGES, progress=Progress(enabled=False))
     page = (out / "report.html").read_text(encoding="utf-8")
-    assert "grid_too_fine" in page and page.index("grid_too_fine") < page.index("Verdicts")
+    assert "grid too fine" in page and page.index("grid too fine") < page.index("Verdicts")
 
 
 def test_a_panel_larger_than_every_sheet_is_a_finding_with_its_dxf(tmp_path):

@@ -112,3 +112,61 @@ def test_report_of_a_small_project_in_chromium(small_run):
     assert len(state["images"]) >= 8
     assert all(complete and width > 0 for _, complete, width in state["images"])
     assert state["canvas"][2] > 500
+
+
+class _Cells(HTMLParser):
+    """Every table cell's text and every link of a page."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.cells: list[str] = []
+        self.hrefs: list[str] = []
+        self._in_cell = False
+
+    def handle_starttag(self, tag, attrs):
+        if tag in ("td", "th"):
+            self._in_cell = True
+            self.cells.append("")
+        if tag == "a" and dict(attrs).get("href"):
+            self.hrefs.append(dict(attrs)["href"])
+
+    def handle_endtag(self, tag):
+        if tag in ("td", "th"):
+            self._in_cell = False
+
+    def handle_data(self, data):
+        if self._in_cell:
+            self.cells[-1] += data
+
+
+def _json_keys(value, into: set[str]) -> set[str]:
+    if isinstance(value, dict):
+        into.update(value)
+        for v in value.values():
+            _json_keys(v, into)
+    elif isinstance(value, list):
+        for v in value:
+            _json_keys(v, into)
+    return into
+
+
+def test_the_report_reads_like_an_engineers_no_raw_keys_no_e_notation_and_its_links_work(small_run):
+    """Every table cell of the small job's report: none is a key of the stages' JSON (the labels
+    are words with units), no number is written 1.2e-07, and every link opens a file of the run."""
+    import json
+    import re
+
+    _, out = small_run
+    parser = _Cells()
+    parser.feed((out / "report.html").read_text(encoding="utf-8"))
+    keys: set[str] = set()
+    for path in out.glob("*/*.json"):
+        _json_keys(json.loads(path.read_text(encoding="utf-8")), keys)
+    keys = {k for k in keys if "_" in k}  # one-word keys ("nodes") are words
+    assert len(parser.cells) > 100
+    raw = sorted({c.strip() for c in parser.cells} & keys)
+    assert raw == [], f"raw keys in the report: {raw}"
+    scientific = [c for c in parser.cells if re.search(r"\d[eE][+-]?\d", c)]
+    assert scientific == []
+    assert parser.hrefs and all((out / href).is_file() for href in parser.hrefs), parser.hrefs
+    assert not (out / "report" / "report.html").exists(), "one report page"

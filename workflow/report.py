@@ -16,16 +16,20 @@ from pathlib import Path
 
 import numpy as np
 
+from .labels import format_value
+
 __all__ = ["Figure", "Table", "Section", "Viewer", "render_report", "viewer_geometry"]
 
 
 @dataclass(frozen=True, kw_only=True)
 class Figure:
-    """A PNG picture with its caption; ``png`` is the file's bytes."""
+    """A PNG picture with its caption; ``png`` is the file's bytes; ``wide`` spans the page's width
+    (pictures of several panels: the modes, the assembly, the sheets)."""
 
     name: str
     caption: str
     png: bytes
+    wide: bool = False
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -76,16 +80,13 @@ def viewer_geometry(viewer: Viewer) -> dict:
     return data
 
 
-def _format(value) -> str:
-    if value is None:
-        return "-"
-    if isinstance(value, (bool, np.bool_)):
+def _format(value, verdict: bool = False) -> str:
+    """A cell's text: pass/FAIL in a verdict column, else as people write numbers (labels.format_value)."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    if verdict and isinstance(value, bool):
         return "pass" if value else "FAIL"
-    if isinstance(value, (float, np.floating)):
-        if value == 0 or 1e-3 <= abs(value) < 1e6:
-            return f"{value:.4g}"
-        return f"{value:.3e}"
-    return str(value)
+    return format_value(value)
 
 
 def _table_html(table: Table) -> str:
@@ -98,7 +99,7 @@ def _table_html(table: Table) -> str:
             css = ""
             if i == verdict_index and isinstance(value, (bool, np.bool_)):
                 css = ' class="pass"' if value else ' class="fail"'
-            cells.append(f"<td{css}>{html.escape(_format(value))}</td>")
+            cells.append(f"<td{css}>{html.escape(_format(value, verdict=i == verdict_index))}</td>")
         body.append("<tr>" + "".join(cells) + "</tr>")
     caption = f"<caption>{html.escape(table.caption)}</caption>" if table.caption else ""
     return (f'<table id="table-{html.escape(table.name)}">{caption}<thead><tr>{head}</tr></thead>'
@@ -107,7 +108,8 @@ def _table_html(table: Table) -> str:
 
 def _figure_html(figure: Figure) -> str:
     data = base64.b64encode(figure.png).decode("ascii")
-    return (f'<figure id="figure-{html.escape(figure.name)}"><img alt="{html.escape(figure.caption)}" '
+    wide = ' class="wide"' if figure.wide else ""
+    return (f'<figure id="figure-{html.escape(figure.name)}"{wide}><img alt="{html.escape(figure.caption)}" '
             f'src="data:image/png;base64,{data}"><figcaption>{html.escape(figure.caption)}</figcaption></figure>')
 
 
@@ -150,9 +152,9 @@ def render_report(*, title: str, subtitle: str, summary: Section, sections: list
     return page
 
 
-def figure_from_file(path: Path, caption: str, name: str | None = None) -> Figure | None:
+def figure_from_file(path: Path, caption: str, name: str | None = None, *, wide: bool = False) -> Figure | None:
     """A Figure from a PNG file, or None when the file does not exist."""
     path = Path(path)
     if not path.is_file():
         return None
-    return Figure(name=name or path.stem, caption=caption, png=path.read_bytes())
+    return Figure(name=name or path.stem, caption=caption, png=path.read_bytes(), wide=wide)

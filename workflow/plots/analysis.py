@@ -70,28 +70,42 @@ def plot_axial_forces(nodes: np.ndarray, beams: np.ndarray, axial_forces: np.nda
 
 def plot_buckling_modes(nodes: np.ndarray, beams: np.ndarray, modes: np.ndarray, factors: np.ndarray, path: Path, *,
                         title: str = "") -> Path:
-    """One axonometric panel per mode: the mode (scaled to 8 % of the span) over the undeformed grid."""
+    """Up to three modes a row, each an axonometric view of the mode drawn at 8 % of the span over
+    the undeformed grid (grey), its beams coloured by the mode's displacement relative to its
+    largest (one colour scale for all), with the load factor and the drawn amplitude."""
     plt = pyplot()
     from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
-    count = len(modes)
-    fig = plt.figure(figsize=(4.6 * max(count, 1), 4.6))
+    count = max(len(modes), 1)
+    cols = min(count, 3)
+    rows = -(-count // cols)
+    fig = plt.figure(figsize=(13.0, 13.0 / cols * 0.75 * rows + 0.8))
     span = float(np.ptp(nodes, axis=0).max())
-    for k in range(count):
-        ax = fig.add_subplot(1, count, k + 1, projection="3d")
+    amplitude = 0.08 * span
+    norm = plt.Normalize(0.0, 1.0)
+    cmap = plt.get_cmap("viridis")
+    for k in range(len(modes)):
+        ax = fig.add_subplot(rows, cols, k + 1, projection="3d")
         shape = modes[k][:, :3]
-        peak = max(float(np.linalg.norm(shape, axis=1).max()), 1e-300)
-        moved = nodes + shape * (0.08 * span / peak)
+        size = np.linalg.norm(shape, axis=1)
+        peak = max(float(size.max()), 1e-300)
+        moved = nodes + shape * (amplitude / peak)
         ax.add_collection3d(Line3DCollection(np.stack([nodes[beams[:, 0]], nodes[beams[:, 1]]], axis=1),
-                                             colors=(0.6, 0.6, 0.6, 0.5), linewidths=0.5))
-        ax.add_collection3d(Line3DCollection(np.stack([moved[beams[:, 0]], moved[beams[:, 1]]], axis=1),
-                                             colors="#c0392b", linewidths=1.0))
-        both = np.vstack([nodes, moved])
-        frame_3d(ax, both)
+                                             colors=(0.6, 0.6, 0.6, 0.45), linewidths=0.5))
+        relative = 0.5 * (size[beams[:, 0]] + size[beams[:, 1]]) / peak
+        lines = Line3DCollection(np.stack([moved[beams[:, 0]], moved[beams[:, 1]]], axis=1), cmap=cmap, norm=norm,
+                                 linewidths=1.4)
+        lines.set_array(relative)
+        ax.add_collection3d(lines)
+        frame_3d(ax, np.vstack([nodes, moved]))
         ax.set_axis_off()
-        ax.set_title(f"mode {k + 1}: lambda = {factors[k]:.3g}")
-    fig.suptitle(title or "linear buckling modes")
-    fig.tight_layout()
+        ax.set_title(f"mode {k + 1}: lambda = {factors[k]:.3g}", fontsize=11)
+    fig.subplots_adjust(left=0.0, right=0.88, bottom=0.02, top=0.9, wspace=0.0, hspace=0.08)
+    mappable = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
+    fig.colorbar(mappable, ax=fig.axes, shrink=0.6, pad=0.02,
+                 label="displacement / the mode's largest")
+    fig.suptitle(f"{title or 'linear buckling modes'}: largest displacement drawn {1000 * amplitude:.0f} mm "
+                 "(a mode has no size of its own)", fontsize=11)
     return save_png(fig, path)
 
 

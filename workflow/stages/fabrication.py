@@ -3,8 +3,8 @@
 Artifacts (07-fabrication/): joints/ (J0001.step, J0001.stl ..., joints.step), beams/
 (cutlist.csv, cutlist.xlsx, bars.csv, beams.step), panels/ (P0001.dxf ..., sheets/S01.dxf
 ..., panels.csv), assembly/ (sequence.csv, steps/*.png), drawings/ (plan.dxf, plan.pdf),
-gridshell.step, gridshell.3dm and fabrication.json (counts and checks, and the seconds each step
-took, ``step_seconds``). Lengths in mm.
+gridshell.step, gridshell.3dm and fabrication.json (counts and checks; the seconds each step took
+go into the manifest, ``step_seconds``). Lengths in mm.
 """
 
 from __future__ import annotations
@@ -126,7 +126,7 @@ def run(ctx):
     clock.stop()
     summary["findings"] = [f.to_dict() for f in findings]
     ctx.report_findings(summary["findings"])
-    summary["step_seconds"] = clock.seconds
+    ctx.timings.update(clock.seconds)
     write_text_atomic(folder / "fabrication.json", json.dumps(summary, indent=1, default=_jsonable))
     return summary
 
@@ -247,7 +247,7 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
         clock.start("panels: flatten and DXFs")
         (PanelSettings, flatten_panels, write_panel_dxfs, write_panels_csv) = require(
             "fabrication", "fabrication.panels", "PanelSettings", "flatten_panels", "write_panel_dxfs", "write_panels_csv")
-        from fabrication.nesting_sheets import nest_on_stock, sheet_overshoot, write_sheet_dxfs, write_sheets_picture
+        from fabrication.nesting_sheets import nest_on_stock, sheet_overshoot, write_sheet_dxfs, write_contact_sheet
 
         p = config.panels
         panel_settings = PanelSettings(thickness_mm=MM * p.thickness, material_name=p.material, density=p.density,
@@ -278,9 +278,10 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
         for first, (_, members, nesting_k) in zip(stock_nesting.first_numbers(), stock_nesting.groups):
             group = [panels[i] for i in members]
             write_sheet_dxfs(nesting_k, group, folder / "panels" / "sheets", panel_settings, first_number=first)
-        if stock_nesting.groups:
-            _, members, nesting_0 = stock_nesting.groups[0]
-            write_sheets_picture(nesting_0, [panels[i] for i in members], folder / "panels" / "sheets.png")
+        if stock_nesting.groups:  # every sheet of every stock size, on one contact sheet
+            write_contact_sheet([(nesting_k, [panels[i] for i in members], first) for first, (_, members, nesting_k)
+                                 in zip(stock_nesting.first_numbers(), stock_nesting.groups)],
+                                folder / "panels" / "sheets.png")
         write_panels_csv(panels, None, panel_settings, folder / "panels" / "panels.csv",
                          sheet_names=stock_nesting.sheet_of(panels),
                          cells={panel.id: (pieces[panel.face].cell + 1, pieces[panel.face].piece) for panel in panels})

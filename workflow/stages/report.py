@@ -1,7 +1,7 @@
 """Stage ``report``: one page that shows the whole job, ``OUT/report.html``.
 
-The page is self-contained (opens offline); its figures are also copied as PNG to
-``report/figures/`` and its tables written as CSV to ``report/tables/``. Figures and figures'
+The page is self-contained (opens offline) and there is one of it; its figures are also copied as
+PNG to ``report/figures/`` and its tables written as CSV to ``report/tables/``. Figures and figures'
 numbers are read from the earlier stages' artifacts, so the report never recomputes anything.
 """
 
@@ -17,6 +17,7 @@ from engine.findings import findings_table
 from fabrication.files import atomic_path, write_bytes_atomic, write_text_atomic
 
 from ..config import Project
+from ..labels import column_label, figure_rows, label_of
 from ..report import Figure, Section, Table, Viewer, figure_from_file, render_report
 
 __all__ = ["run", "load", "published"]
@@ -34,13 +35,17 @@ FIGURES = {
                  ("05-optimize/planarity.png", "Optimised grid-shell, planarity of the cells")],
     "analysis": [("06-analysis/axial.png", "Axial forces (ULS): compression red, tension blue"),
                  ("06-analysis/utilisation.png", "Member utilisation (ULS)"),
-                 ("06-analysis/modes.png", "Linear buckling modes"),
+                 ("06-analysis/modes.png", "Linear buckling modes, coloured by displacement (each drawn at 8 % of "
+                                           "the span), with their load factors"),
                  ("06-analysis/response.png", "Load factor against control-node deflection, worst imperfection bold"),
                  ("06-analysis/loadtest.png", "Incremental load test: deflection of the control points")],
     "compare": [("compare/response.png", "Same-length comparison: response diagrams of the three grids")],
     "fabrication": [("07-fabrication/assembly/steps_strip.png", "Assembly sequence, from the supports inward"),
-                    ("07-fabrication/panels/sheets.png", "Panels nested on stock sheets")],
+                    ("07-fabrication/panels/sheets.png", "Every stock sheet with its nested panels")],
 }
+
+#: Pictures of several panels, shown across the page's width.
+WIDE = {"06-analysis/modes.png", "07-fabrication/assembly/steps_strip.png", "07-fabrication/panels/sheets.png"}
 
 
 def _json(path: Path) -> dict:
@@ -54,7 +59,7 @@ def _figures(out_dir: Path, key: str) -> list[Figure]:
     figures = []
     for relative, caption in FIGURES.get(key, []):
         name = relative.replace("/", "-").removesuffix(".png")
-        figure = figure_from_file(out_dir / relative, caption, name=name)
+        figure = figure_from_file(out_dir / relative, caption, name=name, wide=relative in WIDE)
         if figure is not None:
             figures.append(figure)
     return figures
@@ -70,12 +75,26 @@ def _csv_table(path: Path, name: str, caption: str, max_rows: int = 12, sort_by:
         frame = frame.sort_values(sort_by, ascending=False)
     shown = frame.head(max_rows)
     more = f" (first {max_rows} of {len(frame)})" if len(frame) > max_rows else ""
-    return Table(name=name, caption=caption + more, columns=[str(c) for c in shown.columns],
+    return Table(name=name, caption=caption + more, columns=[column_label(str(c)) for c in shown.columns],
                  rows=shown.astype(object).where(shown.notna(), None).values.tolist())
 
 
 def _pairs(name: str, caption: str, values: dict) -> Table:
+    """A table of already-labelled items: [item, value]."""
     return Table(name=name, caption=caption, columns=["item", "value"], rows=[[k, v] for k, v in values.items()])
+
+
+def _figures_table(name: str, caption: str, values: dict, keys: tuple[str, ...] | None = None) -> Table:
+    """A table of a stage's JSON figures: [figure, value, unit], labelled and in their units."""
+    return Table(name=name, caption=caption, columns=["figure", "value", "unit"], rows=figure_rows(values, keys))
+
+
+def _in_mm(value, limit, unit: str) -> tuple:
+    """(value, limit, unit) with lengths in metres shown in millimetres."""
+    if unit == "m":
+        scale = lambda v: None if v is None else 1000 * float(v)  # noqa: E731
+        return scale(value), scale(limit), "mm"
+    return value, limit, unit
 
 
 def _summary(project: Project, surface, polymesh, analysis: dict, fabrication: dict, shell: dict,
@@ -101,26 +120,32 @@ def _summary(project: Project, surface, polymesh, analysis: dict, fabrication: d
     tables = [_pairs("summary", "The job", values)]
     verdicts = analysis.get("verdicts", [])
     if verdicts:
-        rows = [[v.get("check"), v.get("value"), v.get("limit"), v.get("unit", ""), bool(v.get("pass"))] for v in verdicts]
+        rows = [[v.get("check"), *_in_mm(v.get("value"), v.get("limit"), v.get("unit", "")), bool(v.get("pass"))]
+                for v in verdicts]
         tables.insert(0, Table(name="verdicts", caption="Verdicts", columns=["check", "value", "limit", "unit", "result"],
                                rows=rows, verdict_column="result"))
     passed = all(bool(v.get("pass")) for v in verdicts) if verdicts else None
     text = {True: "Every structural check passes.", False: "At least one structural check fails: see the verdicts below.",
             None: "No structural verdicts (the analysis did not run)."}[passed]
     if findings:
-        from ..progress import format_number
-
-        rows = [[r["kind"], r["count"], None if r["worst"] is None else format_number(r["worst"]),
-                 None if r["limit"] is None else format_number(r["limit"]), r["unit"], ", ".join(r["worst_parts"]),
-                 r["message"], r["fix"]] for r in findings_table(findings)]
-        tables.insert(0, Table(name="findings", caption=f"Findings: {len(findings)} failing checks and parts that cannot "
-                                                        "be built as drawn (every file is still written)",
+        rows = [[r["kind"].replace("_", " "), r["count"], r["worst"], r["limit"], r["unit"],
+                 ", ".join(r["worst_parts"]), r["message"], r["fix"]] for r in findings_table(findings)]
+        tables.insert(0, Table(name="findings", caption="Findings: failing checks and parts that cannot be built as "
+                                                        "drawn (every file is still written)",
                                columns=["kind", "count", "worst", "limit", "unit", "worst at", "what", "fix"],
                                rows=rows))
-        text = f"{len(findings)} findings, listed first below. " + text
+        text = (f"{len(findings)} finding{'s' if len(findings) != 1 else ''}, listed first below. ") + text
     else:
         text = "No findings: every part can be built as drawn. " + text
     return Section(title="Summary", text=text, tables=tables)
+
+
+#: The figures of a grid shown for the remesh and, before and after, for the optimisation.
+GRID_KEYS = ("hexagon_share_interior", "valence3_share_interior", "size_correlation", "achieved_size_ratio",
+             "achieved_max_aspect", "n_nodes", "n_beams", "n_faces", "total_length_m", "mean_beam_length_m",
+             "shortest_beam_m", "smallest_angle_deg")
+OPTIMIZE_KEYS = ("nonconvex_faces", "regularity", "planarity_max_m", "planarity_p95_m", "planarity_max_rel",
+                 "closeness_max_rel", "closeness_mean_rel")
 
 
 def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
@@ -130,32 +155,36 @@ def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
     optimize = _json(out_dir / "05-optimize/optimize.json")
     analysis = _json(out_dir / "06-analysis/analysis.json")
     sections = [Section(title="1. Surface and supports", figures=_figures(out_dir, "surface"))]
-    shell_rows = {k: shell[k] for k in ("load_case", "thickness_m", "max_displacement_m", "N1_max_N_per_m",
-                                        "N2_min_N_per_m", "equilibrium_error") if k in shell}
+    shell_keys = ("load_case", "thickness_m", "max_displacement_m", "N1_max_N_per_m", "N2_min_N_per_m",
+                  "total_load_N", "total_reaction_N", "equilibrium_error")
     sections.append(Section(title="2. Shell statics", figures=_figures(out_dir, "shell"),
-                            tables=[_pairs("shell", "Continuous shell under the serviceability load", shell_rows)]))
+                            tables=[_figures_table("shell", "Continuous shell under the serviceability load", shell,
+                                                   shell_keys)]))
     sections.append(Section(title="3. Guiding field", figures=_figures(out_dir, "field"),
-                            tables=[_pairs("field", "Field against the bounds D and A", field)] if field else []))
-    quality_keys = ("hexagon_share_interior", "valence3_share_interior", "achieved_size_ratio", "achieved_max_aspect",
-                    "size_correlation", "n_nodes", "n_beams", "n_faces", "total_length_m", "mean_beam_length_m",
-                    "shortest_beam_m", "smallest_angle_deg")
-    remesh_rows = {k: remesh[k] for k in quality_keys if k in remesh}
+                            tables=[_figures_table("field", "Field against the bounds D and A", field)] if field else []))
+    remesh_rows = {k: remesh[k] for k in GRID_KEYS if k in remesh}
     sections.append(Section(title="4. Statics-aware Voronoi remeshing", figures=_figures(out_dir, "remesh"),
-                            tables=[_pairs("remesh", "Remeshing quality", remesh_rows)]))
+                            tables=[_figures_table("remesh", "Remeshing quality", remesh_rows)]))
     after = optimize.get("after", {})
     before = optimize.get("before", {})
-    rows = [[k, before.get(k), after.get(k)] for k in after if not isinstance(after.get(k), (dict, list))]
-    sections.append(Section(title="5. Regular and planar cells", figures=_figures(out_dir, "optimize"),
+    rows = []
+    for key in (*GRID_KEYS, *OPTIMIZE_KEYS):
+        if key in after and not isinstance(after[key], (dict, list)):
+            label, unit, factor = label_of(key)
+            scale = (lambda v: v if not isinstance(v, float) else v * factor) if factor != 1.0 else (lambda v: v)
+            rows.append([label, unit, scale(before.get(key)), scale(after[key])])
+    sections.append(Section(title="5. Regular cells, planar panels", figures=_figures(out_dir, "optimize"),
                             tables=[Table(name="optimize", caption="Before and after the optimisation",
-                                          columns=["figure", "before", "after"], rows=rows)] if rows else []))
+                                          columns=["figure", "unit", "remeshed", "optimised"], rows=rows)] if rows else []))
     figure_keys = ("uls_combination", "sls_combination", "delta_L_m", "max_vertical_sls_m", "deflection_limit_m",
                    "max_utilisation", "governing_member", "lambda_LB", "lambda_NL_perfect", "lambda_NL_worst",
-                   "worst_imperfection", "knock_down", "imperfection_amplitude_m", "control_node", "equilibrium_error")
-    tables = [_pairs("analysis", "Beam grid-shell analysis", {k: analysis.get(k) for k in figure_keys if k in analysis})]
+                   "worst_imperfection", "knock_down", "imperfection_amplitude_m", "control_node", "beam_mass_kg",
+                   "equilibrium_error")
+    tables = [_figures_table("analysis", "Beam grid-shell analysis", analysis, figure_keys)]
     imperfections = analysis.get("imperfections", [])
     if imperfections:
         tables.append(Table(name="imperfections", caption="Non-linear limit load factor per imperfection",
-                            columns=["shape", "lambda_NL"], rows=[[i["shape"], i["lambda_NL"]] for i in imperfections]))
+                            columns=["imperfection", "non-linear limit load factor"], rows=[[i["shape"], i["lambda_NL"]] for i in imperfections]))
     members = _csv_table(out_dir / "06-analysis/members.csv", "members", "Most utilised members", sort_by="utilisation")
     if members:
         tables.append(members)
@@ -181,27 +210,23 @@ def _fabrication_section(out_dir: Path) -> Section:
         frame = pd.read_csv(cut)
         group = frame.groupby("profile").agg(beams=("id", "count"), cut_length_m=("cut_length_mm", lambda s: s.sum() / 1000),
                                              mass_kg=("mass_kg", "sum")).reset_index()
-        tables.append(Table(name="cutlist", caption="Cut list by profile", columns=list(group.columns),
+        tables.append(Table(name="cutlist", caption="Cut list by profile", columns=[column_label(c) for c in group.columns],
                             rows=group.values.tolist()))
     fabrication = _json(folder / "fabrication.json")
     bars = {k: fabrication.get(k) for k in ("bars_used", "bars_lower_bound") if k in fabrication}
     if bars:
-        tables.append(_pairs("bars", "Bar nesting (stock bars used against the lower bound)", bars))
+        tables.append(_figures_table("bars", "Bar nesting (stock bars used against the lower bound)", bars))
     panels = _csv_table(folder / "panels/panels.csv", "panels", "Panel schedule", max_rows=10)
     if panels:
         tables.append(panels)
-    summary = {k: fabrication.get(k) for k in ("joints", "panels", "sheets", "sheet_utilisation") if k in fabrication}
-    problems = fabrication.get("joint_problems", [])
-    summary["joints with a problem"] = len(problems)
-    summary["joint clashes (solids intersecting)"] = len(fabrication.get("joint_clashes", []))
-    limits = fabrication.get("limits", {})
-    for key, label in (("min_cut_length_mm", "minimum cut length (mm)"), ("min_angle_deg", "smallest angle at a joint (deg)"),
-                       ("shortest_beam_mm_at_120deg", "shortest buildable beam between 120-degree joints (mm)")):
-        if key in limits:
-            summary[label] = limits[key]
+    summary = {k: fabrication[k] for k in ("joints", "panels", "sheets", "sheet_utilisation") if k in fabrication}
+    summary["joints_with_a_problem"] = len(fabrication.get("joint_problems", []))
+    summary["joint_clashes"] = len(fabrication.get("joint_clashes", []))
+    summary.update({k: v for k, v in fabrication.get("limits", {}).items()
+                    if k in ("min_cut_length_mm", "min_angle_deg", "shortest_beam_mm_at_120deg")})
     if "shortest_cut_length_mm" in fabrication:
-        summary["shortest cut length (mm)"] = fabrication["shortest_cut_length_mm"]
-    tables.insert(0, _pairs("fabrication", "Fabrication", summary))
+        summary["shortest_cut_length_mm"] = fabrication["shortest_cut_length_mm"]
+    tables.insert(0, _figures_table("fabrication", "Fabrication", summary))
     sequence = _csv_table(folder / "assembly/sequence.csv", "assembly", "Assembly sequence", max_rows=10)
     if sequence:
         tables.append(sequence)
@@ -250,7 +275,8 @@ def run(ctx):
             with atomic_path(tables_dir / f"{_safe_name(table.name)}.csv") as tmp:
                 pd.DataFrame(table.rows, columns=table.columns).to_csv(tmp, index=False)
     page = render_report(title=title, subtitle=subtitle, summary=summary, sections=sections, viewer=viewer)
-    write_text_atomic(ctx.folder / "report.html", page)
+    # one page, at OUT/report.html, whose links are relative to OUT (a copy in the stage's own
+    # folder had every link broken)
     write_text_atomic(out_dir / "report.html", page)
     return {"report": str(out_dir / "report.html")}
 
