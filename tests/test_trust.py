@@ -208,7 +208,19 @@ def test_quick_start_flagged_without_red_vertices_says_the_option(capsys, tmp_pa
 def test_quick_start_mesh_in_millimetres(capsys, tmp_path):
     _mesh(tmp_path / "roof.stl", scale=1000.0)
     err = _quick_start(capsys, tmp_path, "--surface", str(tmp_path / "roof.stl"))
-    assert "--surface" in err and "10 km across" in err and 'file_units = "mm"' in err
+    assert "--surface" in err and "10 km across" in err and "--surface-units mm" in err
+    # with the unit given, the same mesh is 10 m across and passes the check
+    from workflow.config import check_inputs, project_from_surface
+
+    assert check_inputs(project_from_surface(tmp_path / "roof.stl", units="mm"), quick_start=True) == pytest.approx(10.0)
+
+
+def test_surface_units_need_a_surface(capsys, tmp_path):
+    from workflow.cli import main
+
+    assert main(["run", "--surface-units", "mm"]) == 2
+    err = capsys.readouterr().err
+    assert "--surface-units" in err and "file_units" in err and "Traceback" not in err
 
 
 # --- 5. through a pipe, a long stage prints a line at least every 10 s ----------------------------
@@ -453,3 +465,13 @@ def test_a_project_folder_stands_for_its_project_toml(tmp_path, capsys):
     (tmp_path / "empty").mkdir()
     assert main(["validate", str(tmp_path / "empty")]) == 2
     assert "folder without a project.toml" in capsys.readouterr().err
+
+
+def test_compare_checks_its_inputs_as_run_does(capsys, tmp_path):
+    from workflow.cli import main
+
+    (tmp_path / "project.toml").write_text('[surface]\nfile = "missing.ply"\n')
+    assert main(["compare", str(tmp_path / "project.toml"), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "[surface] file" in err and "does not exist" in err
+    assert not (tmp_path / "out" / "01-surface").exists()

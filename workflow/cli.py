@@ -58,10 +58,13 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise InputError("give a PROJECT file or --surface MESH, not both")
     if args.supports and not args.surface:
         raise InputError("--supports applies to --surface MESH only; a project file lists its supports")
+    if args.surface_units and not args.surface:
+        raise InputError("--surface-units applies to --surface MESH only",
+                         hint="a project file gives the unit as [surface] file_units")
     if args.only and args.until:
         raise InputError("--only and --until cannot be combined")
     if args.surface:
-        project = project_from_surface(args.surface, args.supports or "boundary")
+        project = project_from_surface(args.surface, args.supports or "boundary", args.surface_units or "m")
         default_out = Path("out") / Path(args.surface).stem
         project_file = None
     else:
@@ -165,6 +168,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("project", nargs="?", help="project file (TOML)")
     run.add_argument("--surface", metavar="MESH", help="quick start from a mesh file (OBJ, PLY, STL, OFF, 3DM)")
     run.add_argument("--supports", choices=("boundary", "flagged"), help="supports for --surface (default boundary)")
+    run.add_argument("--surface-units", choices=("m", "cm", "mm", "in", "ft"),
+                     help="the unit the --surface mesh was modelled in (default m)")
     run.add_argument("--out", metavar="DIR", help="output folder (default out/NAME)")
     run.add_argument("--until", metavar="STAGE", help="stop after this stage")
     run.add_argument("--only", metavar="STAGE", help="run only this stage (earlier results must exist)")

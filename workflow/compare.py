@@ -21,7 +21,7 @@ from engine.loads import combine
 from engine.mesh import PolyMesh
 from fabrication.files import atomic_path, write_text_atomic
 
-from .config import Project, load_project
+from .config import Project, check_inputs, load_project
 from .progress import Progress
 
 __all__ = ["GridRow", "compare_grids", "run_compare", "markdown_table"]
@@ -121,6 +121,7 @@ def run_compare(args: argparse.Namespace) -> int:
 
     project_path = Path(args.project)
     project = load_project(project_path)
+    check_inputs(project)  # what validate checks, before any stage runs
     out_dir = Path(args.out) if args.out else Path("out") / project_path.stem
     progress = Progress(enabled=not args.quiet)
     progress.message(f"gridshell compare: {project.project.name} -> {out_dir / 'compare'}")

@@ -623,18 +623,21 @@ def load_project(path: str | Path) -> Project:
     return parse_project(data, source=str(path), base_dir=path.parent.resolve())
 
 
-def project_from_surface(surface: str | Path, supports: str = "boundary") -> Project:
-    """The quick-start project: a mesh file, supports 'boundary' or 'flagged', defaults elsewhere."""
+def project_from_surface(surface: str | Path, supports: str = "boundary", units: str = "m") -> Project:
+    """The quick-start project: a mesh file in ``units`` (m, cm, mm, in, ft), supports 'boundary'
+    or 'flagged', defaults elsewhere."""
     if supports not in ("boundary", "flagged"):
         raise ConfigError(f"--supports {supports!r}: allowed are boundary, flagged")
+    if units not in _FILE_UNITS:
+        raise ConfigError(f"--surface-units {units!r}: allowed are {', '.join(_FILE_UNITS)}")
     return parse_project({"project": {"name": Path(surface).stem},
-                          "surface": {"file": str(Path(surface).resolve())},
+                          "surface": {"file": str(Path(surface).resolve()), "file_units": units},
                           "supports": [{"select": supports, "restraint": "pinned"}]},
                          source=f"--surface {surface}")
 
 
 _FILE_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
-SURFACE_EXTENT_M = (0.1, 2000.0)
+SURFACE_EXTENT_M = (0.1, 1000.0)
 """The sizes a surface may have across, in metres; outside them its file_units are taken to be wrong."""
 
 
@@ -673,11 +676,11 @@ def check_inputs(project: Project, *, quick_start: bool = False) -> float | None
         likely = next((u for u in ("m", "mm", "cm", "ft", "in") if u != unit
                        and low <= raw * _FILE_UNITS[u] <= high), "mm" if across > high else "m")
         if quick_start:
-            raise ConfigError(f"--surface {path}: the surface is {_distance(across)} across, read in metres "
-                              f"(the quick start reads meshes in metres); in {likely} it would be "
+            raise ConfigError(f"--surface {path}: the surface is {_distance(across)} across, read in {unit} "
+                              f"(--surface-units {unit}); in {likely} it would be "
                               f"{_distance(raw * _FILE_UNITS[likely])}",
-                              hint=f"for a mesh in {likely}, start a project (gridshell init DIR), set its "
-                                   f'[surface] file and file_units = "{likely}", and run that')
+                              hint=f"add --surface-units {likely} (the unit the mesh was modelled in: "
+                                   "m, cm, mm, in or ft)")
         raise ConfigError(f'[surface] file_units = "{unit}": the surface {path.name} is {_distance(across)} across; '
                           f'with file_units = "{likely}" it would be {_distance(raw * _FILE_UNITS[likely])}',
                           hint=f'set [surface] file_units = "{likely}" (the unit the mesh was modelled in: '
