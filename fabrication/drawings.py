@@ -16,7 +16,7 @@ import numpy as np
 
 from engine.errors import InputError
 from engine.mesh import PolyMesh
-from fabrication.files import atomic_path
+from fabrication.files import atomic_path, save_dxf
 
 __all__ = ["write_plan_drawings", "node_id", "beam_id", "panel_id", "joint_id", "PLAN_LAYERS"]
 
@@ -69,10 +69,19 @@ def write_plan_drawings(polymesh: PolyMesh, folder: str | os.PathLike, *, projec
     centres = np.array([plan[f].mean(axis=0) for f in polymesh.faces]).reshape(-1, 2)
     title = [project_name, f"Plan view - {polymesh.n_nodes} nodes, {len(beams)} beams, {polymesh.n_faces} cells",
              f"Total beam length {polymesh.total_length:.2f} m - supports {len(supports)}",
-             f"Units: mm - date {_dt.date.today().isoformat()}"]
+             f"Units: mm - date {drawing_date()}"]
     dxf_path = _write_dxf(folder / "plan.dxf", plan, beams, centres, supports, height, title)
     pdf_path = _write_pdf(folder / "plan.pdf", plan, beams, centres, supports, title)
     return dxf_path, pdf_path
+
+
+def drawing_date() -> str:
+    """The title block's date (ISO): SOURCE_DATE_EPOCH when set (the reproducible-builds
+    convention, so a rerun gives the same bytes), else today."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    if epoch and epoch.isdigit():
+        return _dt.datetime.fromtimestamp(int(epoch), tz=_dt.timezone.utc).date().isoformat()
+    return _dt.date.today().isoformat()
 
 
 def _write_dxf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, supports: np.ndarray,
@@ -124,8 +133,7 @@ def _write_dxf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.nd
     for j, text in enumerate(title):
         msp.add_text(text, height=1.6 * height if j == 0 else height,
                      dxfattribs={"layer": "TITLE", "insert": (x0 + 0.5 * line_h, y0 + (len(title) - j) * line_h)})
-    with atomic_path(target) as tmp:
-        doc.saveas(tmp)
+    save_dxf(doc, target)
     return target
 
 

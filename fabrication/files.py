@@ -12,7 +12,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_path", "atomic_folder", "write_text_atomic", "write_bytes_atomic"]
+__all__ = ["atomic_path", "atomic_folder", "write_text_atomic", "write_bytes_atomic", "save_dxf"]
 
 
 def _umask() -> int:
@@ -65,3 +65,25 @@ def atomic_folder(parent: str | os.PathLike, name: str) -> Path:
     path = Path(tempfile.mkdtemp(prefix=f".{name}.", dir=parent))
     os.chmod(path, 0o777 & ~_umask())
     return path
+
+
+def save_dxf(doc, target: str | os.PathLike) -> Path:
+    """Save an ezdxf document atomically with fixed metadata and a sorted CLASSES section: ezdxf
+    stamps the time and fresh GUIDs ($TDUPDATE, $VERSIONGUID, ...) into every file it writes, and
+    orders its classes as a set (by the process's hash seed), so the same drawing gave different
+    bytes on every run; here the same drawing gives the same file."""
+    from collections import OrderedDict
+
+    import ezdxf
+
+    doc.classes.add_required_classes(doc.dxfversion)
+    doc.classes.classes = OrderedDict(sorted(doc.classes.classes.items()))
+    doc.ezdxf_metadata()["CREATED_BY_EZDXF"] = f"ezdxf {ezdxf.__version__}"  # stamped with the time at ezdxf.new
+    before = ezdxf.options.write_fixed_meta_data_for_testing
+    ezdxf.options.write_fixed_meta_data_for_testing = True
+    try:
+        with atomic_path(target) as tmp:
+            doc.saveas(tmp)
+    finally:
+        ezdxf.options.write_fixed_meta_data_for_testing = before
+    return Path(target)

@@ -28,7 +28,7 @@ import shapely
 from shapely.geometry import MultiPoint, box
 
 from engine.errors import InputError
-from fabrication.files import atomic_path
+from fabrication.files import atomic_path, save_dxf
 
 if TYPE_CHECKING:  # pragma: no cover
     from fabrication.panels import Panel, PanelSettings
@@ -370,8 +370,7 @@ def write_sheet_dxfs(nesting: SheetNesting, panels: list["Panel"], folder: str |
             p = nesting.placements[i]
             add_panel(msp, panels[i], offset=(p.dx, p.dy), angle_deg=p.angle_deg, settings=settings)
         target = folder / f"{name}.dxf"
-        with atomic_path(target) as tmp:
-            doc.saveas(tmp)
+        save_dxf(doc, target)
         paths.append(target)
     return paths
 

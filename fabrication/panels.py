@@ -30,7 +30,7 @@ from shapely.geometry import Polygon
 
 from engine.errors import InputError
 from engine.mesh import PolyMesh
-from fabrication.files import atomic_path, write_text_atomic
+from fabrication.files import save_dxf, write_text_atomic
 
 if TYPE_CHECKING:  # pragma: no cover
     from fabrication.nesting_sheets import SheetNesting
@@ -314,8 +314,7 @@ def write_panel_dxfs(panels: list[Panel], folder: str | os.PathLike,
         doc = new_dxf()
         add_panel(doc.modelspace(), panel, settings=settings, note=True)
         target = folder / f"{panel.id}.dxf"
-        with atomic_path(target) as tmp:
-            doc.saveas(tmp)
+        save_dxf(doc, target)
         paths.append(target)
     return paths
 

@@ -3,7 +3,9 @@ progress reaches pipes; buckling modes come out the same on every run."""
 
 from __future__ import annotations
 
+import os
 import re
+from pathlib import Path
 
 import pytest
 
@@ -475,3 +477,27 @@ def test_compare_checks_its_inputs_as_run_does(capsys, tmp_path):
     err = capsys.readouterr().err
     assert "[surface] file" in err and "does not exist" in err
     assert not (tmp_path / "out" / "01-surface").exists()
+
+
+def test_a_dxf_is_the_same_bytes_from_any_process(tmp_path):
+    """ezdxf stamps times and GUIDs and orders its CLASSES by the hash seed; save_dxf fixes both:
+    two processes with different hash seeds write the same file, which ezdxf reads back."""
+    import hashlib
+    import subprocess
+    import sys
+
+    import ezdxf
+
+    script = ("import sys; from fabrication.panels import new_dxf; from fabrication.files import save_dxf; "
+              "d = new_dxf(); d.modelspace().add_lwpolyline([(0, 0), (100, 0), (100, 50)], "
+              "dxfattribs={'layer': 'CUT'}); save_dxf(d, sys.argv[1])")
+    root = Path(__file__).resolve().parents[1]
+    digests = []
+    for seed in ("1", "2", "3"):
+        path = tmp_path / f"p{seed}.dxf"
+        subprocess.run([sys.executable, "-c", script, str(path)], cwd=root, check=True,
+                       env={**os.environ, "PYTHONHASHSEED": seed})
+        digests.append(hashlib.sha256(path.read_bytes()).hexdigest())
+    assert len(set(digests)) == 1
+    doc = ezdxf.readfile(tmp_path / "p1.dxf")
+    assert doc.header["$INSUNITS"] == 4 and len(doc.modelspace().query("LWPOLYLINE")) == 1

@@ -106,7 +106,7 @@ def write_surface_ply(mesh: TriMesh, path: str | Path) -> Path:
         f"element vertex {mesh.n_vertices}", "property double x", "property double y", "property double z",
         "property uchar red", "property uchar green", "property uchar blue", "property uchar alpha",
         f"element face {mesh.n_faces}", "property list uchar int vertex_indices", "end_header"])
-    vertex_lines = [f"{x:.9g} {y:.9g} {z:.9g} {r} {g} {b} {a}"
+    vertex_lines = [f"{x!r} {y!r} {z!r} {r} {g} {b} {a}"  # exact: a reload gives the same mesh
                     for (x, y, z), (r, g, b, a) in zip(mesh.vertices.tolist(), colours.tolist())]
     face_lines = [f"3 {a} {b} {c}" for a, b, c in mesh.faces.tolist()]
     with atomic_path(path) as tmp:

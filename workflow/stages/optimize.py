@@ -174,7 +174,7 @@ def write_panels_obj(polymesh, pieces, path: Path, *, header: str) -> Path:
     before each face names its cell and piece (``# panel P0001 cell 1 piece 0``, piece 0: the whole cell)."""
     lines = [f"# {header}", "# units: m; one face per panel (node loop over the grid's nodes)",
              f"# nodes {polymesh.n_nodes} panels {len(pieces)}"]
-    lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in polymesh.nodes.tolist()]
+    lines += [f"v {x!r} {y!r} {z!r}" for x, y, z in polymesh.nodes.tolist()]  # exact: a reload gives the same grid
     for k, p in enumerate(pieces):
         lines.append(f"# panel P{k + 1:04d} cell {p.cell + 1} piece {p.piece}")
         lines.append("f " + " ".join(str(i + 1) for i in p.loop.tolist()))

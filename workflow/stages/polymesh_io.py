@@ -20,7 +20,7 @@ def write_polymesh_obj(polymesh: PolyMesh, path: Path, *, header: str = "gridshe
     """Write ``path`` (.obj, metres) and ``path`` with suffix .nodes.json (node flags)."""
     lines = [f"# {header}", "# units: m; one face per cell (node loop); beams are the face edges",
              f"# nodes {polymesh.n_nodes} cells {polymesh.n_faces} beams {len(polymesh.edges)}"]
-    lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in polymesh.nodes.tolist()]
+    lines += [f"v {x!r} {y!r} {z!r}" for x, y, z in polymesh.nodes.tolist()]  # exact: a reload gives the same grid
     lines += ["f " + " ".join(str(i + 1) for i in face.tolist()) for face in polymesh.faces]
     with atomic_path(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n", encoding="ascii")
