@@ -524,16 +524,19 @@ def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_
     with _single_threaded_blas():
         try:
             mu = spla.eigsh(minus_KG, k=1, M=K_free, Minv=stiffness_inverse, which="LA", tol=1e-2,
-                            maxiter=max(2000, 20 * size), return_eigenvectors=False, v0=start)
+                            maxiter=ROUGH_MAXITER, return_eigenvectors=False, v0=start)
         except spla.ArpackNoConvergence as exc:
-            mu = exc.eigenvalues
-            if len(mu) == 0:
-                raise ConvergenceError("linear buckling: the eigenvalue solver did not converge") from exc
+            # no rough estimate within its few hundred steps (it took minutes to fail on clustered
+            # spectra): the Rayleigh quotients of the linear displacements and of the start vector
+            # are below the largest mu, so the shift they give lies above lambda_1 and the
+            # Sylvester check below halves it until it does not
+            mu = exc.eigenvalues if len(exc.eigenvalues) else np.array([
+                max(_rayleigh(minus_KG, K_free, v) for v in (state.u[free], start))])
         if mu.max() <= 1e-12 * abs(minus_KG).max() / abs(K_free).max():
             return none                                          # nothing buckles in compression
         sigma = 0.95 / float(mu.max())
         shifted = None
-        for _ in range(8):
+        for _ in range(SHIFT_HALVINGS):
             shifted = _factor_or_none(state.K_elements + sigma * KG_elements, el, free)
             if shifted is not None and shifted.negative_pivots == 0:
                 break
@@ -560,6 +563,18 @@ def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_
     peak = np.linalg.norm(modes[:, :, :3], axis=2).max(axis=1)
     modes = modes / np.where(peak > 0, peak, 1.0)[:, None, None]
     return BucklingResult(factors=factors, modes=_signed_modes(modes))
+
+
+#: Lanczos steps of the rough first buckling factor (it only places the shift).
+ROUGH_MAXITER = 300
+#: Halvings of the shift at most, until K + sigma K_G has no negative pivot (a factor 2**-20).
+SHIFT_HALVINGS = 20
+
+
+def _rayleigh(A: sp.spmatrix, B: sp.spmatrix, v: np.ndarray) -> float:
+    """v'Av / v'Bv (0 for a zero vector)."""
+    denominator = float(v @ (B @ v))
+    return float(v @ (A @ v)) / denominator if denominator > 0 else 0.0
 
 
 MODE_SIGN_TIE = 1e-3

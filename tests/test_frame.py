@@ -417,6 +417,10 @@ def test_condensed_factor_solves_as_a_plain_lu_and_keeps_the_inertia():
 def test_buckling_factors_match_a_dense_eigensolver():
     """All requested factors of the shifted sparse Lanczos against scipy's dense symmetric solver
     on the same K and K_G (mixed tension and compression, 3 elements per beam)."""
+    _against_the_dense_eigensolver()
+
+
+def _against_the_dense_eigensolver() -> None:
     from dataclasses import replace
 
     import scipy.linalg as sla
@@ -435,6 +439,28 @@ def test_buckling_factors_match_a_dense_eigensolver():
     dense = np.sort(1.0 / mu[mu > 1e-12 * np.abs(mu).max()])[:6]
     assert len(ours) == 6
     assert ours == pytest.approx(dense, rel=1e-8)
+
+
+def test_buckling_without_a_rough_estimate_still_finds_every_factor(monkeypatch):
+    """A rough first-factor run that does not converge falls back on Rayleigh quotients: the shift
+    then lies above lambda_1 and is halved until the factor has no negative pivot, and the factors
+    are those of the dense solver all the same."""
+    import scipy.sparse.linalg as spla
+
+    from engine import frame
+
+    eigsh, fallbacks = spla.eigsh, []
+
+    def rough_fails(*args, **kwargs):
+        if kwargs.get("tol") == 1e-2:  # the rough run
+            raise spla.ArpackNoConvergence("no convergence", np.zeros(0), np.zeros((0, 0)))
+        return eigsh(*args, **kwargs)
+
+    monkeypatch.setattr(frame.spla, "eigsh", rough_fails)
+    rayleigh = frame._rayleigh
+    monkeypatch.setattr(frame, "_rayleigh", lambda *a: fallbacks.append(1) or rayleigh(*a))
+    _against_the_dense_eigensolver()
+    assert fallbacks, "the fallback ran"
 
 
 def test_two_bar_toggle_snaps_through_at_its_closed_form_limit():
