@@ -1,0 +1,242 @@
+"""Does the optimised grid stay statics-aware? The targets of the optimize stage, measured on the
+files it writes, on the mock-up, every real roof and generated free-form roofs, at several sizes.
+
+    .venv/bin/python benchmarks/statics_aware.py [--cells 60,120,300] [--surfaces 5] [--match NAME,...]
+        [--out out/statics_aware]
+
+Each roof runs ``gridshell run PROJECT --until optimize`` (a separate, cold process; the mock-up with
+its template, the others with the quick start's defaults and flagged supports). From
+04-remesh/remesh.json, 05-optimize/optimize.json, 05-optimize/panels.obj and the manifest:
+
+| figure | target |
+|---|---|
+| hexagons among interior cells | >= 70 % |
+| interior nodes with three beams | >= 95 % |
+| non-convex panels (a corner over 185 deg in the panel's plane) | <= 5 %, none over 200 deg |
+| planarity of every panel (largest node distance from its best-fit plane) | <= 0.5 % of the mean beam |
+| closeness (largest node distance to the surface) | <= 0.5 % of the bounding-box diagonal |
+| size correlation with the field (Spearman) | >= 0.7 and within 0.1 of the remeshed grid's, where the field's sizes span >= 1.3 |
+| optimize seconds | <= 3 x the remesh's |
+
+Printed: one row per roof and size with each figure and a mark per target missed, then per target
+how many rows meet it; written to OUT/statics_aware.csv. Peak memory is the run's (its max RSS).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+REAL_SURFACES = Path(os.environ.get("GRIDSHELL_SURFACES", ROOT.parent / "shared" / "data" / "surfaces"))
+TARGETS = {"hexagons": 0.70, "valence3": 0.95, "nonconvex": 0.05, "worst_corner": 200.0, "planarity": 0.005,
+           "closeness": 0.005, "correlation": 0.7, "correlation_drop": 0.1, "span": 1.3, "speed": 3.0}
+COLUMNS = ("name", "cells", "hexagons", "valence3", "nonconvex", "worst_corner_deg", "planarity_rel",
+           "closeness_rel", "correlation_remesh", "correlation", "field_span", "remesh_s", "optimize_s",
+           "peak_mib", "grading_kept", "short_left", "missed", "status")
+
+
+def panel_figures(path: Path) -> tuple[float, float, float, float]:
+    """(share of non-convex panels, largest corner in degrees, largest planarity / mean beam, mean
+    beam m) of a panels.obj."""
+    nodes, loops = [], []
+    for line in path.read_text(encoding="ascii").splitlines():
+        if line.startswith("v "):
+            nodes.append([float(t) for t in line.split()[1:4]])
+        elif line.startswith("f "):
+            loops.append([int(t) - 1 for t in line.split()[1:]])
+    x = np.array(nodes)
+    edges = {tuple(sorted((a, b))) for loop in loops for a, b in zip(loop, loop[1:] + loop[:1])}
+    mean_beam = float(np.mean([np.linalg.norm(x[a] - x[b]) for a, b in edges]))
+    nonconvex, worst, planarity = 0, 0.0, 0.0
+    for loop in loops:
+        p = x[loop]
+        centred = p - p.mean(axis=0)
+        _, _, vt = np.linalg.svd(centred)
+        planarity = max(planarity, float(np.abs(centred @ vt[2]).max()))
+        q = centred @ vt[:2].T
+        area = 0.5 * np.sum(q[:, 0] * np.roll(q[:, 1], -1) - np.roll(q[:, 0], -1) * q[:, 1])
+        a, b = q - np.roll(q, 1, axis=0), np.roll(q, -1, axis=0) - q
+        turn = np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], np.einsum("ij,ij->i", a, b)) * np.sign(area)
+        corners = 180.0 - np.degrees(turn)  # interior angles
+        worst = max(worst, float(corners.max()))
+        nonconvex += bool((corners > 185.0).any())
+    return nonconvex / max(len(loops), 1), worst, planarity / mean_beam, mean_beam
+
+
+def roofs(n_generated: int, out: Path) -> list[tuple[str, list[str]]]:
+    """(name, gridshell run arguments before --out) per roof."""
+    from tests.generated_surfaces import generate_surface, write_ply
+
+    out_surfaces = out / "surfaces"
+    out_surfaces.mkdir(parents=True, exist_ok=True)
+    items = [("mockup", [str(ROOT / "templates" / "mockup.toml")])]
+    if REAL_SURFACES.is_dir():
+        for path in sorted(REAL_SURFACES.glob("*.ply")):
+            items.append((path.stem, ["--surface", str(path), "--supports", "flagged"]))
+    else:
+        print(f"(no real surfaces at {REAL_SURFACES})")
+    for seed in range(n_generated):
+        surface = generate_surface(seed)
+        path = write_ply(surface, out_surfaces / f"gen{seed:02d}-{surface.kind}.ply")
+        items.append((path.stem, ["--surface", str(path), "--supports", "flagged"]))
+    return items
+
+
+def _project_with_cells(args: list[str], cells: int, folder: Path) -> list[str]:
+    """The run arguments with [remesh] n_cells set: a copy of the project file, or for the quick
+    start a project written from its defaults."""
+    import tomllib
+
+    from workflow.config import project_from_surface
+
+    folder.mkdir(parents=True, exist_ok=True)
+    if args[0] == "--surface":
+        project = project_from_surface(args[1], args[3]).model_dump(mode="json", exclude_none=True)
+        data = {"project": project["project"], "surface": {"file": args[1]},
+                "supports": [{"select": args[3], "restraint": "pinned"}], "remesh": {"n_cells": cells}}
+    else:
+        data = tomllib.loads(Path(args[0]).read_text(encoding="utf-8"))
+        data.setdefault("remesh", {})
+        data["remesh"].pop("mean_beam_length", None)
+        data["remesh"].pop("total_length", None)
+        data["remesh"]["n_cells"] = cells
+    path = folder / "project.toml"
+    path.write_text(_toml(data), encoding="utf-8")
+    return [str(path)]
+
+
+def _toml(data: dict, prefix: str = "") -> str:
+    """A small TOML writer for the project dicts here (tables, arrays of tables, plain values)."""
+    plain = {k: v for k, v in data.items() if not isinstance(v, dict) and not (
+        isinstance(v, list) and v and all(isinstance(i, dict) for i in v))}
+    lines = [f"{k} = {json.dumps(v)}" for k, v in plain.items()]
+    out = ([f"[{prefix}]"] if prefix and lines else []) + lines
+    for k, v in data.items():
+        name = f"{prefix}.{k}" if prefix else k
+        if isinstance(v, dict):
+            out.append(_toml(v, name))
+        elif isinstance(v, list) and v and all(isinstance(i, dict) for i in v):
+            for item in v:
+                out.append(f"[[{name}]]\n" + "\n".join(f"{a} = {json.dumps(b)}" for a, b in item.items()))
+    return "\n".join(x for x in out if x) + "\n"
+
+
+def measure(name: str, cells: int, args: list[str], out: Path, timeout: float) -> dict:
+    run_dir = out / "runs" / f"{name}-c{cells}"
+    project_args = _project_with_cells(args, cells, out / "projects" / f"{name}-c{cells}")
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    started = time.perf_counter()
+    try:
+        done = subprocess.run([sys.executable, "-m", "workflow.cli", "run", *project_args, "--out", str(run_dir),
+                               "--until", "optimize", "--quiet", "--force"], cwd=ROOT, capture_output=True,
+                              text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return {"name": name, "cells": cells, "status": f"timeout {timeout:.0f} s"}
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    row: dict = {"name": name, "cells": cells, "peak_mib": round(peak / 1024) if peak > before else "-"}
+    if done.returncode != 0:
+        row["status"] = f"exit {done.returncode}: {(done.stderr.strip().splitlines() or [''])[-1][:80]}"
+        return row
+    remesh = json.loads((run_dir / "04-remesh" / "remesh.json").read_text())
+    optimize = json.loads((run_dir / "05-optimize" / "optimize.json").read_text())
+    stages = {s["name"]: s for s in json.loads((run_dir / "manifest.json").read_text())["stages"]}
+    after = optimize["after"]
+    nonconvex, worst, planarity, _ = panel_figures(run_dir / "05-optimize" / "panels.obj")
+    row.update({
+        "hexagons": after.get("hexagon_share_interior"), "valence3": after.get("valence3_share_interior"),
+        "nonconvex": nonconvex, "worst_corner_deg": worst, "planarity_rel": planarity,
+        "closeness_rel": after.get("closeness_max_rel"),
+        "correlation_remesh": optimize["before"].get("size_correlation"), "correlation": after.get("size_correlation"),
+        "field_span": remesh.get("field_size_ratio"),
+        "remesh_s": stages["remesh"].get("duration_s"), "optimize_s": stages["optimize"].get("duration_s"),
+        "grading_kept": optimize.get("buildable", {}).get("grading_kept"),
+        "short_left": optimize.get("buildable", {}).get("short_beams_left"), "status": "ok",
+        "seconds": round(time.perf_counter() - started, 1)})
+    row["missed"] = " ".join(missed(row)) or "-"
+    return row
+
+
+def missed(row: dict) -> list[str]:
+    """The targets a row misses."""
+    t, out = TARGETS, []
+    if (row.get("hexagons") or 0) < t["hexagons"]:
+        out.append("hex")
+    if (row.get("valence3") or 0) < t["valence3"]:
+        out.append("val3")
+    if row.get("nonconvex", 1) > t["nonconvex"] or row.get("worst_corner_deg", 360) > t["worst_corner"]:
+        out.append("convex")
+    if row.get("planarity_rel", 1) > t["planarity"]:
+        out.append("planar")
+    if (row.get("closeness_rel") or 1) > t["closeness"]:
+        out.append("close")
+    graded = (row.get("field_span") or 0) >= t["span"]
+    r0, r1 = row.get("correlation_remesh"), row.get("correlation")
+    if graded and (r1 is None or r1 < t["correlation"] or (r0 is not None and r0 - r1 > t["correlation_drop"])):
+        out.append("grading")
+    if (row.get("optimize_s") or 0) > t["speed"] * max(row.get("remesh_s") or 0, 1e-9):
+        out.append("speed")
+    return out
+
+
+def _cell(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.3g}"
+    return "-" if value is None else str(value)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cells", default="60,120,300", help="cell counts (default 60,120,300)")
+    parser.add_argument("--surfaces", type=int, default=5, help="generated roofs, seeds 0..N-1 (default 5)")
+    parser.add_argument("--match", default="", help="only roofs whose name contains one of these (comma-separated)")
+    parser.add_argument("--out", default=str(ROOT / "out" / "statics_aware"))
+    parser.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
+    args = parser.parse_args()
+    out = Path(args.out)
+    items = roofs(args.surfaces, out)
+    if args.match:
+        keys = [k for k in args.match.split(",") if k]
+        items = [(n, a) for n, a in items if any(k in n for k in keys)]
+    sizes = [int(c) for c in args.cells.split(",") if c]
+    rows = []
+    print(f"statics_aware: {len(items)} roofs x {len(sizes)} sizes, until optimize, into {out}")
+    for cells in sizes:
+        for name, run_args in items:
+            row = measure(name, cells, run_args, out, args.timeout)
+            rows.append(row)
+            print(f"  {name} c{cells}: {row.get('status')} {row.get('missed', '')}", flush=True)
+            with open(out / "statics_aware.csv", "w", newline="", encoding="utf-8") as handle:
+                writer = csv.DictWriter(handle, fieldnames=COLUMNS, extrasaction="ignore")
+                writer.writeheader()
+                writer.writerows(rows)
+    widths = {c: max(len(c), *(len(_cell(r.get(c))) for r in rows)) for c in COLUMNS}
+    print("  ".join(c.ljust(widths[c]) for c in COLUMNS))
+    for row in rows:
+        print("  ".join(_cell(row.get(c)).ljust(widths[c]) for c in COLUMNS))
+    ok = [r for r in rows if r.get("status") == "ok"]
+    print(f"runs {len(rows)}, completed {len(ok)}")
+    for key, label in (("hex", "hexagons >= 70 %"), ("val3", "three-beam nodes >= 95 %"),
+                       ("convex", "non-convex panels <= 5 %, none over 200 deg"),
+                       ("planar", "panel planarity <= 0.5 % of the mean beam"),
+                       ("close", "closeness <= 0.5 % of the diagonal"),
+                       ("grading", "size correlation >= 0.7 and within 0.1 of the remesh (graded fields)"),
+                       ("speed", "optimize <= 3 x remesh")):
+        met = sum(key not in r.get("missed", "").split() for r in ok)
+        print(f"  {label}: met on {met} of {len(ok)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
