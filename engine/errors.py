@@ -14,6 +14,7 @@ __all__ = [
     "SelectionError",
     "MechanismError",
     "ConvergenceError",
+    "FabricationError",
 ]
 
 
@@ -57,3 +58,9 @@ class MechanismError(GridshellError):
 
 class ConvergenceError(GridshellError):
     """Raised when an iterative analysis does not converge within its settings."""
+
+
+class FabricationError(RuntimeError):
+    """A part could not be built or written: the CAD kernel's boolean or tessellation failed, or a
+    STEP part file is not what its writer expects. Not the user's mistake; where a part fails, the
+    fabrication stage reports it as a finding and carries on."""

@@ -16,6 +16,7 @@ import pandas as pd
 
 from engine.errors import InputError
 from engine.mesh import PolyMesh
+from engine.parts import beam_id, node_id
 
 from .files import atomic_path
 from .joints import JointSettings, joint_geometry, joint_setback_mm, smallest_angle
@@ -65,9 +66,9 @@ def cut_list(polymesh: PolyMesh, normals: np.ndarray, settings: BeamSettings, jo
                                                   smallest_angle(geometry.directions))
     # a beam shorter than its two joints take keeps a zero cut length; the caller reports it
     cut = np.maximum(node_length - setback[e[:, 0]] - setback[e[:, 1]], 0.0)
-    ids = [f"B{i + 1:04d}" for i in range(len(e))]
+    ids = [beam_id(i) for i in range(len(e))]
     return pd.DataFrame({
-        "id": ids, "start_node": [f"N{a + 1:04d}" for a in e[:, 0]], "end_node": [f"N{b + 1:04d}" for b in e[:, 1]],
+        "id": ids, "start_node": [node_id(a) for a in e[:, 0]], "end_node": [node_id(b) for b in e[:, 1]],
         "profile": settings.profile_name, "material": settings.material_name,
         "node_length_mm": np.round(node_length, 1), "setback_start_mm": np.round(setback[e[:, 0]], 1),
         "setback_end_mm": np.round(setback[e[:, 1]], 1), "cut_length_mm": np.round(cut, 1),

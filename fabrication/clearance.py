@@ -34,6 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from engine.errors import FabricationError
+
 from .workers import exit_with_parent
 
 __all__ = ["joint_clashes", "joint_clashes_from_step", "joint_clashes_parallel", "bounding_boxes",
@@ -150,7 +152,7 @@ def _common(a, b) -> tuple[float, float]:
     operation.SetRunParallel(False)  # one core per pair: the caller parallelises over pairs
     operation.Build()
     if not operation.IsDone():
-        raise RuntimeError("BRepAlgoAPI_Common is not done")
+        raise FabricationError("BRepAlgoAPI_Common is not done")
     common = operation.Shape()
     properties = GProp_GProps()
     BRepGProp.VolumeProperties_s(common, properties)

@@ -16,6 +16,7 @@ import numpy as np
 
 from engine.errors import InputError
 from engine.mesh import PolyMesh
+from engine.parts import beam_id, joint_id, node_id, panel_id
 from fabrication.files import atomic_path, save_dxf
 
 __all__ = ["write_plan_drawings", "node_id", "beam_id", "panel_id", "joint_id", "PLAN_LAYERS"]
@@ -24,22 +25,6 @@ __all__ = ["write_plan_drawings", "node_id", "beam_id", "panel_id", "joint_id", 
 PLAN_LAYERS = {"BEAMS": 7, "LABELS_NODES": 3, "LABELS_BEAMS": 4, "LABELS_PANELS": 6, "SUPPORTS": 1,
                "DIMENSIONS": 2, "TITLE": 7}
 _A3_LANDSCAPE_IN = (420 / 25.4, 297 / 25.4)
-
-
-def node_id(i: int) -> str:
-    return f"N{i + 1:04d}"
-
-
-def beam_id(k: int) -> str:
-    return f"B{k + 1:04d}"
-
-
-def panel_id(f: int) -> str:
-    return f"P{f + 1:04d}"
-
-
-def joint_id(i: int) -> str:
-    return f"J{i + 1:04d}"
 
 
 def _support_nodes(polymesh: PolyMesh, support_nodes: np.ndarray | None) -> np.ndarray:

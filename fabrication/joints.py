@@ -28,7 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
+from engine.errors import FabricationError
 from engine.mesh import PolyMesh
+from engine.parts import joint_id
 
 from .files import atomic_path
 from .step_assembly import StepAssemblyWriter, step_part, write_step_part
@@ -73,7 +75,7 @@ class JointGeometry:
 
 
 def joint_name(node: int) -> str:
-    return f"J{node + 1:04d}"
+    return joint_id(node)
 
 
 def smallest_angle(directions: np.ndarray) -> float:
@@ -190,7 +192,7 @@ def _boolean(kind: str, arguments: list, tools: list):
     operation.SetRunParallel(False)
     operation.Build()
     if not operation.IsDone():
-        raise RuntimeError(f"the {kind} of a joint failed")
+        raise FabricationError(f"the {kind} of a joint failed")
     return operation.Shape()
 
 
@@ -483,7 +485,7 @@ def _watertight_stl(solid, path: Path) -> bool:
 
     vertices, triangles = _tessellate(solid.wrapped, 0.05, 0.3)
     if not len(triangles):
-        raise RuntimeError("the joint solid has no faces to tessellate (the booleans left nothing)")
+        raise FabricationError("the joint solid has no faces to tessellate (the booleans left nothing)")
     mesh = trimesh.Trimesh(vertices, triangles, process=True)
     mesh.merge_vertices(digits_vertex=5)
     mesh.update_faces(mesh.nondegenerate_faces())

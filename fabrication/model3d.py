@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from engine.mesh import PolyMesh
+from engine.parts import beam_id, joint_id
 
 from .files import atomic_path
 
@@ -22,13 +23,13 @@ def write_gridshell_step(polymesh: PolyMesh, panels, beam_radius_mm: float, join
     assembly = cq.Assembly(name="gridshell")
     grey, blue, glass = cq.Color(0.6, 0.6, 0.6), cq.Color(0.27, 0.51, 0.71), cq.Color(0.7, 0.85, 0.95, 0.5)
     for i, p in enumerate(nodes):
-        assembly.add(cq.Workplane().sphere(joint_radius_mm), name=f"J{i + 1:04d}", loc=cq.Location(cq.Vector(*p)),
+        assembly.add(cq.Workplane().sphere(joint_radius_mm), name=joint_id(i), loc=cq.Location(cq.Vector(*p)),
                      color=grey)
     for k, (a, b) in enumerate(polymesh.edges):
         direction = nodes[b] - nodes[a]
         length = float(np.linalg.norm(direction))
         solid = cq.Solid.makeCylinder(beam_radius_mm, length, cq.Vector(*nodes[a]), cq.Vector(*(direction / length)))
-        assembly.add(cq.Workplane().add(solid), name=f"B{k + 1:04d}", color=blue)
+        assembly.add(cq.Workplane().add(solid), name=beam_id(k), color=blue)
     for panel in panels:
         outline = 1000 * np.asarray(panel.outline_3d_m)
         normal = np.cross(panel.axes[0], panel.axes[1])
@@ -63,10 +64,10 @@ def write_gridshell_3dm(polymesh: PolyMesh, panels, beam_radius_mm: float, joint
 
     for i, p in enumerate(nodes):
         sphere = rhino3dm.Sphere(rhino3dm.Point3d(*p), joint_radius_mm)
-        model.Objects.AddSphere(sphere, attributes("joints", f"J{i + 1:04d}"))
+        model.Objects.AddSphere(sphere, attributes("joints", joint_id(i)))
     for k, (a, b) in enumerate(polymesh.edges):
         start, end = rhino3dm.Point3d(*nodes[a]), rhino3dm.Point3d(*nodes[b])
-        model.Objects.AddLine(start, end, attributes("beams", f"B{k + 1:04d}"))
+        model.Objects.AddLine(start, end, attributes("beams", beam_id(k)))
     for panel in panels:
         outline = 1000 * np.asarray(panel.outline_3d_m)
         mesh = rhino3dm.Mesh()

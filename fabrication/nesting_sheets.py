@@ -28,6 +28,7 @@ import shapely
 from shapely.geometry import MultiPoint, box
 
 from engine.errors import InputError
+from engine.parts import sheet_id
 from fabrication.files import atomic_path, save_dxf
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -280,7 +281,7 @@ class StockNesting:
         out = {}
         for first, (_, members, nesting) in zip(self.first_numbers(), self.groups):
             for p in nesting.placements:
-                out[panels[members[p.panel]].id] = f"S{first + p.sheet:02d}"
+                out[panels[members[p.panel]].id] = sheet_id(first - 1 + p.sheet)
         return out
 
 
@@ -341,7 +342,7 @@ def nest_sheets(panels: list["Panel"], settings: SheetSettings | None = None) ->
             sheets[k].area += areas[i]
     per_sheet = [sheet.area / sheet_area for sheet in sheets]
     utilisation = float(areas.sum() / (len(sheets) * sheet_area)) if sheets else 0.0
-    sheet_of = {panels[p.panel].id: f"S{p.sheet + 1:02d}" for p in placements}
+    sheet_of = {panels[p.panel].id: sheet_id(p.sheet) for p in placements}
     return SheetNesting(placements=list(placements), sheets=members, utilisation=utilisation,
                         sheet_utilisation=per_sheet, settings=settings, sheet_of=sheet_of)
 
@@ -363,7 +364,7 @@ def write_sheet_dxfs(nesting: SheetNesting, panels: list["Panel"], folder: str |
         msp = doc.modelspace()
         msp.add_lwpolyline([(0, 0), (sheet.width_mm, 0), (sheet.width_mm, sheet.height_mm), (0, sheet.height_mm)],
                            close=True, dxfattribs={"layer": "NOTES"})
-        name = f"S{first_number + k:02d}"
+        name = sheet_id(first_number - 1 + k)
         msp.add_text(f"{name}  {sheet.width_mm:g} x {sheet.height_mm:g} mm  {len(members)} parts  utilisation {100 * nesting.sheet_utilisation[k]:.1f} %",
                      height=5.0, dxfattribs={"layer": "NOTES", "insert": (0.0, -10.0)})
         for i in members:

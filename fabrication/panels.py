@@ -30,6 +30,7 @@ from shapely.geometry import Polygon
 
 from engine.errors import InputError
 from engine.mesh import PolyMesh
+from engine.parts import panel_id, sheet_id
 from fabrication.files import save_dxf, write_text_atomic
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -227,23 +228,23 @@ def flatten_panels(polymesh: PolyMesh, settings: PanelSettings | None = None, *,
     panels: list[Panel] = []
     nodes = polymesh.nodes
     for f, loop in enumerate(polymesh.faces):
-        panel_id = f"P{f + 1:04d}"
+        label = panel_id(f)
         if len(loop) < 3:
-            raise InputError(f"cell {f} ({panel_id}) has {len(loop)} nodes; a panel needs at least 3")
+            raise InputError(f"cell {f} ({label}) has {len(loop)} nodes; a panel needs at least 3")
         loop_m = nodes[loop]
         try:
-            panel = _make_panel(panel_id, f, loop_m, settings)
+            panel = _make_panel(label, f, loop_m, settings)
         except InputError as error:
             if problems is None:
                 raise
-            problems.append((panel_id, str(error).splitlines()[0]))
+            problems.append((label, str(error).splitlines()[0]))
             continue
         if not (panel.nonplanar and settings.split_nonplanar):
             panels.append(panel)
             continue
         centroid, _, axes = _plane(loop_m)
         for k, tri in enumerate(_ear_clip((loop_m - centroid) @ axes.T)):
-            panels.append(_make_panel(f"{panel_id}{_suffix(k)}", f, loop_m[list(tri)], settings))
+            panels.append(_make_panel(f"{label}{_suffix(k)}", f, loop_m[list(tri)], settings))
     return panels
 
 
@@ -332,7 +333,7 @@ def write_panels_csv(panels: list[Panel], nesting: "SheetNesting | None", settin
         sheet_of = {i: sheet_names[p.id] for i, p in enumerate(panels) if p.id in sheet_names}
     elif nesting is not None:
         for placement in nesting.placements:
-            sheet_of[placement.panel] = f"S{placement.sheet + 1:02d}"
+            sheet_of[placement.panel] = sheet_id(placement.sheet)
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(["id", "area_mm2", "perimeter_mm", "vertex_count", "planarity_mm", "thickness_mm",

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
+from engine.errors import FabricationError
+
 from .files import atomic_path
 
 __all__ = ["StepPart", "step_part", "write_step_part", "StepAssemblyWriter", "SCHEMA"]
@@ -66,7 +68,7 @@ def step_part(text: str, first_id: int, *, context_id: int = 2) -> StepPart:
     header_end = text.index("ENDSEC;")
     schema = re.search(r"FILE_SCHEMA\s*\(.*?\)\s*;", text[:header_end], re.S)
     if schema is None or " ".join(schema.group(0).split()) != SCHEMA:
-        raise ValueError(f"a part file of another schema: {schema.group(0) if schema else 'none'}")
+        raise FabricationError(f"a part file of another schema: {schema.group(0) if schema else 'none'}")
     data = text[text.index("DATA;", header_end) + 5:text.rindex("ENDSEC;")]
     # where each entity instance starts (OCCT starts each on a line) and the few kinds looked up
     starts = {int(m.group(1)): m.start() for m in _START.finditer(data)}
@@ -78,7 +80,7 @@ def step_part(text: str, first_id: int, *, context_id: int = 2) -> StepPart:
     def entity(number: int) -> tuple[int, int, str]:
         if number not in cache:
             if number not in starts:
-                raise ValueError(f"entity #{number} not found at the start of a line")
+                raise FabricationError(f"entity #{number} not found at the start of a line")
             match = _ENTITY.match(data, starts[number])
             cache[number] = (match.start(), match.end(), match.group(2))
         return cache[number]
@@ -89,7 +91,7 @@ def step_part(text: str, first_id: int, *, context_id: int = 2) -> StepPart:
     def one(kind: str) -> int:
         found = by_type.get(kind, [])
         if len(found) != 1:
-            raise ValueError(f"expected one {kind} in a part file, found {len(found)}")
+            raise FabricationError(f"expected one {kind} in a part file, found {len(found)}")
         return found[0]
 
     occurrence, context = one("NEXT_ASSEMBLY_USAGE_OCCURRENCE"), one("APPLICATION_CONTEXT")
@@ -131,7 +133,7 @@ def step_part(text: str, first_id: int, *, context_id: int = 2) -> StepPart:
         if old in soft:
             needed.append(old)
         elif old in hard and old != context:
-            raise ValueError(f"an entity of part {name!r} refers to #{old} of its wrapper product")
+            raise FabricationError(f"an entity of part {name!r} refers to #{old} of its wrapper product")
         return numbering[old]
 
     def renumbered(piece: str) -> str:
@@ -197,7 +199,7 @@ class StepAssemblyWriter:
     def _record(self, name: str, ids: tuple[int, ...]) -> None:
         first, last = ids[4], ids[5]
         if first < self.FIRST_ID or any(first <= b and a <= last for a, b in self._ranges):
-            raise ValueError(f"part {name}: entity ids #{first}..#{last} overlap those of another part")
+            raise FabricationError(f"part {name}: entity ids #{first}..#{last} overlap those of another part")
         self._ranges.append((first, last))
         self._parts.append((name, ids))
 
@@ -224,7 +226,7 @@ class StepAssemblyWriter:
         if order is not None:
             by_name = dict(parts)
             if sorted(order) != sorted(by_name) or len(by_name) != len(parts):
-                raise ValueError("the order names other parts than those added")
+                raise FabricationError("the order names other parts than those added")
             parts = [(name, by_name[name]) for name in order]
         n = self.next_free_id
         lines, placements = [], []

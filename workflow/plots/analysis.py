@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from engine.parts import beam_id
+
 from ._common import frame_3d, pyplot, save_png
 
 __all__ = ["plot_utilisation", "plot_axial_forces", "plot_buckling_modes", "plot_response"]
@@ -40,7 +42,7 @@ def plot_utilisation(nodes: np.ndarray, beams: np.ndarray, utilisation: np.ndarr
     fig.colorbar(lines, ax=ax, shrink=0.8, extend="max", label="utilisation")
     worst = int(np.argmax(utilisation))
     middle = nodes[beams[worst]].mean(axis=0)
-    ax.annotate(f"B{worst + 1:04d}: {utilisation[worst]:.2f}", middle[:2], xytext=(10, 10), textcoords="offset points",
+    ax.annotate(f"{beam_id(worst)}: {utilisation[worst]:.2f}", middle[:2], xytext=(10, 10), textcoords="offset points",
                 fontsize=9, arrowprops={"arrowstyle": "->"})
     _frame(ax, nodes)
     ax.set_title(title or "member utilisation")

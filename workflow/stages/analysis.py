@@ -20,6 +20,7 @@ from engine.loads import LoadCombination, combine
 from engine.structure import BeamProperties, beam_up_vectors, gridshell_loads, node_normals, support_restraints
 from engine.findings import Finding
 from engine.supports import Supports
+from engine.parts import beam_id, node_id
 from fabrication.files import atomic_path, write_text_atomic
 
 from ..config import Project
@@ -121,11 +122,11 @@ def run(ctx):
     stiffer = "a larger [section] diameter or thickness, a stronger [material], or more supports ([[supports]])"
     verdicts = [
         {"check": "member utilisation (ULS)", "kind": "utilisation", "value": float(utilisation.max()), "limit": 1.0,
-         "pass": bool(utilisation.max() <= 1.0), "part": f"B{int(utilisation.argmax()) + 1:04d}",
+         "pass": bool(utilisation.max() <= 1.0), "part": beam_id(utilisation.argmax()),
          "fix": f"{stiffer}"},
         {"check": f"deflection (SLS) vs span/{config.deflection_limit_ratio:g}", "kind": "deflection",
          "value": vertical_sls, "limit": deflection_limit, "pass": bool(vertical_sls <= deflection_limit), "unit": "m",
-         "part": f"N{int(np.abs(result.sls_displacements[:, 2]).argmax()) + 1:04d}",
+         "part": node_id(np.abs(result.sls_displacements[:, 2]).argmax()),
          "fix": f"{stiffer}; or [analysis] deflection_limit_ratio if the limit is not the project's"},
     ]
     if result.buckling_error is not None:
@@ -152,13 +153,13 @@ def run(ctx):
         "uls_combination": uls_combo.name, "sls_combination": sls_combo.name,
         "material": project.material.name, "section": project.section.model_dump(mode="json"),
         "delta_L_m": result.delta_L, "max_vertical_sls_m": vertical_sls, "deflection_limit_m": deflection_limit,
-        "max_utilisation": float(utilisation.max()), "governing_member": f"B{int(utilisation.argmax()) + 1:04d}",
+        "max_utilisation": float(utilisation.max()), "governing_member": beam_id(utilisation.argmax()),
         "lambda_LB": result.lambda_LB, "buckling_factors": [float(x) for x in result.buckling_factors],
         "lambda_NL_perfect": None if result.perfect is None else result.perfect.capacity,
         "lambda_NL_worst": None if worst is None else worst.capacity,
         "limit_point_reached": None if worst is None else worst.limit_load_factor is not None,
         "worst_imperfection": None if worst is None else worst.name, "knock_down": result.knock_down,
-        "imperfection_amplitude_m": amplitude, "control_node": f"N{result.control_node + 1:04d}",
+        "imperfection_amplitude_m": amplitude, "control_node": node_id(result.control_node),
         "equilibrium_error": result.equilibrium_error,
         "imperfections": [{"shape": c.name, "lambda_NL": c.capacity, "limit_point": c.limit_load_factor is not None,
                            "path_complete": c.converged} for c in result.imperfect],
@@ -175,9 +176,9 @@ def run(ctx):
     write_text_atomic(ctx.folder / "analysis.json", json.dumps(figures, indent=1, default=float))
     import pandas as pd
 
-    members = pd.DataFrame({"beam": [f"B{i + 1:04d}" for i in range(len(lengths))],
-                            "start_node": [f"N{a + 1:04d}" for a in polymesh.edges[:, 0]],
-                            "end_node": [f"N{b + 1:04d}" for b in polymesh.edges[:, 1]],
+    members = pd.DataFrame({"beam": [beam_id(i) for i in range(len(lengths))],
+                            "start_node": [node_id(a) for a in polymesh.edges[:, 0]],
+                            "end_node": [node_id(b) for b in polymesh.edges[:, 1]],
                             "length_m": lengths, "axial_force_kN": axial / 1e3, "utilisation": utilisation,
                             "governing_check": list(getattr(checks, "governing", [""] * len(lengths)))})
     with atomic_path(ctx.folder / "members.csv") as tmp:
@@ -235,7 +236,7 @@ def _load_test(ctx, project: Project, surface, polymesh, model, supports, props,
                   title=f"{project.project.name}: load test, {', '.join(permanent) or 'no'} load held, "
                         f"{', '.join(variable)} increased")
     return {"permanent_cases": list(permanent), "variable_cases": list(variable),
-            "control_nodes": {name: f"N{int(n) + 1:04d}" for name, n in zip(names, nodes)},
+            "control_nodes": {name: node_id(n) for name, n in zip(names, nodes)},
             "limit_load_factor": run.limit_load_factor, "largest_load_factor": float(run.path[:, 0].max()),
             "path_complete": bool(run.converged)}
 
