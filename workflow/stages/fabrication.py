@@ -113,7 +113,7 @@ def run(ctx):
     findings += _joint_findings(joint_reports, limits)
     clock.start("joints: clearance between neighbours")
     summary["joint_clashes"] = _joint_clashes(folder / "joints", [r["id"] for r in joint_reports
-                                                                  if r.get("built", True)])
+                                                                  if r.get("built", True)], config.workers)
     findings += [Finding(kind="joint_clash", parts=list(c["parts"]), measure=c.get("volume_mm3"), limit=CLASH_MM3,
                          unit="mm3", stage="fabrication",
                          message=(f"joints {c['parts'][0]} and {c['parts'][1]} overlap by "
@@ -135,12 +135,16 @@ def run(ctx):
 CLASH_MM3 = 1.0
 
 
-def _joint_clashes(folder: Path, names: list[str]) -> list[dict]:
-    """Pairs of joint solids (as written) that intersect by more than CLASH_MM3."""
-    from fabrication.clearance import joint_clashes_from_step
+def _joint_clashes(folder: Path, names: list[str], workers: int | None = None) -> list[dict]:
+    """Pairs of joint solids (as written) that intersect by more than CLASH_MM3, the booleans on
+    every core (the joints' workers have ended by then)."""
+    import os
+
+    from fabrication.clearance import joint_clashes_parallel
 
     # boxes from the STL each worker wrote beside the STEP (same solid): only touching joints are read
-    return joint_clashes_from_step(folder, names, min_volume_mm3=CLASH_MM3, stl_boxes=True)
+    return joint_clashes_parallel(folder, names, workers=workers or os.cpu_count() or 1, min_volume_mm3=CLASH_MM3,
+                                  stl_boxes=True)
 
 
 def _joint_findings(reports: list[dict], limits) -> list[Finding]:
