@@ -9,7 +9,8 @@ buildable length). A collapse is made only where the result stays a valid polygo
   (that triangle disappears; its other two beams become one);
 - every cell holding both ends has them next to each other (no cell is pinched in two);
 - two boundary nodes merge only along a boundary beam (the surface is not pinched);
-- two corners never merge, no node loses its last cell, and no node gets more than MAX_VALENCE beams.
+- two corners never merge, no node loses its last cell, and no node gets more than MAX_VALENCE beams
+  (MAX_BOUNDARY_VALENCE on the boundary).
 
 The merged node keeps the place of its more constrained end (corner, then support, then boundary),
 else takes the midpoint; it keeps the flags of both ends. Collapses of one pass touch disjoint
@@ -35,6 +36,9 @@ __all__ = ["CollapseReport", "collapse_beams", "flip_beams", "collapse_short_bea
 
 #: Most beams a merged node may have (a joint with more is crowded, its angles small).
 MAX_VALENCE = 5
+#: Most beams a merged node on the boundary may have: two of them run along the boundary, so the
+#: others share half a turn (a five-beam boundary joint on the hypar closed to 3.6 degrees).
+MAX_BOUNDARY_VALENCE = 4
 #: A flipped beam is given this many times its buildable length.
 FLIP_MARGIN = 1.1
 #: A beam is flipped only if its two cells have at least FLIP_SIDES[0] sides (they lose one) and the
@@ -112,7 +116,8 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray) -> tuple[PolyMesh, int
         thirds = {v for i in triangles for v in faces[i] if v not in (a, b)}
         if (neighbours[a] & neighbours[b]) - thirds:
             continue
-        if len((neighbours[a] | neighbours[b]) - {a, b}) > MAX_VALENCE:
+        merged = len((neighbours[a] | neighbours[b]) - {a, b})
+        if merged > (MAX_BOUNDARY_VALENCE if polymesh.boundary[a] or polymesh.boundary[b] else MAX_VALENCE):
             continue
         # a triangle's third node must keep a cell; so must a and b
         if any(all(j in triangles for j in node_faces[c]) for c in thirds):

@@ -20,7 +20,7 @@ from ..config import Project
 from ._require import require
 from .polymesh_io import read_polymesh_obj, write_polymesh_obj
 from .fabrication import build_limits_of
-from .remesh import MAX_COLLAPSE_SHARE, buildable_grid, short_share, too_fine_finding
+from .remesh import MAX_COLLAPSE_SHARE, buildable_grid, grid_figures, short_count, short_share, too_fine_finding
 
 #: The end game keeps beams this much above the shortest buildable beam between 120-degree joints.
 MIN_LENGTH_MARGIN = 1.05
@@ -103,9 +103,17 @@ def run(ctx):
         grid, buildable = buildable_grid(again.polymesh, project)
         collapsed += buildable["collapsed_beams"]
         flipped += buildable["flipped_beams"]
-    if changed(buildable):  # the last collapse stands without a further optimisation
-        result = dataclasses.replace(result, polymesh=grid)
-        result.quality["after"].update(optimize_quality(grid, surface.mesh))
+    if changed(buildable):
+        # the last collapses or flips: optimised once more (their nodes and corners held to the
+        # limits), and what is short after that is reported, not collapsed again
+        rounds += 1
+        ctx.step(f"{buildable['collapsed_beams']} short beams collapsed, {buildable['flipped_beams']} flipped: "
+                 "optimising a last time")
+        again = optimize(grid, surface.mesh, field, dataclasses.replace(settings, split_cells=False),
+                         progress=ctx.step, beam_length_limits=limits)
+        result = dataclasses.replace(result, polymesh=again.polymesh,
+                                     quality={**again.quality, "before": result.quality["before"]})
+        buildable.update({**grid_figures(again.polymesh), "short_beams_left": short_count(again.polymesh, project)})
     buildable.update({"collapsed_beams": collapsed, "flipped_beams": flipped, "reoptimised": rounds,
                       "grading_kept": grading_kept, "short_share_at_grading": share_kept})
     if buildable["too_fine"]:

@@ -77,7 +77,7 @@ def buildable_grid(polymesh, project: Project, share: float = 1.0):
     shortest beam and the smallest angle between two beams at a node. When more than
     MAX_COLLAPSE_SHARE of the beams are short, nothing is changed and ``too_fine`` is set."""
     from engine.collapse import CollapseReport, collapse_short_beams
-    from fabrication.limits import node_smallest_angles, required_beam_lengths_m
+    from fabrication.limits import required_beam_lengths_m
 
     from .fabrication import build_limits_of
 
@@ -90,21 +90,33 @@ def buildable_grid(polymesh, project: Project, share: float = 1.0):
         grid, report = collapse_short_beams(polymesh, lambda g: share * required_beam_lengths_m(g, limits))
     record = {**limits.to_dict(), **report.to_dict(), "too_fine": too_fine, "removed_under_share": share,
               "short_share_before": float(short.mean()) if len(short) else 0.0,
-              "shortest_beam_m": float(grid.beam_lengths.min()) if len(grid.edges) else 0.0,
-              "mean_beam_m": float(grid.beam_lengths.mean()) if len(grid.edges) else 0.0,
-              "smallest_beam_angle_deg": float(np.degrees(node_smallest_angles(grid).min()))}
+              **grid_figures(grid)}
     return grid, record
 
 
-def short_share(polymesh, project: Project) -> float:
-    """Share of the beams of ``polymesh`` shorter than their joints and the shortest cut take."""
+def grid_figures(grid) -> dict:
+    """The shortest and mean beam (m) and the smallest angle between two beams at a node (deg)."""
+    from fabrication.limits import node_smallest_angles
+
+    return {"shortest_beam_m": float(grid.beam_lengths.min()) if len(grid.edges) else 0.0,
+            "mean_beam_m": float(grid.beam_lengths.mean()) if len(grid.edges) else 0.0,
+            "smallest_beam_angle_deg": float(np.degrees(node_smallest_angles(grid).min()))}
+
+
+def short_count(polymesh, project: Project) -> int:
+    """Beams of ``polymesh`` shorter than their joints and the shortest cut take."""
     from fabrication.limits import required_beam_lengths_m
 
     from .fabrication import build_limits_of
 
     if not len(polymesh.edges):
-        return 0.0
-    return float((polymesh.beam_lengths < required_beam_lengths_m(polymesh, build_limits_of(project))).mean())
+        return 0
+    return int((polymesh.beam_lengths < required_beam_lengths_m(polymesh, build_limits_of(project))).sum())
+
+
+def short_share(polymesh, project: Project) -> float:
+    """Share of the beams of ``polymesh`` shorter than their joints and the shortest cut take."""
+    return short_count(polymesh, project) / max(len(polymesh.edges), 1)
 
 
 def too_fine_finding(record: dict, stage: str) -> dict:
