@@ -204,7 +204,7 @@ def main() -> int:
     parser.add_argument("--out", default=str(ROOT / "out" / "statics_aware"))
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
     args = parser.parse_args()
-    out = Path(args.out)
+    out = Path(args.out).resolve()  # the projects written under it name their surfaces by absolute path
     items = roofs(args.surfaces, out)
     if args.match:
         keys = [k for k in args.match.split(",") if k]
