@@ -31,9 +31,12 @@ test-fast: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[test,bench]"
-	@for f in benchmarks/*.py; do [ "$$f" = benchmarks/any_roof.py ] && continue; echo "== $$f"; $(BIN)/python $$f || exit 1; done
+	@for f in benchmarks/*.py; do case "$$f" in benchmarks/any_roof.py|benchmarks/statics_aware.py) continue;; esac; \
+		echo "== $$f"; $(BIN)/python $$f || exit 1; done
 	@echo "== benchmarks/any_roof.py (a sample; every size: $(BIN)/python benchmarks/any_roof.py)"
 	$(BIN)/python benchmarks/any_roof.py --cells 60 --surfaces 5
+	@echo "== benchmarks/statics_aware.py (a sample; every roof and size: $(BIN)/python benchmarks/statics_aware.py)"
+	$(BIN)/python benchmarks/statics_aware.py --cells 60 --surfaces 2 --match mockup,Hall,gen
 
 clean:
 	rm -rf out build *.egg-info .pytest_cache
