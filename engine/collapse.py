@@ -62,6 +62,16 @@ class CollapseReport:
                 "collapse_passes": int(self.passes), "short_beams_left": int(len(self.left))}
 
 
+def _cells_at_nodes(polymesh: PolyMesh) -> tuple[list[list[int]], list[list[int]]]:
+    """The cells as editable node lists, and per node the ids of its cells."""
+    faces = [list(map(int, f)) for f in polymesh.faces]
+    node_faces: list[list[int]] = [[] for _ in range(polymesh.n_nodes)]
+    for i, f in enumerate(faces):
+        for v in f:
+            node_faces[v].append(i)
+    return faces, node_faces
+
+
 def _rank(polymesh: PolyMesh) -> np.ndarray:
     """How constrained each node is: corner 3, support 2, boundary 1, interior 0."""
     return np.select([polymesh.corners, polymesh.supports, polymesh.boundary], [3, 2, 1], 0)
@@ -73,11 +83,7 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray) -> tuple[PolyMesh, int
     (unused nodes dropped, the others renumbered in order) and the number collapsed."""
     edges = polymesh.edges
     n = polymesh.n_nodes
-    faces = [list(map(int, f)) for f in polymesh.faces]
-    node_faces: list[list[int]] = [[] for _ in range(n)]
-    for i, f in enumerate(faces):
-        for v in f:
-            node_faces[v].append(i)
+    faces, node_faces = _cells_at_nodes(polymesh)
     neighbours: list[set[int]] = [set() for _ in range(n)]
     for a, b in edges:
         neighbours[a].add(int(b))
@@ -174,17 +180,12 @@ def flip_beams(polymesh: PolyMesh, beams: np.ndarray, lengths: np.ndarray) -> tu
     """Flip (T1), in the order given, those of ``beams`` that join two interior three-beam nodes,
     whose two cells and two end cells have the sides of FLIP_SIDES, where the four cells around
     the beam are distinct and the two end cells share no node, touching no node near an earlier
-    flip of this call. A
-    flipped beam keeps its node ids, is centred where it was, turned to run from one former cell
-    towards the other, and is ``lengths[beam]`` long (m). Returns the grid (same nodes, new cells),
+    flip of this call. A flipped beam keeps its node ids, is centred where it was, turned to run
+    from one former cell towards the other, and is ``lengths[beam]`` long (m). Returns the grid (same nodes, new cells),
     the number flipped and the ids of the flipped beams in the new grid."""
     edges = polymesh.edges
     n = polymesh.n_nodes
-    faces = [list(map(int, f)) for f in polymesh.faces]
-    node_faces: list[list[int]] = [[] for _ in range(n)]
-    for i, f in enumerate(faces):
-        for v in f:
-            node_faces[v].append(i)
+    faces, node_faces = _cells_at_nodes(polymesh)
     valence = np.bincount(edges.ravel(), minlength=n)
     free = ~(polymesh.boundary | polymesh.supports | polymesh.corners) & (valence == 3)
     x = np.array(polymesh.nodes, dtype=float)

@@ -483,8 +483,12 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
 
     groups = _groups(polymesh.faces)
     x0 = x.copy()
-    # the remeshed cells' areas: the grading (None: each cell's current area)
-    areas0 = {k: cell_areas(x0[f]) if settings.keep_grading else None for k, f in groups.items()}
+
+    def given_areas(groups: dict[int, np.ndarray]) -> dict[int, np.ndarray | None]:
+        """The cells' areas in the grid as given: the grading (None: each cell's current area)."""
+        return {k: cell_areas(x0[f]) if settings.keep_grading else None for k, f in groups.items()}
+
+    areas0 = given_areas(groups)
     C = _centering(groups, n)
     neighbours = _neighbour_mean(polymesh.edges, n)
     shape, plan = _schedule(settings)
@@ -600,9 +604,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
                                          min_beam_length=settings.min_beam_length,
                                          min_angle_deg=settings.min_corner_angle_deg)
 
-        def regular(x: np.ndarray, groups: dict = groups) -> np.ndarray:
-            return _stack(groups, {k: regular_targets(x[faces], settings.max_cell_stretch,
-                                                      cell_areas(x0[faces]) if settings.keep_grading else None)
+        def regular(x: np.ndarray, groups: dict = groups, areas: dict = given_areas(groups)) -> np.ndarray:
+            return _stack(groups, {k: regular_targets(x[faces], settings.max_cell_stretch, areas[k])
                                    for k, faces in groups.items()})
 
         def said(steps: int, base: int = end["steps"]) -> None:

@@ -32,7 +32,11 @@ def face_corners(faces) -> np.ndarray:
 
 def corner_angles(x: np.ndarray, corners: np.ndarray) -> np.ndarray:
     """(c,) angle at node o of each (a, o, b) row of ``corners`` between o->a and o->b, rad."""
-    u, v = x[corners[:, 0]] - x[corners[:, 1]], x[corners[:, 2]] - x[corners[:, 1]]
+    return _angles(x[corners[:, 0]] - x[corners[:, 1]], x[corners[:, 2]] - x[corners[:, 1]])
+
+
+def _angles(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(c,) angles between the rows of u and v (c,3), rad."""
     return np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.einsum("ij,ij->i", u, v))
 
 
@@ -107,7 +111,7 @@ def open_narrow_corners(x: np.ndarray, corners: np.ndarray, minimum: float, mova
     def measure(x: np.ndarray):
         u, v = x[a] - x[o], x[b] - x[o]
         lu, lv = np.linalg.norm(u, axis=1), np.linalg.norm(v, axis=1)
-        angle = corner_angles(x, corners)
+        angle = _angles(u, v)
         return u, v, lu, lv, np.where(free & (lu > 0) & (lv > 0), np.maximum(minimum - angle, 0.0), 0.0)
 
     def move(x: np.ndarray) -> np.ndarray:

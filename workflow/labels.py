@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["LABELS", "label_of", "format_value", "figure_rows", "column_label"]
+__all__ = ["LABELS", "label_of", "in_unit", "format_value", "figure_rows", "column_label"]
 
 #: key -> (label, unit, factor from the stored value to the unit)
 LABELS: dict[str, tuple[str, str, float]] = {
@@ -155,9 +155,14 @@ def figure_rows(values: dict, keys: tuple[str, ...] | None = None) -> list[list]
     for key in keys if keys is not None else tuple(values):
         if key not in values or isinstance(values[key], (dict, list)):
             continue
-        label, unit, factor = label_of(key)
-        value = values[key]
-        if isinstance(value, (int, float)) and not isinstance(value, bool) and factor != 1.0:
-            value = float(value) * factor
-        rows.append([label, value, unit])
+        label, unit, _ = label_of(key)
+        rows.append([label, in_unit(key, values[key]), unit])
     return rows
+
+
+def in_unit(key: str, value):
+    """A JSON figure's value in the unit label_of gives it (numbers scaled, anything else as is)."""
+    factor = label_of(key)[2]
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and factor != 1.0:
+        return float(value) * factor
+    return value

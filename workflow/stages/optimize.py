@@ -59,7 +59,7 @@ def beam_length_limits(project: Project):
 
 
 def run(ctx):
-    optimize, optimize_quality = require("optimize", "engine.optimize", "optimize", "optimize_quality")
+    optimize = require("optimize", "engine.optimize", "optimize")
     project: Project = ctx.project
     surface = ctx.result("surface")
     field = ctx.result("field")
@@ -69,6 +69,7 @@ def run(ctx):
     limits = beam_length_limits(project)
     result = optimize(polymesh, surface.mesh, field, settings, progress=ctx.step, beam_length_limits=limits)
     grading_kept, share_kept = True, short_share(result.polymesh, project)
+    share = share_kept
     if share_kept > GRADED_SHORT_SHARE:
         # the field's smallest cells are too small for the joints: let the sizes even out, and keep
         # whichever grid leaves fewer beams short (a finding says what it cost)
@@ -76,9 +77,11 @@ def run(ctx):
                  "optimising with the sizes evened out")
         even = optimize(polymesh, surface.mesh, field, dataclasses.replace(settings, keep_grading=False),
                         progress=ctx.step, beam_length_limits=limits)
-        if short_share(even.polymesh, project) < share_kept:
+        share_even = short_share(even.polymesh, project)
+        if share_even < share_kept:
             result, grading_kept, settings = even, False, dataclasses.replace(settings, keep_grading=False)
-    if short_share(result.polymesh, project) > MAX_COLLAPSE_SHARE:
+            share = share_even
+    if share > MAX_COLLAPSE_SHARE:
         # too fine for its joints even when held to their lengths, which then unmake the cells:
         # optimised free of them instead (the grid_too_fine finding below says so)
         ctx.step("the grid is too fine for its joints: optimising without their lengths")
@@ -92,28 +95,27 @@ def run(ctx):
     def changed(record: dict) -> int:
         return record["collapsed_beams"] + record["flipped_beams"]
 
-    while changed(buildable) and rounds < BUILDABLE_ROUNDS:
-        rounds += 1
-        ctx.step(f"{buildable['collapsed_beams']} short beams collapsed, {buildable['flipped_beams']} flipped: "
-                 f"optimising again ({rounds})")
+    def reoptimised(result, grid, record: dict, when: str):
+        """``result`` with ``grid`` (after ``record``'s collapses and flips) optimised again."""
+        ctx.step(f"{record['collapsed_beams']} short beams collapsed, {record['flipped_beams']} flipped: "
+                 f"optimising {when}")
         again = optimize(grid, surface.mesh, field, dataclasses.replace(settings, split_cells=False),
                          progress=ctx.step, beam_length_limits=limits)
-        result = dataclasses.replace(result, polymesh=again.polymesh,
-                                     quality={**again.quality, "before": result.quality["before"]})
-        grid, buildable = buildable_grid(again.polymesh, project)
+        return dataclasses.replace(result, polymesh=again.polymesh,
+                                   quality={**again.quality, "before": result.quality["before"]})
+
+    while changed(buildable) and rounds < BUILDABLE_ROUNDS:
+        rounds += 1
+        result = reoptimised(result, grid, buildable, f"again ({rounds})")
+        grid, buildable = buildable_grid(result.polymesh, project)
         collapsed += buildable["collapsed_beams"]
         flipped += buildable["flipped_beams"]
     if changed(buildable):
         # the last collapses or flips: optimised once more (their nodes and corners held to the
         # limits), and what is short after that is reported, not collapsed again
         rounds += 1
-        ctx.step(f"{buildable['collapsed_beams']} short beams collapsed, {buildable['flipped_beams']} flipped: "
-                 "optimising a last time")
-        again = optimize(grid, surface.mesh, field, dataclasses.replace(settings, split_cells=False),
-                         progress=ctx.step, beam_length_limits=limits)
-        result = dataclasses.replace(result, polymesh=again.polymesh,
-                                     quality={**again.quality, "before": result.quality["before"]})
-        buildable.update({**grid_figures(again.polymesh), "short_beams_left": short_count(again.polymesh, project)})
+        result = reoptimised(result, grid, buildable, "a last time")
+        buildable.update({**grid_figures(result.polymesh), "short_beams_left": short_count(result.polymesh, project)})
     buildable.update({"collapsed_beams": collapsed, "flipped_beams": flipped, "reoptimised": rounds,
                       "grading_kept": grading_kept, "short_share_at_grading": share_kept})
     if buildable["too_fine"]:

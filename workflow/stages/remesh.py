@@ -82,7 +82,7 @@ def buildable_grid(polymesh, project: Project, share: float = 1.0):
     from .fabrication import build_limits_of
 
     limits = build_limits_of(project)
-    short = polymesh.beam_lengths < required_beam_lengths_m(polymesh, limits)
+    short = short_beams(polymesh, project)
     too_fine = bool(short.mean() > MAX_COLLAPSE_SHARE) if len(short) else False
     if too_fine:
         grid, report = polymesh, CollapseReport(collapsed=0, passes=0, left=np.flatnonzero(short))
@@ -103,15 +103,18 @@ def grid_figures(grid) -> dict:
             "smallest_beam_angle_deg": float(np.degrees(node_smallest_angles(grid).min()))}
 
 
-def short_count(polymesh, project: Project) -> int:
-    """Beams of ``polymesh`` shorter than their joints and the shortest cut take."""
+def short_beams(polymesh, project: Project) -> np.ndarray:
+    """(n_beams,) whether each beam of ``polymesh`` is shorter than its joints and the shortest cut take."""
     from fabrication.limits import required_beam_lengths_m
 
     from .fabrication import build_limits_of
 
-    if not len(polymesh.edges):
-        return 0
-    return int((polymesh.beam_lengths < required_beam_lengths_m(polymesh, build_limits_of(project))).sum())
+    return polymesh.beam_lengths < required_beam_lengths_m(polymesh, build_limits_of(project))
+
+
+def short_count(polymesh, project: Project) -> int:
+    """Beams of ``polymesh`` shorter than their joints and the shortest cut take."""
+    return int(short_beams(polymesh, project).sum())
 
 
 def short_share(polymesh, project: Project) -> float:

@@ -17,7 +17,7 @@ from engine.findings import findings_table
 from fabrication.files import atomic_path, write_bytes_atomic, write_text_atomic
 
 from ..config import Project
-from ..labels import column_label, figure_rows, label_of
+from ..labels import column_label, figure_rows, in_unit, label_of
 from ..report import Figure, Section, Table, Viewer, figure_from_file, render_report
 
 __all__ = ["run", "load", "published"]
@@ -170,9 +170,8 @@ def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
     rows = []
     for key in (*GRID_KEYS, *OPTIMIZE_KEYS):
         if key in after and not isinstance(after[key], (dict, list)):
-            label, unit, factor = label_of(key)
-            scale = (lambda v: v if not isinstance(v, float) else v * factor) if factor != 1.0 else (lambda v: v)
-            rows.append([label, unit, scale(before.get(key)), scale(after[key])])
+            label, unit, _ = label_of(key)
+            rows.append([label, unit, in_unit(key, before.get(key)), in_unit(key, after[key])])
     sections.append(Section(title="5. Regular cells, planar panels", figures=_figures(out_dir, "optimize"),
                             tables=[Table(name="optimize", caption="Before and after the optimisation",
                                           columns=["figure", "unit", "remeshed", "optimised"], rows=rows)] if rows else []))
