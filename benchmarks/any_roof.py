@@ -45,7 +45,7 @@ TEMPLATES = ("mockup", "cap", "vault", "hypar", "courtyard")
 STAGES = ("surface", "shell", "field", "remesh", "optimize", "analysis", "fabrication", "report")
 REAL_SURFACES = Path(os.environ.get("GRIDSHELL_SURFACES", ROOT.parent / "shared" / "data" / "surfaces"))
 SHORT_CHECK = {"nonlinear": "NL", "non-linear": "NL", "utilisation": "util", "deflection": "defl", "buckling": "LB"}
-COLUMNS = ("name", "source", "cells", *STAGES, "total_s", "shortest_beam_mm", "shortest_cut_mm", "cut_min_mm",
+COLUMNS = ("name", "source", "cells", "built", *STAGES, "total_s", "shortest_beam_mm", "shortest_cut_mm", "cut_min_mm",
            "joint_clashes", "findings", "findings_by_kind", "verdict", "failed_checks", "report_html", "status",
            "error", "out")
 
@@ -231,14 +231,18 @@ def _verdict(analysis: dict | None) -> tuple[str, str]:
     return "FAIL " + ",".join(short), "; ".join(f"{v.get('check')}: {v.get('value')} vs {v.get('limit')}" for v in failed)
 
 
-def _findings(fabrication: dict | None) -> tuple[object, str]:
-    if fabrication is None or not isinstance(fabrication.get("findings"), list):
+def _findings(stages: dict) -> tuple[object, str]:
+    """The count and kinds of the geometry and fabrication findings (the manifest's, of every stage
+    but the analysis, whose failing checks are the verdict column)."""
+    if "fabrication" not in stages:
         return "-", "-"
+    findings = [f for name, stage in stages.items() if name != "analysis"
+                for f in (stage.get("findings") or []) if isinstance(f, dict)]
     counts: dict[str, int] = {}
-    for finding in fabrication["findings"]:
-        kind = str(finding.get("kind", "?")) if isinstance(finding, dict) else "?"
+    for finding in findings:
+        kind = str(finding.get("kind", "?"))
         counts[kind] = counts.get(kind, 0) + 1
-    return len(fabrication["findings"]), ",".join(f"{k}:{n}" for k, n in sorted(counts.items())) or "0"
+    return len(findings), ",".join(f"{k}:{n}" for k, n in sorted(counts.items())) or "0"
 
 
 def _clashes(fabrication: dict | None) -> object:
@@ -308,6 +312,7 @@ def run_one(case: Case, cells: int, out: Path, timeout: float, min_cut_mm: float
     if not isinstance(shortest, (int, float)):
         shortest = _shortest_obj_edge_m(run_dir / "05-optimize" / "gridshell.obj")
     v["shortest_beam_mm"] = "-" if shortest is None else round(1000.0 * shortest, 1)
+    v["built"] = ((optimize or {}).get("after") or {}).get("n_faces", "-")
 
     stage_message = str(stages.get(problem, {}).get("message", "")) if problem else ""
     error = _last_line(stderr) or stage_message
@@ -321,7 +326,7 @@ def run_one(case: Case, cells: int, out: Path, timeout: float, min_cut_mm: float
     v["cut_min_mm"] = "-" if minimum is None else round(float(minimum), 1)
     v["_cut_under"] = joints_eat_beam or (cut is not None and minimum is not None and cut < minimum)
     v["joint_clashes"] = _clashes(fabrication)
-    v["findings"], v["findings_by_kind"] = _findings(fabrication)
+    v["findings"], v["findings_by_kind"] = _findings(stages)
     v["verdict"], v["failed_checks"] = _verdict(_read_json(run_dir / "06-analysis" / "analysis.json"))
     v["report_html"] = "yes" if (run_dir / "report.html").is_file() else "no"
 
@@ -351,7 +356,7 @@ def _cell(value) -> str:
     return "-" if value is None else str(value)
 
 
-TABLE = (("name", "name"), ("cells", "cells"), *((s, s[:5] if s != "fabrication" else "fabr") for s in STAGES),
+TABLE = (("name", "name"), ("cells", "cells"), ("built", "built"), *((s, s[:5] if s != "fabrication" else "fabr") for s in STAGES),
          ("total_s", "total"), ("shortest_beam_mm", "beam_mm"), ("shortest_cut_mm", "cut_mm"),
          ("joint_clashes", "clash"), ("findings_by_kind", "findings"), ("verdict", "verdict"),
          ("report_html", "html"), ("status", "status"), ("error", "error"))

@@ -104,15 +104,18 @@ def test_small_mockup_reaches_the_report_with_its_findings_reported(small_run):
 
 
 def test_joints_too_big_for_the_grid_are_a_finding_not_a_collapsed_grid(tmp_path):
-    """A minimum cut of 1 m on a 2.4 m mock-up: nearly every beam is too short; the grid is kept as
-    remeshed (no collapse into a few cells) and the optimize stage says the grid is too fine."""
+    """A minimum cut of 1 m on a 2.4 m mock-up, with the cells asked for kept: nearly every beam is
+    too short; the grid is kept as remeshed (no collapse into a few cells) and the optimize stage
+    says the grid is too fine."""
     from workflow.progress import Progress
     from workflow.runner import run_project
     from workflow.stages import STAGES
 
     project = small_project()
-    project = project.model_copy(update={"fabrication": project.fabrication.model_copy(update={
-        "beams": project.fabrication.beams.model_copy(update={"min_cut_length": 1.0})})})
+    project = project.model_copy(update={
+        "fabrication": project.fabrication.model_copy(update={
+            "beams": project.fabrication.beams.model_copy(update={"min_cut_length": 1.0})}),
+        "remesh": project.remesh.model_copy(update={"coarsen_for_joints": False})})
     out = tmp_path / "out"
     summary = run_project(project, out, STAGES, until="optimize", progress=Progress(enabled=False))
     remesh = json.loads((out / "04-remesh" / "remesh.json").read_text())
@@ -126,6 +129,41 @@ def test_joints_too_big_for_the_grid_are_a_finding_not_a_collapsed_grid(tmp_path
     summary = run_project(project, out, STAGES, progress=Progress(enabled=False))
     page = (out / "report.html").read_text(encoding="utf-8")
     assert "grid too fine" in page and page.index("grid too fine") < page.index("Verdicts")
+
+
+def test_a_grid_too_fine_for_its_joints_is_remeshed_with_fewer_cells(tmp_path):
+    """The hypar template (10 m span, steel nodes) at 300 cells: most beams would be shorter than
+    their joints take. The remesh takes fewer cells, says so in a finding naming the key that keeps
+    the count, and leaves at most COARSEN_SHARE of the beams short, counted here from the OBJ
+    read back against the joints' own lengths; the optimiser then builds it (no grid_too_fine)."""
+    from importlib import resources
+
+    from fabrication.limits import required_beam_lengths_m
+    from workflow.config import load_project
+    from workflow.progress import Progress
+    from workflow.runner import run_project
+    from workflow.stages import STAGES
+    from workflow.stages.fabrication import build_limits_of
+    from workflow.stages.polymesh_io import read_polymesh_obj
+    from workflow.stages.remesh import COARSEN_SHARE
+
+    project = load_project(resources.files("templates") / "hypar.toml")
+    project = project.model_copy(update={"remesh": project.remesh.model_copy(update={"n_cells": 300})})
+    out = tmp_path / "out"
+    summary = run_project(project, out, STAGES, until="optimize", progress=Progress(enabled=False))
+    remesh = json.loads((out / "04-remesh" / "remesh.json").read_text())
+    grid = read_polymesh_obj(out / "04-remesh" / "gridshell.obj")
+    assert remesh["coarsened"]["cells_asked"] == 300 and remesh["coarsened"]["remeshes"] >= 1
+    assert 12 < grid.n_faces < 300
+    short = grid.beam_lengths < required_beam_lengths_m(grid, build_limits_of(project))
+    assert short.mean() <= COARSEN_SHARE
+    kinds = [f["kind"] for f in summary.findings]
+    assert "grid_coarsened" in kinds and "grid_too_fine" not in kinds
+    coarsened = next(f for f in summary.findings if f["kind"] == "grid_coarsened")
+    assert coarsened["limit"] == 300 and coarsened["measure"] == grid.n_faces
+    assert "[remesh] coarsen_for_joints" in coarsened["fix"]
+    optimize = json.loads((out / "05-optimize" / "optimize.json").read_text())
+    assert not optimize["buildable"]["too_fine"]
 
 
 def test_a_panel_larger_than_every_sheet_is_a_finding_with_its_dxf(tmp_path):

@@ -260,13 +260,16 @@ class FieldConfig(_Section):
 class RemeshConfig(_Section):
     """Size target: one of n_cells, mean_beam_length, total_length (default 120 cells).
     lloyd_iterations caps the Lloyd steps between clusterings at each level (the remesher takes at
-    most 20 at its coarsest level and 3 at finer ones; 0: the clustering of the initial lattice)."""
+    most 20 at its coarsest level and 3 at finer ones; 0: the clustering of the initial lattice).
+    coarsen_for_joints: remesh with fewer cells when most beams are shorter than their joints take
+    (a grid_coarsened finding says so); false keeps the cells asked for, and the joints clash."""
 
     n_cells: int | None = Field(None, ge=4)
     mean_beam_length: Length | None = None
     total_length: Length | None = None
     lloyd_iterations: int = Field(80, ge=0)
     seed: int = 0
+    coarsen_for_joints: bool = True
 
     @model_validator(mode="after")
     def _one_target(self) -> "RemeshConfig":

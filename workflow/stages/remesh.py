@@ -6,7 +6,9 @@ figures) and pictures coloured by face degree.
 
 from __future__ import annotations
 
+import dataclasses
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -39,8 +41,18 @@ def run(ctx):
     field = ctx.result("field")
     support_vertices = np.zeros(surface.mesh.n_vertices, dtype=bool)
     support_vertices[surface.supports.nodes] = True
-    result = remesh(surface.mesh, field, remesh_settings(project), support_vertices=support_vertices,
-                    progress=ctx.step)
+    settings = remesh_settings(project)
+    result = remesh(surface.mesh, field, settings, support_vertices=support_vertices, progress=ctx.step)
+    asked, remeshes = settings.n_cells or result.polymesh.n_faces, 0
+    if project.remesh.coarsen_for_joints:
+        result, remeshes = fitted_to_joints(
+            result, project,
+            lambda n: remesh(surface.mesh, field, dataclasses.replace(settings, n_cells=n, mean_beam_length=None,
+                                                                      total_length=None),
+                             support_vertices=support_vertices, progress=ctx.step),
+            progress=ctx.step)
+    if remeshes:
+        ctx.report_findings([coarsened_finding(asked, result, project)])
     ctx.step("collapsing beams far shorter than the joints and the shortest cut take")
     polymesh, buildable = buildable_grid(result.polymesh, project, share=REMESH_SHARE)
     write_polymesh_obj(polymesh, ctx.folder / "gridshell.obj",
@@ -52,6 +64,7 @@ def run(ctx):
         polymesh_quality = require("remesh", "engine.voronoi", "polymesh_quality")
         quality.update(polymesh_quality(polymesh, mesh=surface.mesh, field=field))
     quality["buildable"] = buildable
+    quality["coarsened"] = {"cells_asked": int(asked), "cells_built": int(polymesh.n_faces), "remeshes": remeshes}
     quality.update({"max_size_ratio_D": project.field.max_size_ratio, "max_aspect_A": project.field.max_aspect})
     write_text_atomic(ctx.folder / "remesh.json", json.dumps(quality, indent=1, default=float))
     ctx.step("drawing")
@@ -68,6 +81,56 @@ REMESH_SHARE = 0.5
 #: Collapse short beams only while they are at most this share of the grid: beyond it the joints
 #: are too big for the grid, and collapsing would unmake it (a finding says so instead).
 MAX_COLLAPSE_SHARE = 0.2
+
+
+#: Remesh with fewer cells while more than this share of the beams is shorter than its joints take:
+#: the optimiser makes buildable grids of up to about a third short beams (the hypar at 60 cells,
+#: 33 %), not of two thirds (a wave at 300 cells, 64 %).
+COARSEN_SHARE = 0.3
+#: ... aiming at this share (the cell count from the beams' length to required-length ratios).
+COARSEN_TARGET = 0.25
+#: The most remeshes with fewer cells.
+COARSEN_ATTEMPTS = 4
+
+
+def fitted_to_joints(result, project: Project, remesh_with: Callable[[int], object],
+                     progress: Callable[[str], None] | None = None):
+    """(result, remeshes): ``result``, or the remesh with fewer cells (``remesh_with(n_cells)``) when more than
+    COARSEN_SHARE of its beams are shorter than their joints and the shortest cut take. The count
+    scales the beams by the ratio that leaves COARSEN_TARGET of them short (beam lengths go as
+    1/sqrt(cells)); at most COARSEN_ATTEMPTS remeshes, each with at most 90 % of the cells before."""
+    from fabrication.limits import required_beam_lengths_m
+
+    from .fabrication import build_limits_of
+
+    limits = build_limits_of(project)
+    remeshes = 0
+    for _ in range(COARSEN_ATTEMPTS):
+        grid = result.polymesh
+        ratio = required_beam_lengths_m(grid, limits) / np.maximum(grid.beam_lengths, 1e-12)
+        if not len(ratio) or np.mean(ratio > 1.0) <= COARSEN_SHARE:
+            break
+        scale = float(np.quantile(ratio, 1.0 - COARSEN_TARGET))
+        n_cells = max(4, min(int(grid.n_faces / scale ** 2), int(0.9 * grid.n_faces)))
+        if progress is not None:
+            progress(f"{100 * np.mean(ratio > 1.0):.0f} % of the beams shorter than their joints take: "
+                     f"remeshing with {n_cells} cells")
+        result, remeshes = remesh_with(n_cells), remeshes + 1
+    return result, remeshes
+
+
+def coarsened_finding(asked: int, result, project: Project) -> dict:
+    """The finding that the grid has fewer cells than asked, so that its joints fit (JSON-ready)."""
+    from engine.findings import Finding
+
+    built = result.polymesh.n_faces
+    return Finding(kind="grid_coarsened", parts=["grid"], measure=built, limit=asked, unit="cells",
+                   stage="remesh",
+                   message=(f"remeshed with {built} cells instead of {asked}: at {asked} cells most beams were "
+                            "shorter than their joints and the shortest cut take"),
+                   fix="smaller joints ([fabrication.joints] kind, hub_radius, sleeve_length) or a smaller tube "
+                       "([section] diameter) for more cells; [remesh] coarsen_for_joints = false keeps the "
+                       "cells asked for, with joints that clash").to_dict()
 
 
 def buildable_grid(polymesh, project: Project, share: float = 1.0):
