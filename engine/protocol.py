@@ -10,13 +10,15 @@ amplitude eps, both signs. The lowest lambda_NL is the worst imperfection.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from concurrent.futures import Executor
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .supports import Supports
 
-__all__ = ["ImperfectionCase", "ProtocolSettings", "ProtocolResult", "imperfection_shapes", "run_protocol"]
+__all__ = ["ImperfectionCase", "ProtocolSettings", "ProtocolResult", "imperfection_shapes", "nonlinear_path", "run_protocol"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -120,13 +122,47 @@ def imperfection_shapes(settings: ProtocolSettings, sls_displacements: np.ndarra
     return out
 
 
-def run_protocol(model, supports: Supports, sls_loads: np.ndarray, uls_loads: np.ndarray,
-                 settings: ProtocolSettings, *, progress=None) -> ProtocolResult:
-    """Run LS (SLS and ULS), LB and GNL with imperfections on a frame model (engine.frame)."""
-    from dataclasses import replace
+class _Deferred:
+    """A call run when its result is first asked for: the in-process stand-in for a pool's future,
+    so that without a pool the paths run one after another, each when it is awaited."""
 
+    def __init__(self, function: Callable, args: tuple) -> None:
+        self._call, self._value = (function, args), None
+
+    def result(self):
+        if self._call is not None:
+            function, args = self._call
+            self._value, self._call = function(*args), None
+        return self._value
+
+
+def _submit(executor: Executor | None, function: Callable, *args):
+    return _Deferred(function, args) if executor is None else executor.submit(function, *args)
+
+
+def nonlinear_path(model, supports: Supports, loads: np.ndarray, control_node: int, settings: ProtocolSettings,
+                   name: str) -> tuple[ImperfectionCase, np.ndarray]:
+    """One GNL path of ``model`` (its nodes as given: perfect or imperfect) under ``loads`` with
+    arc-length control of ``control_node``'s vertical displacement: the case and the displacements
+    at its end (n, 6). A module-level function, so that a process pool can run it."""
+    from .frame import nonlinear_static
+
+    run = nonlinear_static(model, supports, loads, control=(control_node, 2),
+                           max_load_factor=settings.max_load_factor, max_steps=settings.max_steps)
+    return (ImperfectionCase(name=name, limit_load_factor=run.limit_load_factor, path=np.asarray(run.path),
+                             negative_pivots=getattr(run, "negative_pivots", None),
+                             converged=bool(getattr(run, "converged", True))), run.displacements)
+
+
+def run_protocol(model, supports: Supports, sls_loads: np.ndarray, uls_loads: np.ndarray,
+                 settings: ProtocolSettings, *, progress=None, executor: Executor | None = None) -> ProtocolResult:
+    """Run LS (SLS and ULS), LB and GNL with imperfections on a frame model (engine.frame).
+
+    ``executor`` (e.g. a process pool) runs the GNL paths side by side: the perfect path and the
+    imperfections that do not need its shape at once, the GNL-shape imperfections after it; the
+    results are the same, in the same order, as without one."""
     from .errors import ConvergenceError
-    from .frame import BucklingResult, linear_buckling, linear_static, nonlinear_static
+    from .frame import BucklingResult, linear_buckling, linear_static
 
     def say(text: str, fraction: float | None = None) -> None:
         if progress is not None:
@@ -148,20 +184,23 @@ def run_protocol(model, supports: Supports, sls_loads: np.ndarray, uls_loads: np
     perfect = None
     imperfect: list[ImperfectionCase] = []
     if settings.nonlinear:
-        def gnl(nodes: np.ndarray, name: str) -> tuple[ImperfectionCase, np.ndarray]:
-            run = nonlinear_static(replace(model, nodes=nodes), supports, uls_loads, control=(control_node, 2),
-                                   max_load_factor=settings.max_load_factor, max_steps=settings.max_steps)
-            return (ImperfectionCase(name=name, limit_load_factor=run.limit_load_factor, path=np.asarray(run.path),
-                                     negative_pivots=getattr(run, "negative_pivots", None),
-                                     converged=bool(getattr(run, "converged", True))), run.displacements)
+        nodes = np.asarray(model.nodes)
 
+        def path(offset: np.ndarray | None, name: str):
+            shaped = model if offset is None else replace(model, nodes=nodes + offset)
+            return _submit(executor, nonlinear_path, shaped, supports, uls_loads, control_node, settings, name)
+
+        first = replace(settings, shapes=tuple(s for s in settings.shapes if s != "nonlinear"))
+        paths = {"perfect": path(None, "perfect")}
+        paths.update({name: path(offset, name)
+                      for name, offset in imperfection_shapes(first, sls.displacements, None, buckling.modes).items()})
         say("non-linear, perfect")
-        perfect, gnl_shape = gnl(np.asarray(model.nodes), "perfect")
+        perfect, gnl_shape = paths["perfect"].result()
         shapes = imperfection_shapes(settings, sls.displacements, gnl_shape, buckling.modes)
-        for i, (name, offset) in enumerate(shapes.items()):
+        paths.update({name: path(offset, name) for name, offset in shapes.items() if name not in paths})
+        for i, name in enumerate(shapes):
             say(f"non-linear, imperfection {name}", (i + 1) / max(len(shapes), 1))
-            case, _ = gnl(np.asarray(model.nodes) + offset, name)
-            imperfect.append(case)
+            imperfect.append(paths[name].result()[0])
     return ProtocolResult(sls_displacements=sls.displacements, uls_displacements=uls.displacements,
                           uls_beam_end_forces=uls.beam_end_forces, uls_reactions=uls.reactions,
                           equilibrium_error=float(uls.equilibrium_error),

@@ -711,3 +711,27 @@ def test_star_dome_linear_deflection_and_limit_load():
     assert run.limit_load_factor * P == pytest.approx(_star_dome_symmetric_limit(E_psi, A_in2), rel=1e-3)
     assert run.limit_load_factor < 0.7
     assert run.negative_pivots[-1] == 1, "a limit point: one negative pivot past it"
+
+
+def test_protocol_paths_side_by_side_give_the_paths_one_after_another():
+    """The protocol on Lee's frame with its non-linear paths in a two-process pool: the perfect
+    limit load is the published one (18.5 EI / L^2), and every imperfect path has the same name,
+    order, limit and path as when the paths run one after another in this process."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from engine.protocol import ProtocolSettings, run_protocol
+
+    model, supports, loaded = _lee_frame()
+    loads = np.zeros((len(model.nodes), 6))
+    loads[loaded, 2] = -1.0
+    settings = ProtocolSettings(n_modes=3, amplitude=0.5, max_load_factor=5.0, max_steps=150)
+    alone = run_protocol(model, supports, loads, loads, settings)
+    with ProcessPoolExecutor(max_workers=2) as pool:
+        pooled = run_protocol(model, supports, loads, loads, settings, executor=pool)
+    assert alone.perfect.limit_load_factor * 120.0**2 / (720.0 * 2.0) == pytest.approx(18.5, rel=0.02)
+    assert [c.name for c in pooled.imperfect] == [c.name for c in alone.imperfect]
+    assert len(alone.imperfect) == 10
+    for a, b in zip(alone.imperfect, pooled.imperfect):
+        assert a.limit_load_factor == b.limit_load_factor
+        np.testing.assert_array_equal(a.path, b.path)
+    assert pooled.perfect.limit_load_factor == alone.perfect.limit_load_factor

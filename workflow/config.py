@@ -302,7 +302,8 @@ class OptimizeConfig(_Section):
 
 
 class AnalysisConfig(_Section):
-    """Beam grid-shell analysis (METHOD.md 5). imperfection_amplitude None: L/300 of the shorter plan side."""
+    """Beam grid-shell analysis (METHOD.md 5). imperfection_amplitude None: L/300 of the shorter plan side.
+    workers: processes that run the non-linear paths side by side (default: one per core)."""
 
     elements_per_beam: int = Field(4, ge=1, le=20)
     n_modes: int = Field(6, ge=1, le=50)
@@ -317,6 +318,7 @@ class AnalysisConfig(_Section):
     uls_combination: str | None = None
     sls_combination: str | None = None
     control_points: dict[str, list[Length]] = Field(default_factory=dict)
+    workers: int | None = Field(None, ge=1)
 
 
 class JointsConfig(_Section):

@@ -10,6 +10,8 @@ table), members.csv, response.csv and pictures (response, modes, utilisation, ax
 from __future__ import annotations
 
 import json
+import os
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -86,6 +88,23 @@ def build_frame(polymesh, surface, props: BeamProperties, elements_per_beam: int
     return model, Supports(nodes=nodes, restraints=flags), normals
 
 
+@contextmanager
+def path_pool(workers: int | None):
+    """A process pool of ``workers`` (default: one per core) for the non-linear paths, or None
+    with one worker (the paths then run here, one after another). Its workers end with this
+    process (fabrication.workers)."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from fabrication.workers import exit_with_parent
+
+    count = workers or os.cpu_count() or 1
+    if count < 2:
+        yield None
+        return
+    with ProcessPoolExecutor(max_workers=count, initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
+        yield pool
+
+
 def _plan_span(polymesh) -> float:
     extent = np.ptp(polymesh.nodes[:, :2], axis=0)
     return float(extent.min())
@@ -110,7 +129,8 @@ def run(ctx):
     amplitude = config.imperfection_amplitude or span / 300.0
     settings = ProtocolSettings(n_modes=config.n_modes, amplitude=amplitude, shapes=tuple(config.imperfection_shapes),
                                 nonlinear=config.nonlinear, max_load_factor=config.max_load_factor)
-    result = run_protocol(model, supports, sls_loads, uls_loads, settings, progress=ctx.step)
+    with path_pool(config.workers if config.nonlinear else 1) as pool:
+        result = run_protocol(model, supports, sls_loads, uls_loads, settings, progress=ctx.step, executor=pool)
     ctx.step("member checks")
     lengths = polymesh.beam_lengths
     checks = member_checks(result.uls_beam_end_forces, lengths, section, material,
