@@ -31,7 +31,8 @@ from engine.mesh import PolyMesh
 from fabrication.drawings import beam_id, node_id, panel_id
 from fabrication.files import atomic_path, write_text_atomic
 
-__all__ = ["AssemblyStep", "AssemblySequence", "plan_assembly", "write_assembly", "partial_frame_deflection"]
+__all__ = ["AssemblyStep", "AssemblySequence", "plan_assembly", "write_assembly", "partial_frame_deflection",
+           "step_groups", "step_image_name", "MAX_STEP_IMAGES"]
 
 GRAVITY = 9.81  # m/s^2
 CANDIDATES_PER_STEP = 4
@@ -331,13 +332,34 @@ def plan_assembly(polymesh: PolyMesh, support_nodes: np.ndarray, beam: dict, *, 
 
 # ----------------------------------------------------------------------------- files
 
+#: The most step images: beyond it each image shows as many consecutive steps as it takes.
+MAX_STEP_IMAGES = 100
+
+
+def step_groups(n_steps: int, max_images: int | None = MAX_STEP_IMAGES) -> list[range]:
+    """Consecutive steps (0-based) drawn together: one step per image, or, beyond ``max_images``
+    steps, ``max_images`` runs of consecutive steps whose lengths differ by at most one."""
+    count = n_steps if not max_images or n_steps <= max_images else max_images
+    bounds = np.linspace(0, n_steps, count + 1).round().astype(int)
+    return [range(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
+
+
+def step_image_name(group: range, n_steps: int, runs: bool = False) -> str:
+    """``step_007.png`` for one step, ``steps_101-115.png`` for a run of steps (``runs``: the
+    images show runs; 1-based, zero-padded to the digits of the last step, at least three)."""
+    width = max(3, len(str(n_steps)))
+    first, last = group.start + 1, group.stop
+    return f"steps_{first:0{width}d}-{last:0{width}d}.png" if runs else f"step_{first:0{width}d}.png"
+
+
 def write_assembly(sequence: AssemblySequence, polymesh: PolyMesh, folder: str | os.PathLike, *,
-                   max_step_images: int | None = None) -> dict:
+                   max_step_images: int | None = MAX_STEP_IMAGES) -> dict:
     """Write ``folder/sequence.csv`` (step, parts, props, largest_deflection_mm),
-    ``folder/steps/step_001.png``... (plan: built dark, new red, props as markers) and
-    ``folder/steps_strip.png`` (up to 8 thumbnails). ``max_step_images``: draw only that many
-    evenly spread step images (None: all). Returns a summary dict: csv (path), steps,
-    props (N... ids of every node propped at some step), largest_deflection_mm."""
+    ``folder/steps/step_001.png``... (plan: built dark, new red, props as markers; beyond
+    ``max_step_images`` steps, one image per run of steps, ``steps_001-015.png``, see
+    step_groups; None: one per step) and ``folder/steps_strip.png`` (up to 8 thumbnails).
+    Returns a summary dict: csv (path), steps, step_images, props (N... ids of every node
+    propped at some step), largest_deflection_mm."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     buffer = io.StringIO()
@@ -350,19 +372,22 @@ def write_assembly(sequence: AssemblySequence, polymesh: PolyMesh, folder: str |
     csv_path = write_text_atomic(folder / "sequence.csv", buffer.getvalue())
 
     n = len(sequence.steps)
-    chosen = range(n) if max_step_images is None or max_step_images >= n else \
-        np.unique(np.linspace(0, n - 1, max_step_images).round().astype(int))
+    groups = step_groups(n, max_step_images)
     (folder / "steps").mkdir(exist_ok=True)
-    for k in chosen:
-        _step_image(sequence, polymesh, int(k), folder / "steps" / f"step_{k + 1:03d}.png")
+    canvas = _StepCanvas(sequence, polymesh)
+    runs = len(groups) < n
+    for group in groups:
+        canvas.save(group, folder / "steps" / step_image_name(group, n, runs))
     _strip(sequence, polymesh, folder / "steps_strip.png")
     finite = [s.largest_deflection_m for s in sequence.steps if np.isfinite(s.largest_deflection_m)]
-    return {"csv": str(csv_path), "steps": n, "props": [node_id(p) for p in sequence.props_used],
+    return {"csv": str(csv_path), "steps": n, "step_images": len(groups),
+            "props": [node_id(p) for p in sequence.props_used],
             "largest_deflection_mm": 1e3 * max(finite, default=0.0),
             "deflection_limit_mm": 1e3 * sequence.deflection_limit_m, "analyses": sequence.n_analyses}
 
 
-def _draw_state(ax, sequence: AssemblySequence, polymesh: PolyMesh, k: int, thumbnail: bool = False) -> None:
+def _draw_state(ax, sequence: AssemblySequence, polymesh: PolyMesh, k: int) -> None:
+    """Step ``k`` (0-based) on ``ax``: the strip's thumbnails."""
     from matplotlib.collections import LineCollection, PolyCollection
 
     plan = polymesh.nodes[:, :2]
@@ -380,37 +405,75 @@ def _draw_state(ax, sequence: AssemblySequence, polymesh: PolyMesh, k: int, thum
                                          edgecolors="none"))
     ax.add_collection(LineCollection(plan[edges], colors="0.88", linewidths=0.5))
     if before_beams:
-        ax.add_collection(LineCollection(plan[edges[before_beams]], colors="0.15",
-                                         linewidths=1.0 if thumbnail else 1.4))
-    ax.add_collection(LineCollection(plan[edges[step.beams]], colors="red", linewidths=1.6 if thumbnail else 2.4))
+        ax.add_collection(LineCollection(plan[edges[before_beams]], colors="0.15", linewidths=1.0))
+    ax.add_collection(LineCollection(plan[edges[step.beams]], colors="red", linewidths=1.6))
     s = sequence.support_nodes
-    ax.plot(plan[s, 0], plan[s, 1], "^", color="tab:blue", markersize=3 if thumbnail else 6, linestyle="none")
+    ax.plot(plan[s, 0], plan[s, 1], "^", color="tab:blue", markersize=3, linestyle="none")
     if step.props:
-        ax.plot(plan[step.props, 0], plan[step.props, 1], "X", color="darkorange",
-                markersize=5 if thumbnail else 10, linestyle="none")
+        ax.plot(plan[step.props, 0], plan[step.props, 1], "X", color="darkorange", markersize=5, linestyle="none")
+    _frame(ax, plan)
+    ax.set_title(f"step {step.step}", fontsize=8)
+
+
+def _frame(ax, plan: np.ndarray) -> None:
     lo, hi = plan.min(0), plan.max(0)
     pad = 0.04 * (hi - lo).max()
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
     ax.set_ylim(lo[1] - pad, hi[1] + pad)
-    if thumbnail:
-        ax.set_title(f"step {step.step}", fontsize=8)
-    else:
-        parts = [beam_id(b) for b in step.beams] + [panel_id(f) for f in step.panels]
-        text = ", ".join(parts[:12]) + (" ..." if len(parts) > 12 else "")
-        props = ", ".join(node_id(p) for p in step.props) or "none"
-        ax.set_title(f"Step {step.step} of {len(sequence.steps)}: {text}\nprops: {props} | "
-                     f"largest deflection {step.largest_deflection_m * 1e3:.2f} mm", fontsize=9)
 
 
-def _step_image(sequence: AssemblySequence, polymesh: PolyMesh, k: int, target: Path) -> None:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+class _StepCanvas:
+    """One figure for every step image: the grid and the supports drawn once, and per image only
+    what was built before (dark), what the steps add (red), the props and the title changed."""
 
-    fig = Figure(figsize=(6, 6))
-    FigureCanvasAgg(fig)
-    _draw_state(fig.add_axes((0.02, 0.02, 0.96, 0.86)), sequence, polymesh, k)
-    with atomic_path(target) as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
+    def __init__(self, sequence: AssemblySequence, polymesh: PolyMesh) -> None:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.collections import LineCollection, PolyCollection
+        from matplotlib.figure import Figure
+
+        self.sequence, self.polymesh = sequence, polymesh
+        self.plan = polymesh.nodes[:, :2]
+        self.figure = Figure(figsize=(6, 6))
+        FigureCanvasAgg(self.figure)
+        ax = self.figure.add_axes((0.02, 0.02, 0.96, 0.86))
+        ax.set_aspect("equal")
+        ax.axis("off")
+        self.built_panels = ax.add_collection(PolyCollection([], facecolors="0.8", edgecolors="none"))
+        self.new_panels = ax.add_collection(PolyCollection([], facecolors="#f4a6a6", edgecolors="none"))
+        ax.add_collection(LineCollection(self.plan[polymesh.edges], colors="0.88", linewidths=0.5))
+        self.built_beams = ax.add_collection(LineCollection([], colors="0.15", linewidths=1.4))
+        self.new_beams = ax.add_collection(LineCollection([], colors="red", linewidths=2.4))
+        s = sequence.support_nodes
+        ax.plot(self.plan[s, 0], self.plan[s, 1], "^", color="tab:blue", markersize=6, linestyle="none")
+        (self.props,) = ax.plot([], [], "X", color="darkorange", markersize=10, linestyle="none")
+        _frame(ax, self.plan)
+        self.ax = ax
+
+    def save(self, group: range, target: Path) -> None:
+        """Draw the steps of ``group`` (0-based, consecutive) and write them to ``target`` (PNG)."""
+        steps, mesh, plan = self.sequence.steps, self.polymesh, self.plan
+        before, added = steps[:group.start], steps[group.start:group.stop]
+        beams = lambda run: [b for s in run for b in s.beams]  # noqa: E731
+        panels = lambda run: [plan[mesh.faces[f]] for s in run for f in s.panels]  # noqa: E731
+        self.built_panels.set_verts(panels(before))
+        self.new_panels.set_verts(panels(added))
+        self.built_beams.set_segments(plan[mesh.edges[beams(before)]].reshape(-1, 2, 2))
+        self.new_beams.set_segments(plan[mesh.edges[beams(added)]].reshape(-1, 2, 2))
+        last = added[-1]
+        self.props.set_data(plan[last.props, 0], plan[last.props, 1])
+        if len(added) == 1:
+            parts = [beam_id(b) for b in last.beams] + [panel_id(f) for f in last.panels]
+            text = f"Step {last.step} of {len(steps)}: " + ", ".join(parts[:8]) + (" ..." if len(parts) > 8 else "")
+        else:  # the parts of each step are in sequence.csv
+            n_beams, n_panels = sum(len(s.beams) for s in added), sum(len(s.panels) for s in added)
+            text = f"Steps {added[0].step}-{last.step} of {len(steps)}: {n_beams} beams, {n_panels} panels"
+        shown = [node_id(p) for p in last.props]
+        props = ", ".join(shown[:6]) + (f" and {len(shown) - 6} more" if len(shown) > 6 else "") or "none"
+        deflection = max(s.largest_deflection_m for s in added)
+        self.ax.set_title(f"{text}\nprops: {props} | "
+                          f"largest deflection {deflection * 1e3:.2f} mm", fontsize=9)
+        with atomic_path(target) as tmp:
+            self.figure.savefig(tmp, dpi=100, format="png")
 
 
 def _strip(sequence: AssemblySequence, polymesh: PolyMesh, target: Path) -> None:
@@ -424,7 +487,7 @@ def _strip(sequence: AssemblySequence, polymesh: PolyMesh, target: Path) -> None
     fig = Figure(figsize=(3.3 * cols, 3.3 * rows + 0.4))
     FigureCanvasAgg(fig)
     for j, k in enumerate(picks):
-        _draw_state(fig.add_subplot(rows, cols, j + 1), sequence, polymesh, int(k), thumbnail=True)
+        _draw_state(fig.add_subplot(rows, cols, j + 1), sequence, polymesh, int(k))
     fig.suptitle(f"{len(picks)} of the {n} steps: built (dark), added in the step (red), supports (blue), "
                  "temporary props (orange)", fontsize=10)
     with atomic_path(target) as tmp:

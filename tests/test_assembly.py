@@ -11,7 +11,7 @@ import pytest
 
 from engine.errors import InputError
 from engine.mesh import PolyMesh
-from fabrication.assembly import _build_model, partial_frame_deflection, plan_assembly, write_assembly
+from fabrication.assembly import step_groups, step_image_name, _build_model, partial_frame_deflection, plan_assembly, write_assembly
 from fabrication.drawings import beam_id, node_id, panel_id
 from tests.test_panels import hex_polymesh
 
@@ -137,3 +137,32 @@ def test_write_assembly_files(tmp_path):
     assert [p.name for p in images] == [f"step_{k:03d}.png" for k in range(1, len(sequence.steps) + 1)]
     for p in images + [tmp_path / "assembly" / "steps_strip.png"]:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("n_steps, max_images", [(1, 100), (7, 100), (100, 100), (101, 100), (1497, 100), (10, 3)])
+def test_step_images_cover_every_step_once_in_order(n_steps, max_images):
+    """One image per step up to the cap; beyond it runs of consecutive steps, at most the cap,
+    every step in exactly one, names that sort in the order of the steps."""
+    groups = step_groups(n_steps, max_images)
+    assert len(groups) <= max_images
+    assert [k for g in groups for k in g] == list(range(n_steps))
+    runs = len(groups) < n_steps
+    names = [step_image_name(g, n_steps, runs) for g in groups]
+    assert max(map(len, groups), default=0) - min(map(len, groups), default=0) <= 1
+    assert names == sorted(names) and len(set(names)) == len(names)
+    if n_steps <= max_images:
+        assert names[0] == "step_001.png" and all(len(g) == 1 for g in groups)
+    else:
+        assert names[0].startswith("steps_") and names[-1].endswith(f"-{n_steps:03d}.png")
+
+
+def test_runs_of_steps_are_drawn_when_the_steps_are_more_than_the_cap(tmp_path):
+    mesh = hex_polymesh(3, 3)
+    sequence = plan_assembly(mesh, np.flatnonzero(mesh.supports), TIMBER, panel_area_load=35.0)
+    summary = write_assembly(sequence, mesh, tmp_path / "assembly", max_step_images=2)
+    images = sorted(p.name for p in (tmp_path / "assembly" / "steps").iterdir())
+    n = len(sequence.steps)
+    assert summary["step_images"] == len(images) == 2
+    half = int(images[0][10:13])
+    assert half in (n // 2, n - n // 2)
+    assert images == [f"steps_001-{half:03d}.png", f"steps_{half + 1:03d}-{n:03d}.png"]
