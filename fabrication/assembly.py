@@ -12,6 +12,12 @@ that is a mechanism gets a temporary prop (a fully restrained support) at its da
 than the limit gets a prop at the node of largest displacement. Props are removed as soon
 as the structure stands within the limit without them. A panel follows in the step that
 completes its ring of beams.
+
+On a grid of more than ANALYSED_RUNS cells, the cells go up in runs of consecutive steps, each
+taking the best-ranked cell unanalysed; the state after a run is analysed and propped where it
+needs it, and a run that does not stand even so is taken again one analysed step at a time. A
+1500-cell roof is planned in some 20 s instead of 5 min; its props are placed per run, so there
+may be a few more of them.
 """
 
 from __future__ import annotations
@@ -227,9 +233,85 @@ def _analyse_with_props(model: _Model, beams: np.ndarray, panels: np.ndarray, pr
         added.append(node)
 
 
+#: Frame analyses are run for at most about this many states of a large grid: beyond it the cells
+#: are built in runs of consecutive steps, and the state after each run is analysed (see
+#: plan_assembly).
+ANALYSED_RUNS = 150
+
+
+class _Growth:
+    """What is built (beams, nodes, panels) and the cells' incidences, for ranking the next cells."""
+
+    def __init__(self, polymesh: PolyMesh, support_nodes: np.ndarray) -> None:
+        from scipy.sparse import coo_matrix, csr_matrix
+        from scipy.sparse.csgraph import dijkstra
+
+        edges, faces = polymesh.edges, polymesh.faces
+        lookup = {(int(a), int(b)): k for k, (a, b) in enumerate(edges)}
+        self.face_beams = [np.array(sorted({lookup[(min(a, b), max(a, b))] for a, b in zip(loop, np.roll(loop, -1))}))
+                           for loop in faces]
+        self.face_nodes = [np.asarray(loop) for loop in faces]
+        rows = np.repeat(np.arange(len(faces)), [len(b) for b in self.face_beams])
+        self.cell_beams = csr_matrix((np.ones(len(rows)), (rows, np.concatenate(self.face_beams))),
+                                     shape=(len(faces), len(edges)))
+        rows = np.repeat(np.arange(len(faces)), [len(n) for n in self.face_nodes])
+        self.cell_nodes = csr_matrix((np.ones(len(rows)), (rows, np.concatenate(self.face_nodes))),
+                                     shape=(len(faces), polymesh.n_nodes))
+        # distance along the beams from the nearest support, to rank cells "from the supports inward"
+        lengths = polymesh.beam_lengths
+        graph = coo_matrix((np.r_[lengths, lengths], (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
+                           shape=(polymesh.n_nodes,) * 2).tocsr()
+        from_support = dijkstra(graph, indices=support_nodes, min_only=True)
+        self.distance = np.array([from_support[loop].mean() for loop in self.face_nodes])
+        self.edges = edges
+        self.beams = np.zeros(len(edges), dtype=bool)
+        self.nodes = np.zeros(polymesh.n_nodes, dtype=bool)
+        self.panels = np.zeros(len(faces), dtype=bool)
+        self.supported = np.zeros(polymesh.n_nodes, dtype=bool)
+        self.supported[support_nodes] = True
+
+    def copy(self) -> "_Growth":
+        other = object.__new__(_Growth)
+        other.__dict__.update(self.__dict__)
+        other.beams, other.nodes, other.panels = self.beams.copy(), self.nodes.copy(), self.panels.copy()
+        return other
+
+    def options(self, count: int) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The ``count`` best next cells as (missing beams, panels completed with them): cells
+        sharing a node with what is built (at first: with a support), fewest missing beams first,
+        then nearest a support; a part not reachable through cells starts nearest a support."""
+        missing = self.cell_beams @ (~self.beams).astype(float)
+        touching = self.nodes if self.nodes.any() else self.supported
+        open_cells = (missing > 0) & (self.cell_nodes @ touching.astype(float) > 0)
+        if not open_cells.any():
+            open_cells = missing > 0
+            chosen = [int(np.flatnonzero(open_cells)[np.argmin(self.distance[open_cells])])]
+        else:
+            cells = np.flatnonzero(open_cells)
+            chosen = cells[np.lexsort((self.distance[cells], missing[cells]))][:count].tolist()
+        out = []
+        for f in chosen:
+            todo = self.face_beams[f][~self.beams[self.face_beams[f]]]
+            done = self.beams.copy()
+            done[todo] = True
+            completed = np.flatnonzero(~self.panels & (self.cell_beams @ (~done).astype(float) == 0))
+            out.append((todo, completed))
+        return out
+
+    def build(self, todo: np.ndarray, panels: np.ndarray) -> list[int]:
+        """Add ``todo`` beams and ``panels``; returns the nodes first joined."""
+        ends = self.edges[todo].ravel()
+        new_nodes = sorted(set(ends[~self.nodes[ends]].tolist()))
+        self.beams[todo] = True
+        self.nodes[ends] = True
+        self.panels[panels] = True
+        return new_nodes
+
+
 def plan_assembly(polymesh: PolyMesh, support_nodes: np.ndarray, beam: dict, *, panel_area_load: float = 0.0,
                   deflection_limit_m: float | None = None, candidates_per_step: int = CANDIDATES_PER_STEP,
                   support_restraint: str = "pinned", up: np.ndarray | None = None,
+                  analysed_runs: int | None = ANALYSED_RUNS,
                   progress: Callable[[str, float], None] | None = None) -> AssemblySequence:
     """Greedy assembly sequence from the supports inward (see the module docstring).
 
@@ -240,6 +322,10 @@ def plan_assembly(polymesh: PolyMesh, support_nodes: np.ndarray, beam: dict, *, 
     added (default: span / 500, span = the larger plan dimension). support_restraint:
     "pinned" (translations held) or "fixed" for the permanent supports; props are fixed.
     up (b, 3): each beam's local z (default: mean normal of the adjacent cells).
+    analysed_runs: on a grid of more cells than this, a run of n_cells / analysed_runs steps
+    takes the best-ranked cell each, unanalysed (their ``largest_deflection_m`` is NaN), and the
+    state after the run is analysed; where it needs a prop or deflects over the limit, those
+    steps are taken again one at a time, each analysed (None: every step analysed).
     progress(message, fraction): optional callback after each step.
     """
     support_nodes = np.unique(np.asarray(support_nodes, dtype=np.int64).ravel())
@@ -253,79 +339,89 @@ def plan_assembly(polymesh: PolyMesh, support_nodes: np.ndarray, beam: dict, *, 
                          hint="beam = dict(E=, G=, A=, Iy=, Iz=, J=, mass_per_length=) in SI units")
     if support_restraint not in ("pinned", "fixed"):
         raise InputError(f"support_restraint {support_restraint!r} must be 'pinned' or 'fixed'")
-    edges = polymesh.edges
     span = float(np.ptp(polymesh.nodes[:, :2], axis=0).max())
     limit = span / 500 if deflection_limit_m is None else float(deflection_limit_m)
     model = _build_model(polymesh, support_nodes, beam, panel_area_load, support_restraint, up)
-
-    lookup = {(int(a), int(b)): k for k, (a, b) in enumerate(edges)}
-    face_beams = [np.array(sorted({lookup[(min(a, b), max(a, b))] for a, b in zip(loop, np.roll(loop, -1))}))
-                  for loop in polymesh.faces]
-    face_nodes = [np.asarray(loop) for loop in polymesh.faces]
-    # distance along the beams from the nearest support, to rank candidates "from the supports inward"
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import dijkstra
-
-    lengths = polymesh.beam_lengths
-    graph = coo_matrix((np.r_[lengths, lengths], (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
-                       shape=(polymesh.n_nodes,) * 2).tocsr()
-    from_support = dijkstra(graph, indices=support_nodes, min_only=True)
-    face_distance = np.array([from_support[loop].mean() for loop in face_nodes])
-
-    built_beam = np.zeros(len(edges), dtype=bool)
-    built_node = np.zeros(polymesh.n_nodes, dtype=bool)
-    panelled = np.zeros(polymesh.n_faces, dtype=bool)
-    supported = np.zeros(polymesh.n_nodes, dtype=bool)
-    supported[support_nodes] = True
+    run_length = 1 if not analysed_runs else max(1, -(-polymesh.n_faces // analysed_runs))
+    growth = _Growth(polymesh, support_nodes)
     props: list[int] = []
     steps: list[AssemblyStep] = []
 
-    while not built_beam.all():
-        touching = built_node if built_node.any() else supported
-        options = []
-        for f in range(polymesh.n_faces):
-            todo = face_beams[f][~built_beam[face_beams[f]]]
-            if todo.size and touching[face_nodes[f]].any():
-                options.append((todo.size, face_distance[f], f, todo))
-        if not options:  # a part not reachable through cells from what is built: start it nearest a support
-            rest = [f for f in range(polymesh.n_faces) if not built_beam[face_beams[f]].all()]
-            f = min(rest, key=lambda f: face_distance[f])
-            options = [(0, 0.0, f, face_beams[f][~built_beam[face_beams[f]]])]
-        options.sort(key=lambda o: (o[0], o[1]))
-        best = None
-        for _, _, f, todo in options[:candidates_per_step]:
-            beams_after = np.concatenate([np.flatnonzero(built_beam), todo])
-            done = built_beam.copy()
-            done[todo] = True
-            new_panels = [g for g in range(polymesh.n_faces) if not panelled[g] and done[face_beams[g]].all()]
-            panels_after = np.concatenate([np.flatnonzero(panelled), new_panels]).astype(np.int64)
-            deflection, added = _analyse_with_props(model, beams_after, panels_after, props, limit)
-            key = (len(added), deflection)
-            if best is None or key < best[0]:
-                best = (key, todo, new_panels, deflection, added)
-        _, todo, new_panels, deflection, added = best
-        new_nodes = sorted(set(np.unique(edges[todo]).tolist()) - set(np.flatnonzero(built_node).tolist()))
-        built_beam[todo] = True
-        built_node[edges[todo].ravel()] = True
-        panelled[new_panels] = True
-        props = props + added
-        # remove props the structure no longer needs (all together, else one at a time, oldest first)
-        if props and not added:
-            beams_now, panels_now = np.flatnonzero(built_beam), np.flatnonzero(panelled)
-            for trial in [[]] + [[p for p in props if p != q] for q in props[:3]]:
-                try:
-                    value, _ = partial_frame_deflection(model, beams_now, panels_now, trial)
-                except MechanismError:
-                    continue
-                if value <= limit:
-                    props, deflection = trial, value
-                    break
+    def add_step(todo, panels, deflection: float, added: list[int], new_nodes: list[int]) -> None:
         steps.append(AssemblyStep(step=len(steps) + 1, beams=[int(k) for k in todo],
-                                  panels=[int(g) for g in new_panels], props=list(props),
+                                  panels=[int(g) for g in panels], props=list(props),
                                   largest_deflection_m=float(deflection), nodes_built=new_nodes,
                                   props_added=list(added)))
         if progress is not None:
-            progress(f"assembly step {len(steps)}", float(built_beam.mean()))
+            progress(f"assembly step {len(steps)}", float(growth.beams.mean()))
+
+    def fewer_props() -> float | None:
+        """Remove the props the built structure no longer needs (all together, else one at a
+        time, oldest first); the deflection without them, or None when all stay."""
+        nonlocal props
+        beams_now, panels_now = np.flatnonzero(growth.beams), np.flatnonzero(growth.panels)
+        for trial in [[]] + [[p for p in props if p != q] for q in props[:3]]:
+            try:
+                value, _ = partial_frame_deflection(model, beams_now, panels_now, trial)
+            except MechanismError:
+                continue
+            if value <= limit:
+                props = trial
+                return value
+        return None
+
+    def analysed_step() -> None:
+        nonlocal props
+        best = None
+        for todo, completed in growth.options(candidates_per_step):
+            beams_after = np.concatenate([np.flatnonzero(growth.beams), todo])
+            panels_after = np.concatenate([np.flatnonzero(growth.panels), completed]).astype(np.int64)
+            deflection, added = _analyse_with_props(model, beams_after, panels_after, props, limit)
+            key = (len(added), deflection)
+            if best is None or key < best[0]:
+                best = (key, todo, completed, deflection, added)
+        _, todo, completed, deflection, added = best
+        new_nodes = growth.build(todo, completed)
+        props = props + added
+        if props and not added:
+            value = fewer_props()
+            deflection = deflection if value is None else value
+        add_step(todo, completed, deflection, added, new_nodes)
+
+    def run_of_steps() -> bool:
+        """Up to run_length best-ranked cells, the state after them analysed and propped where it
+        deflects over the limit (at most 3 new props, at the last step): kept (True) when it then
+        stands within the limit, else undone (False)."""
+        nonlocal growth, props
+        before = growth.copy()
+        taken = []
+        for _ in range(run_length):
+            if growth.beams.all():
+                break
+            (todo, completed), = growth.options(1)
+            taken.append((todo, completed, growth.build(todo, completed)))
+        deflection, added = _analyse_with_props(model, np.flatnonzero(growth.beams), np.flatnonzero(growth.panels),
+                                                props, limit)
+        if not deflection <= limit:
+            growth = before
+            return False
+        for k, (todo, completed, new_nodes) in enumerate(taken):
+            last = k == len(taken) - 1
+            if last:  # the props the run's end needs stand from its last step
+                props = props + added
+                if props and not added:
+                    value = fewer_props()
+                    deflection = deflection if value is None else value
+            add_step(todo, completed, deflection if last else np.nan, added if last else [], new_nodes)
+        return True
+
+    while not growth.beams.all():
+        if run_length > 1 and run_of_steps():
+            continue
+        for _ in range(run_length):  # one at a time, each analysed
+            if growth.beams.all():
+                break
+            analysed_step()
     return AssemblySequence(steps=steps, deflection_limit_m=limit, support_nodes=support_nodes,
                             n_analyses=model.n_analyses)
 
@@ -368,7 +464,7 @@ def write_assembly(sequence: AssemblySequence, polymesh: PolyMesh, folder: str |
     for s in sequence.steps:
         parts = [beam_id(k) for k in s.beams] + [panel_id(f) for f in s.panels]
         writer.writerow([s.step, " ".join(parts), " ".join(node_id(p) for p in s.props),
-                         f"{s.largest_deflection_m * 1e3:.3f}"])
+                         f"{s.largest_deflection_m * 1e3:.3f}" if np.isfinite(s.largest_deflection_m) else ""])
     csv_path = write_text_atomic(folder / "sequence.csv", buffer.getvalue())
 
     n = len(sequence.steps)
@@ -469,9 +565,10 @@ class _StepCanvas:
             text = f"Steps {added[0].step}-{last.step} of {len(steps)}: {n_beams} beams, {n_panels} panels"
         shown = [node_id(p) for p in last.props]
         props = ", ".join(shown[:6]) + (f" and {len(shown) - 6} more" if len(shown) > 6 else "") or "none"
-        deflection = max(s.largest_deflection_m for s in added)
+        analysed = [s.largest_deflection_m for s in added if np.isfinite(s.largest_deflection_m)]
+        deflection = f"{max(analysed) * 1e3:.2f} mm" if analysed else "not analysed"
         self.ax.set_title(f"{text}\nprops: {props} | "
-                          f"largest deflection {deflection * 1e3:.2f} mm", fontsize=9)
+                          f"largest deflection {deflection}", fontsize=9)
         with atomic_path(target) as tmp:
             self.figure.savefig(tmp, dpi=100, format="png")
 
