@@ -18,7 +18,7 @@ from engine.errors import InputError
 from engine.mesh import PolyMesh
 from engine.parts import beam_id, node_id
 
-from .files import atomic_path
+from .files import atomic_path, stamp_step, stamp_zip
 from .joints import JointSettings, joint_geometry, joint_setback_mm, smallest_angle
 
 __all__ = ["BeamSettings", "cut_list", "write_cut_list", "write_beams_step", "roll_angles_deg"]
@@ -97,6 +97,7 @@ def write_cut_list(table: pd.DataFrame, folder: Path) -> tuple[Path, Path]:
                 sheet = pd.concat([rows, pd.DataFrame([totals])], ignore_index=True)
                 name = "".join(ch for ch in str(profile) if ch not in "[]:*?/\\")[:28] or f"profile {number}"
                 sheet.to_excel(writer, sheet_name=name, index=False)
+        stamp_zip(tmp)
     return folder / "cutlist.csv", folder / "cutlist.xlsx"
 
 
@@ -121,4 +122,5 @@ def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, out
     compound.label = "beams"
     with atomic_path(path) as tmp:
         export_step(compound, str(tmp))
+        stamp_step(tmp)
     return Path(path)

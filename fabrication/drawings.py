@@ -8,7 +8,6 @@ block. Ids (shared by every fabrication file): node i -> N{i+1:04d}, beam k (row
 
 from __future__ import annotations
 
-import datetime as _dt
 import os
 from pathlib import Path
 
@@ -17,7 +16,7 @@ import numpy as np
 from engine.errors import InputError
 from engine.mesh import PolyMesh
 from engine.parts import beam_id, joint_id, node_id, panel_id
-from fabrication.files import atomic_path, save_dxf
+from fabrication.files import atomic_path, file_date, save_dxf
 
 __all__ = ["write_plan_drawings", "node_id", "beam_id", "panel_id", "joint_id", "PLAN_LAYERS"]
 
@@ -61,12 +60,9 @@ def write_plan_drawings(polymesh: PolyMesh, folder: str | os.PathLike, *, projec
 
 
 def drawing_date() -> str:
-    """The title block's date (ISO): SOURCE_DATE_EPOCH when set (the reproducible-builds
-    convention, so a rerun gives the same bytes), else today."""
-    epoch = os.environ.get("SOURCE_DATE_EPOCH")
-    if epoch and epoch.isdigit():
-        return _dt.datetime.fromtimestamp(int(epoch), tz=_dt.timezone.utc).date().isoformat()
-    return _dt.date.today().isoformat()
+    """The title block's date (ISO): fabrication.files.file_date, SOURCE_DATE_EPOCH when set,
+    else today."""
+    return file_date().date().isoformat()
 
 
 def _write_dxf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, supports: np.ndarray,
@@ -155,5 +151,5 @@ def _write_pdf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.nd
     fig.text(0.96, 0.03, "\n".join(title), ha="right", va="bottom", fontsize=9,
              bbox={"boxstyle": "square", "facecolor": "white", "edgecolor": "black"})
     with atomic_path(target) as tmp:
-        fig.savefig(tmp, format="pdf")
+        fig.savefig(tmp, format="pdf", metadata={"CreationDate": file_date()})
     return target

@@ -7,12 +7,16 @@ the same folder, and renames it onto the target only when the block ends without
 from __future__ import annotations
 
 import contextlib
+import datetime as _dt
 import os
+import re
 import tempfile
+import zipfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_path", "atomic_folder", "write_text_atomic", "write_bytes_atomic", "save_dxf"]
+__all__ = ["atomic_path", "atomic_folder", "write_text_atomic", "write_bytes_atomic", "save_dxf", "file_date",
+           "stamp_step", "stamp_zip"]
 
 
 def _umask() -> int:
@@ -87,3 +91,62 @@ def save_dxf(doc, target: str | os.PathLike) -> Path:
     finally:
         ezdxf.options.write_fixed_meta_data_for_testing = before
     return Path(target)
+
+
+def file_date() -> _dt.datetime:
+    """The date written into files that carry one (drawings' title blocks, STEP headers, XLSX
+    properties, PDF metadata): SOURCE_DATE_EPOCH when set (the reproducible-builds convention),
+    else today, at 00:00 UTC. A day, not a time: two runs of the same input on one day give the
+    same bytes."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    if epoch and epoch.isdigit():
+        day = _dt.datetime.fromtimestamp(int(epoch), tz=_dt.timezone.utc).date()
+    else:
+        day = _dt.datetime.now(tz=_dt.timezone.utc).date()
+    return _dt.datetime(day.year, day.month, day.day, tzinfo=_dt.timezone.utc)
+
+
+_STEP_STAMP = re.compile(rb"FILE_NAME\s*\(\s*'(?:[^']|'')*'\s*,\s*'(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d)")
+
+
+_STEP_OCCURRENCE = re.compile(rb"(NEXT_ASSEMBLY_USAGE_OCCURRENCE\s*\(\s*')(\d+)(')")
+
+
+def stamp_step(path: str | os.PathLike) -> None:
+    """Make a STEP file the same bytes for the same model: file_date() as its FILE_NAME time stamp
+    (the writers put the time of writing there), and its assembly occurrences numbered 1, 2, ...
+    in the file's order (OCCT numbers them with a counter of the process, which depends on what
+    the process exported before)."""
+    path = Path(path)
+    data = path.read_bytes()
+    match = _STEP_STAMP.search(data, 0, 8192)
+    if match:
+        stamp = file_date().strftime("%Y-%m-%dT%H:%M:%S").encode()
+        data = data[:match.start(1)] + stamp + data[match.end(1):]
+    numbers = iter(range(1, len(data)))
+    data = _STEP_OCCURRENCE.sub(lambda m: m.group(1) + str(next(numbers)).encode() + m.group(3), data)
+    path.write_bytes(data)
+
+
+_CORE_TIMES = re.compile(rb"(<dcterms:(?:created|modified)[^>]*>)([^<]*)(</dcterms:)")
+
+
+def stamp_zip(path: str | os.PathLike) -> None:
+    """Rewrite a ZIP container (XLSX) with file_date() as every member's time and as an Office
+    document's created and modified times, members and their compression otherwise unchanged
+    (zip writers stamp each member with the time of writing)."""
+    stamp = file_date().timetuple()[:6]
+    path = Path(path)
+    when = file_date().strftime("%Y-%m-%dT%H:%M:%SZ").encode()
+    with zipfile.ZipFile(path) as source:
+        members = [(info, source.read(info)) for info in source.infolist()]
+    # and the document's own created and modified times (docProps/core.xml)
+    members = [(info, _CORE_TIMES.sub(rb"\g<1>" + when + rb"\g<3>", data) if info.filename == "docProps/core.xml"
+                else data) for info, data in members]
+    tmp = path.with_name(path.name + ".stamp")
+    with zipfile.ZipFile(tmp, "w") as target:
+        for info, data in members:
+            fixed = zipfile.ZipInfo(info.filename, date_time=stamp)
+            fixed.compress_type, fixed.external_attr = info.compress_type, info.external_attr
+            target.writestr(fixed, data)
+    os.replace(tmp, path)

@@ -22,7 +22,7 @@ import math
 import os
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -32,7 +32,7 @@ from engine.errors import FabricationError
 from engine.mesh import PolyMesh
 from engine.parts import joint_id
 
-from .files import atomic_path
+from .files import atomic_path, stamp_step
 from .step_assembly import StepAssemblyWriter, step_part, write_step_part
 from .workers import exit_with_parent
 
@@ -532,6 +532,7 @@ def _build_and_write_checked(job: tuple) -> dict:
     step_path = folder / f"{report['id']}.step"
     with atomic_path(step_path) as tmp:
         export_step(placed, str(tmp))
+        stamp_step(tmp)
     part = step_part(step_path.read_text(encoding="utf-8"), first_id)
     # a part too big for its id range is renumbered by the parent, above every range
     report["_part"] = str(write_step_part(part, Path(parts_folder) / f"{report['id']}.part")) \
@@ -633,7 +634,7 @@ class JointsInBackground:
 
     def _collect_all(self) -> None:
         try:
-            for future in as_completed(self._futures):
+            for future in self._futures:  # in the order given, so that joints.step is the same bytes
                 self._collect(future.result())
         except BaseException as error:  # noqa: BLE001 - raised again in the caller's thread
             self._error = error

@@ -10,7 +10,7 @@ import numpy as np
 from engine.mesh import PolyMesh
 from engine.parts import beam_id, joint_id
 
-from .files import atomic_path
+from .files import atomic_path, stamp_step
 
 __all__ = ["write_gridshell_step", "write_gridshell_3dm"]
 
@@ -39,6 +39,7 @@ def write_gridshell_step(polymesh: PolyMesh, panels, beam_radius_mm: float, join
         assembly.add(cq.Workplane().add(solid), name=panel.id, color=glass)
     with atomic_path(path) as tmp:
         assembly.export(str(tmp), "STEP")
+        stamp_step(tmp)
     return Path(path)
 
 

@@ -17,14 +17,13 @@ from __future__ import annotations
 
 import re
 import shutil
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
 from engine.errors import FabricationError
 
-from .files import atomic_path
+from .files import atomic_path, file_date
 
 __all__ = ["StepPart", "step_part", "write_step_part", "StepAssemblyWriter", "SCHEMA"]
 
@@ -191,7 +190,7 @@ class StepAssemblyWriter:
         self._parts: list[tuple[str, tuple[int, ...]]] = []
         self._ranges: list[tuple[int, int]] = []
         quoted = name.replace("'", "''")
-        stamp = time.strftime("%Y-%m-%dT%H:%M:%S")
+        stamp = file_date().strftime("%Y-%m-%dT%H:%M:%S")
         file.write("ISO-10303-21;\nHEADER;\nFILE_DESCRIPTION(('gridshell assembly'),'2;1');\n"
                    f"FILE_NAME('{quoted}','{stamp}',(''),(''),'gridshell fabrication.step_assembly',"
                    f"'Open CASCADE STEP processor (parts)','');\n{SCHEMA}\nENDSEC;\nDATA;\n")

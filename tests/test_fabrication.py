@@ -340,3 +340,39 @@ def test_assembly_step_from_part_files_reads_back(tmp_path):
     assert top == "joints" and [name for name, _ in parts] == names
     for name, solid in parts:
         assert _volume_and_box(solid) == pytest.approx(_volume_and_box(_read_step(tmp_path / f"{name}.step")), abs=1e-6)
+
+
+def test_files_that_carry_a_date_carry_the_day_and_are_the_same_bytes_a_second_later(tmp_path, monkeypatch):
+    """The cut list's XLSX and a STEP file written twice, 1.1 s apart (their writers stamp the time
+    of writing): the same bytes. Re-read by openpyxl and OCP: the workbook's created and modified
+    and the STEP header's stamp are SOURCE_DATE_EPOCH's day, and the solid is intact."""
+    import time
+    import zipfile
+
+    import openpyxl
+    import pandas as pd
+    from build123d import Box, export_step, import_step
+
+    from fabrication.beams import write_cut_list
+    from fabrication.files import stamp_step
+
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")  # 2023-11-14 22:13:20 UTC
+    table = pd.DataFrame({"id": ["B0001", "B0002"], "profile": ["CHS 48.3x3.2"] * 2, "cut_length_mm": [812.5, 640.0],
+                          "mass_kg": [2.9, 2.3], "label": ["B0001", "B0002"]})
+    box = Box(10, 20, 30)
+    box.label = "J0001"
+    written = []
+    for k in range(2):
+        folder = tmp_path / f"run{k}"
+        _, xlsx = write_cut_list(table, folder)
+        export_step(box, str(folder / "J0001.step"))
+        stamp_step(folder / "J0001.step")
+        written.append((xlsx.read_bytes(), (folder / "J0001.step").read_bytes()))
+        time.sleep(1.1)
+    assert written[0] == written[1]
+    book = openpyxl.load_workbook(tmp_path / "run0" / "cutlist.xlsx")
+    assert book.properties.created.date().isoformat() == "2023-11-14"
+    assert book.properties.modified.date().isoformat() == "2023-11-14"
+    assert {info.date_time[:3] for info in zipfile.ZipFile(tmp_path / "run0" / "cutlist.xlsx").infolist()} == {(2023, 11, 14)}
+    assert "'2023-11-14T00:00:00'" in written[0][1][:2000].decode()
+    assert import_step(str(tmp_path / "run0" / "J0001.step")).volume == pytest.approx(6000.0)

@@ -139,15 +139,18 @@ def test_pool_workers_end_within_seconds_of_their_parents_sigkill(watch):
                 pass
 
 
-#: Formats that must be byte-identical between two runs of the same input; pictures are compared
-#: by their pixels. STEP, PDF, XLSX and 3DM carry clocks of their own in their headers.
-DETERMINISTIC = (".csv", ".json", ".obj", ".ply", ".npz", ".stl", ".dxf", ".nc1", ".html")
+#: Formats that must be byte-identical between two runs of the same input on one day (the files
+#: that carry a date carry the day: fabrication.files.file_date); pictures are compared by their
+#: pixels. Not yet: 3DM (rhino3dm writes random object ids and its own clock) and gridshell.step
+#: (the CAD kernel's assembly writer numbers its styles in an order of its own).
+DETERMINISTIC = (".csv", ".json", ".obj", ".ply", ".npz", ".stl", ".dxf", ".nc1", ".html", ".step", ".pdf", ".xlsx")
+NOT_YET = ("07-fabrication/gridshell.step",)
 
 
 def _hashes(out: Path) -> dict[str, str]:
     """sha256 of every deterministic artifact of a run, from its manifest."""
     return {a["path"]: a["sha256"] for stage in json.loads((out / "manifest.json").read_text())["stages"]
-            for a in stage.get("artifacts", []) if a["path"].endswith(DETERMINISTIC)}
+            for a in stage.get("artifacts", []) if a["path"].endswith(DETERMINISTIC) and a["path"] not in NOT_YET}
 
 
 def _different_pictures(a: Path, b: Path) -> list[str]:
