@@ -39,7 +39,7 @@ class GridRow:
     worst: str | None
 
 
-def _protocol(polymesh: PolyMesh, surface, project: Project, progress) -> GridRow:
+def _protocol(polymesh: PolyMesh, surface, project: Project, progress, executor=None) -> GridRow:
     from engine.protocol import ProtocolSettings, run_protocol
     from engine.structure import gridshell_loads
 
@@ -57,7 +57,7 @@ def _protocol(polymesh: PolyMesh, surface, project: Project, progress) -> GridRo
     settings = ProtocolSettings(n_modes=config.n_modes, amplitude=config.imperfection_amplitude or span / 300.0,
                                 shapes=tuple(config.imperfection_shapes), nonlinear=config.nonlinear,
                                 max_load_factor=config.max_load_factor)
-    result = run_protocol(model, supports, loads["SLS"], loads["ULS"], settings, progress=progress)
+    result = run_protocol(model, supports, loads["SLS"], loads["ULS"], settings, progress=progress, executor=executor)
     worst = result.worst
     values = {"nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "L_tot_m": polymesh.total_length,
               "weight_kg": polymesh.total_length * props.mass_per_length, "delta_L_mm": 1000 * result.delta_L,
@@ -90,10 +90,15 @@ def compare_grids(project: Project, surface, voronoi: PolyMesh, *, progress=None
     tri = triangular_grid(surface.mesh, total_length=length, support_vertices=support_vertices)
     say("building the quad grid")
     quad = quad_grid(surface.mesh, total_length=length, support_vertices=support_vertices)
+    from .stages.analysis import path_pool
+
     out = {}
-    for label, grid in (("triangular", tri), ("quad", quad), (name, voronoi)):
-        say(f"analysing the {label} grid")
-        out[label] = (grid, _protocol(grid, surface, project, lambda text, fraction=None: say(f"{label}: {text}")))
+    config = project.analysis
+    with path_pool(config.workers if config.nonlinear else 1) as pool:  # each grid's paths side by side
+        for label, grid in (("triangular", tri), ("quad", quad), (name, voronoi)):
+            say(f"analysing the {label} grid")
+            out[label] = (grid, _protocol(grid, surface, project, lambda text, fraction=None: say(f"{label}: {text}"),
+                                          executor=pool))
     return out
 
 
