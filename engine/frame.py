@@ -15,7 +15,6 @@ Units: any consistent set (SI in the workflow).
 from __future__ import annotations
 
 import contextlib
-import hashlib
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -27,7 +26,8 @@ from .linalg import assemble_blocks, congruent
 from .errors import ConvergenceError, InputError, MechanismError
 from .supports import Supports
 
-__all__ = ["FrameModel", "LinearResult", "BucklingResult", "NonlinearResult", "linear_static", "linear_buckling",
+__all__ = ["FrameModel", "FrameStiffness", "LinearResult", "BucklingResult", "NonlinearResult", "factor_stiffness",
+           "linear_static", "linear_buckling",
            "nonlinear_static", "solve_frame_json", "DOF_NAMES"]
 
 DOF_NAMES = ("ux", "uy", "uz", "rx", "ry", "rz")
@@ -385,9 +385,8 @@ def _check_loads(loads: np.ndarray, n: int) -> np.ndarray:
 # ----------------------------------------------------------------------------- linear analyses
 
 @dataclass
-class _Stiffness:
-    """The linear stiffness of a model on its supports, factored (kept for the next analysis of
-    the same model and supports: ``_stiffness``)."""
+class FrameStiffness:
+    """The linear stiffness of a model on its supports, factored (factor_stiffness)."""
     el: _Elements
     L: np.ndarray
     R: np.ndarray
@@ -415,32 +414,14 @@ class _Linear:
     u: np.ndarray
     F: np.ndarray
     local_forces: np.ndarray
-    stiffness: _Stiffness
+    stiffness: FrameStiffness
     K_elements: np.ndarray
 
 
-_last_stiffness: list[tuple[bytes, _Stiffness]] = []   # the last factored stiffness and its key
-
-
-def _stiffness_key(model: FrameModel, supports: Supports) -> bytes:
-    """A digest of everything the linear stiffness depends on."""
-    digest = hashlib.blake2b(digest_size=20)
-    for array in (model.nodes, model.beams, model.E, model.G, model.A, model.Iy, model.Iz, model.J, model.up,
-                  model.releases if model.releases is not None else np.zeros(0), supports.nodes, supports.restraints):
-        array = np.ascontiguousarray(array)
-        digest.update(str((array.dtype.str, array.shape)).encode())
-        digest.update(array.tobytes())
-    digest.update(str(model.elements_per_beam).encode())
-    return digest.digest()
-
-
-def _stiffness(model: FrameModel, supports: Supports) -> _Stiffness:
-    """Assembled and factored linear stiffness. The last one is kept, so the analyses that follow
-    one another on one model (serviceability and ultimate loads, then buckling) factor it once."""
-    key = _stiffness_key(model, supports)
-    if _last_stiffness and _last_stiffness[0][0] == key:
-        return _last_stiffness[0][1]
-    _last_stiffness.clear()
+def factor_stiffness(model: FrameModel, supports: Supports) -> FrameStiffness:
+    """The linear stiffness of ``model`` on ``supports``, assembled and factored: pass it to the
+    analyses that follow one another on one model (serviceability and ultimate loads, then
+    buckling) so that they factor it once, and drop it after them (it holds the factor)."""
     el = _elements(model)
     n_all = len(el.nodes)
     restrained = _restrained(supports, el.n_original, n_all)
@@ -453,15 +434,14 @@ def _stiffness(model: FrameModel, supports: Supports) -> _Stiffness:
     free = np.flatnonzero(~restrained)
     lu = _factor(K_elements, el, free,
                  np.linalg.norm(model.nodes[model.beams[:, 1]] - model.nodes[model.beams[:, 0]], axis=1))
-    state = _Stiffness(el=el, L=L, R=R, T=T, K_local=K_local, K_elements=K_elements, K=K, restrained=restrained,
-                       free=free, lu=lu)
-    _last_stiffness.append((key, state))
-    return state
+    return FrameStiffness(el=el, L=L, R=R, T=T, K_local=K_local, K_elements=K_elements, K=K, restrained=restrained,
+                          free=free, lu=lu)
 
 
-def _solve_linear(model: FrameModel, supports: Supports, loads: np.ndarray) -> _Linear:
+def _solve_linear(model: FrameModel, supports: Supports, loads: np.ndarray,
+                  stiffness: FrameStiffness | None = None) -> _Linear:
     loads = _check_loads(loads, model.nodes.shape[0])
-    stiffness = _stiffness(model, supports)
+    stiffness = stiffness if stiffness is not None else factor_stiffness(model, supports)
     el, free = stiffness.el, stiffness.free
     n_all = len(el.nodes)
     F = np.zeros(6 * n_all)
@@ -482,9 +462,11 @@ def _section_forces(el: _Elements, local_forces: np.ndarray) -> np.ndarray:
     return out
 
 
-def linear_static(model: FrameModel, supports: Supports, loads: np.ndarray) -> LinearResult:
-    """Linear static analysis under nodal loads (n,6) on the original nodes."""
-    state = _solve_linear(model, supports, loads)
+def linear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *,
+                  stiffness: FrameStiffness | None = None) -> LinearResult:
+    """Linear static analysis under nodal loads (n,6) on the original nodes; ``stiffness``: the
+    model's factored stiffness on these supports (factor_stiffness), else factored here."""
+    state = _solve_linear(model, supports, loads, stiffness)
     n = state.el.n_original
     reactions_all = (state.K @ state.u - state.F).reshape(-1, 6)
     reactions_all[~state.restrained.reshape(-1, 6)] = 0.0
@@ -495,7 +477,8 @@ def linear_static(model: FrameModel, supports: Supports, loads: np.ndarray) -> L
                         equilibrium_error=_equilibrium_error(model.nodes, np.asarray(loads, float), reactions))
 
 
-def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_modes: int = 6) -> BucklingResult:
+def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_modes: int = 6, *,
+                    stiffness: FrameStiffness | None = None) -> BucklingResult:
     """Linear buckling: (K + lambda K_G) phi = 0 with K_G from the linear axial forces; the
     ``n_modes`` smallest positive factors (none when nothing is in compression).
 
@@ -504,8 +487,9 @@ def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_
     wanted factors well (about 50 solves for 10 modes instead of 150 without a shift). sigma is
     0.95 of a rough first factor (a short Lanczos run on -K_G phi = mu K phi with the linear
     stiffness factor, which over-estimates lambda_1); Sylvester's law checks it: K + sigma K_G
-    has no negative pivot only if no factor lies in (0, sigma), else sigma is halved."""
-    state = _solve_linear(model, supports, loads)
+    has no negative pivot only if no factor lies in (0, sigma), else sigma is halved.
+    ``stiffness``: as for linear_static."""
+    state = _solve_linear(model, supports, loads, stiffness)
     el = state.el
     N = state.local_forces[:, 6]
     KG_elements = congruent(state.T, _released_zero(_geometric_stiffness(state.L, N, el), el.released))
@@ -1045,13 +1029,15 @@ def solve_frame_json(data: dict, *, analysis: str = "linear", modes: int = 6,
     if analysis not in ("linear", "buckling", "nonlinear"):
         raise InputError(f"frame: analysis must be linear, buckling or nonlinear, got {analysis!r}")
     model, supports, loads = model_from_json(data)
-    linear = linear_static(model, supports, loads)
+    stiffness = factor_stiffness(model, supports)
+    linear = linear_static(model, supports, loads, stiffness=stiffness)
     result = {"displacements": linear.displacements.tolist(),
               "reactions": {str(int(n)): linear.reactions[n].tolist() for n in supports.nodes},
               "buckling_factors": [], "path": [], "limit_load_factor": None,
               "equilibrium_error": linear.equilibrium_error}
     if analysis == "buckling":
-        result["buckling_factors"] = linear_buckling(model, supports, loads, n_modes=modes).factors.tolist()
+        result["buckling_factors"] = linear_buckling(model, supports, loads, n_modes=modes,
+                                                     stiffness=stiffness).factors.tolist()
     if analysis == "nonlinear":
         if control is None:
             node = int(np.argmax(np.linalg.norm(linear.displacements[:, :3], axis=1)))

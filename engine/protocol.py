@@ -162,23 +162,25 @@ def run_protocol(model, supports: Supports, sls_loads: np.ndarray, uls_loads: np
     imperfections that do not need its shape at once, the GNL-shape imperfections after it; the
     results are the same, in the same order, as without one."""
     from .errors import ConvergenceError
-    from .frame import BucklingResult, linear_buckling, linear_static
+    from .frame import BucklingResult, factor_stiffness, linear_buckling, linear_static
 
     def say(text: str, fraction: float | None = None) -> None:
         if progress is not None:
             progress(text, fraction)
 
     say("linear static, SLS")
-    sls = linear_static(model, supports, sls_loads)
+    stiffness = factor_stiffness(model, supports)  # factored once for the three linear analyses
+    sls = linear_static(model, supports, sls_loads, stiffness=stiffness)
     say("linear static, ULS")
-    uls = linear_static(model, supports, uls_loads)
+    uls = linear_static(model, supports, uls_loads, stiffness=stiffness)
     say("linear buckling")
     buckling_error = None
     try:
-        buckling = linear_buckling(model, supports, uls_loads, n_modes=settings.n_modes)
+        buckling = linear_buckling(model, supports, uls_loads, n_modes=settings.n_modes, stiffness=stiffness)
     except ConvergenceError as error:  # reported by the caller; the non-linear paths go on without modes
         buckling_error = str(error).splitlines()[0]
         buckling = BucklingResult(factors=np.zeros(0), modes=np.zeros((0, len(model.nodes), 6)))
+    del stiffness  # its factor is not needed by the paths, which factor their tangents
     vertical = np.abs(uls.displacements[:, 2])
     control_node = int(np.argmax(vertical))
     perfect = None

@@ -328,7 +328,6 @@ def _modes(monkeypatch, seed: int, flip: bool):
         return out
 
     monkeypatch.setattr(frame.spla, "eigsh", seeded)
-    frame._last_stiffness.clear()
     model, supports, loads = _frame()
     result = frame.linear_buckling(model, supports, loads, n_modes=4)
     monkeypatch.setattr(frame.spla, "eigsh", eigsh)
