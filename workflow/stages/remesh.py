@@ -85,8 +85,8 @@ MAX_COLLAPSE_SHARE = 0.2
 
 #: Remesh with fewer cells while more than this share of the beams is shorter than its joints take:
 #: the optimiser makes buildable grids of up to about a third short beams (the hypar at 60 cells,
-#: 33 %), not of two thirds (a wave at 300 cells, 64 %).
-COARSEN_SHARE = 0.3
+#: 33 %), not of two thirds (a wave at 300 cells, 64 %); none was seen in between.
+COARSEN_SHARE = 0.4
 #: ... aiming at this share (the cell count from the beams' length to required-length ratios).
 COARSEN_TARGET = 0.25
 #: The most remeshes with fewer cells.
