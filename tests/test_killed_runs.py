@@ -200,3 +200,34 @@ def test_a_run_killed_during_fabrication_leaves_nothing_and_the_next_run_heals(t
     assert len(mine) > 100 and set(mine) == set(theirs)
     assert sorted(k for k in mine if mine[k] != theirs[k]) == []
     assert _different_pictures(out, reference) == []
+
+
+@pytest.mark.slow
+def test_a_run_killed_during_its_nonlinear_paths_leaves_no_worker_and_heals(tmp_path):
+    """SIGKILL of `gridshell run` while the analysis's process pool runs the non-linear paths:
+    within 5 s no worker is left, and the next run writes the analysis an uninterrupted run writes."""
+    reference = tmp_path / "reference"
+    until = ["--until", "analysis", "--quiet"]
+    subprocess.run([*GRIDSHELL, "run", "--out", str(reference), *until], cwd=ROOT, check=True, timeout=900)
+    out = tmp_path / "killed"
+    run = subprocess.Popen([*GRIDSHELL, "run", "--out", str(out), *until], cwd=ROOT)
+    below: set[int] = set()
+    try:
+        end = time.monotonic() + 600
+        while time.monotonic() < end and run.poll() is None:
+            if list(out.glob(".06-analysis.*")):
+                below = _descendants(run.pid)
+                if below:
+                    break
+            time.sleep(0.05)
+        assert below, "the analysis's path workers ran"
+        run.send_signal(signal.SIGKILL)
+        run.wait()
+    finally:
+        if run.poll() is None:
+            run.kill()
+    assert _wait_gone(below, 5.0) == set(), "no path worker outlives the killed run"
+    subprocess.run([*GRIDSHELL, "run", "--out", str(out), *until], cwd=ROOT, check=True, timeout=900)
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".") and p.name != LOCK_NAME]
+    for name in ("analysis.json", "members.csv", "response.csv"):
+        assert (out / "06-analysis" / name).read_bytes() == (reference / "06-analysis" / name).read_bytes(), name
