@@ -1,10 +1,10 @@
 """Part labels, shared by every file a job writes: node i -> N0001, beam k (row k of the grid's
-beams) -> B0001, panel p -> P0001, joint at node i -> J0001, stock sheet s -> S01. Indices are
-0-based, labels 1-based."""
+beams) -> B0001, panel p -> P0001, joint at node i -> J0001, stock sheet s -> SHEET01, stock bar
+b -> BAR001. Indices are 0-based, labels 1-based."""
 
 from __future__ import annotations
 
-__all__ = ["node_id", "beam_id", "panel_id", "joint_id", "sheet_id"]
+__all__ = ["node_id", "beam_id", "panel_id", "joint_id", "sheet_id", "bar_id"]
 
 
 def node_id(i: int) -> str:
@@ -28,5 +28,10 @@ def joint_id(i: int) -> str:
 
 
 def sheet_id(s: int) -> str:
-    """S01 for stock sheet 0."""
-    return f"S{int(s) + 1:02d}"
+    """SHEET01 for stock sheet 0."""
+    return f"SHEET{int(s) + 1:02d}"
+
+
+def bar_id(b: int) -> str:
+    """BAR001 for stock bar 0."""
+    return f"BAR{int(b) + 1:03d}"

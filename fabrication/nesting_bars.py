@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from engine.errors import InputError
+from engine.parts import bar_id
 
 from .files import atomic_path
 
@@ -49,7 +50,7 @@ class BarNesting:
 
         rows = []
         for number, (pieces, offcut) in enumerate(zip(self.bars, self.offcuts_mm), start=1):
-            rows.append({"bar": f"S{number:03d}", "pieces": " ".join(self.labels[i] for i in pieces),
+            rows.append({"bar": bar_id(number - 1), "pieces": " ".join(self.labels[i] for i in pieces),
                          "lengths_mm": " ".join(f"{self.lengths_mm[i]:.1f}" for i in pieces),
                          "count": len(pieces), "used_mm": round(self.stock_length_mm - offcut, 1),
                          "offcut_mm": round(offcut, 1)})

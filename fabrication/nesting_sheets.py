@@ -84,7 +84,7 @@ class Placement:
 class SheetNesting:
     """Result of ``nest_sheets``: one placement per panel (in panel order), the panel
     indices on each sheet, overall and per-sheet utilisation (panel area / sheet area),
-    and sheet_of: panel id -> sheet name (S01...)."""
+    and sheet_of: panel id -> sheet name (SHEET01...)."""
 
     placements: list[Placement]
     sheets: list[list[int]]
@@ -252,7 +252,7 @@ def sheet_overshoot(panel: "Panel", stocks: list[SheetSettings]) -> tuple[float,
 class StockNesting:
     """Panels nested on several stock sheet sizes: ``groups`` holds, per size used, its settings,
     the indices of its panels (into the full list) and their nesting; ``unfit`` the panels larger
-    than every size. Sheets are numbered S01... across the sizes in order."""
+    than every size. Sheets are numbered SHEET01... across the sizes in order."""
 
     groups: list[tuple[SheetSettings, list[int], SheetNesting]]
     unfit: list[int]
@@ -277,7 +277,7 @@ class StockNesting:
         return out
 
     def sheet_of(self, panels: list["Panel"]) -> dict[str, str]:
-        """Panel id -> sheet name (S01...), for the panels placed."""
+        """Panel id -> sheet name (SHEET01...), for the panels placed."""
         out = {}
         for first, (_, members, nesting) in zip(self.first_numbers(), self.groups):
             for p in nesting.placements:
@@ -349,7 +349,7 @@ def nest_sheets(panels: list["Panel"], settings: SheetSettings | None = None) ->
 
 def write_sheet_dxfs(nesting: SheetNesting, panels: list["Panel"], folder: str | os.PathLike,
                      settings: "PanelSettings | None" = None, *, first_number: int = 1) -> list[Path]:
-    """Write ``folder/S01.dxf``... : sheet outline on NOTES, parts on CUT, panel ids on
+    """Write ``folder/SHEET01.dxf``... : sheet outline on NOTES, parts on CUT, panel ids on
     ENGRAVE, drill holes on DRILL (mm, $INSUNITS 4). ``settings``: PanelSettings for the
     hole diameter (default: PanelSettings()); ``first_number``: the first sheet's number."""
     from fabrication.panels import PanelSettings, add_panel, new_dxf
@@ -414,7 +414,7 @@ def write_contact_sheet(groups: list[tuple[SheetNesting, list["Panel"], int]], p
         ax.set_xlim(-10, s.width_mm + 10)
         ax.set_ylim(-10, s.height_mm + 10)
         ax.set_aspect("equal")
-        ax.set_title(f"S{number:02d} ({s.width_mm:g} x {s.height_mm:g} mm): {len(nesting.sheets[k])} parts, "
+        ax.set_title(f"{sheet_id(number - 1)} ({s.width_mm:g} x {s.height_mm:g} mm): {len(nesting.sheets[k])} parts, "
                      f"{100 * nesting.sheet_utilisation[k]:.0f} % used", fontsize=max(5.0, min(9.0, 30.0 / cols)))
     fig.tight_layout()
     with atomic_path(path) as tmp:

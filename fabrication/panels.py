@@ -324,7 +324,7 @@ def write_panels_csv(panels: list[Panel], nesting: "SheetNesting | None", settin
                      path: str | os.PathLike, *, sheet_names: dict[str, str] | None = None,
                      cells: dict[str, tuple[int, int]] | None = None) -> Path:
     """Panel schedule: id, area_mm2, perimeter_mm, vertex_count, planarity_mm, thickness_mm,
-    mass_kg (cut area less drill holes x thickness x density), sheet (S01... or empty).
+    mass_kg (cut area less drill holes x thickness x density), sheet (SHEET01... or empty).
     ``sheet_names`` (panel id -> sheet) replaces the nesting's names (several stock sizes);
     ``cells`` (panel id -> (cell number, piece index; 0 = the whole cell)) adds columns cell, piece."""
     settings = settings or PanelSettings()

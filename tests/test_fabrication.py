@@ -78,6 +78,8 @@ def test_cut_list_matches_the_geometry_and_the_bars_fit(small_run):
         assert sum(values) + kerf * len(values) <= stock + 1e-6
     lower_bound = int(np.ceil((table["cut_length_mm"].sum() + kerf * len(table)) / stock))
     assert len(bars) >= lower_bound
+    # stock bars and sheets have names of their own kind (BAR001, SHEET01), not both S...
+    assert list(bars["bar"]) == [f"BAR{k:03d}" for k in range(1, len(bars) + 1)]
 
 
 @slow

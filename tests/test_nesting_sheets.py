@@ -98,7 +98,7 @@ def test_sheet_dxfs_reread(tmp_path):
     settings = SheetSettings(width_mm=800, height_mm=500)
     nesting = nest_sheets(panels, settings)
     paths = write_sheet_dxfs(nesting, panels, tmp_path / "sheets", psettings)
-    assert [p.name for p in paths] == [f"S{k + 1:02d}.dxf" for k in range(nesting.n_sheets)]
+    assert [p.name for p in paths] == [f"SHEET{k + 1:02d}.dxf" for k in range(nesting.n_sheets)]
     seen = []
     for k, path in enumerate(paths):
         doc = ezdxf.readfile(path)
@@ -141,7 +141,7 @@ def test_nonconvex_panels_and_picture(tmp_path):
     settings = SheetSettings(width_mm=700, height_mm=500, spacing_mm=6)
     nesting = nest_sheets(panels, settings)
     check_nesting(nesting, panels, settings)
-    assert nesting.sheet_of == {panels[p.panel].id: f"S{p.sheet + 1:02d}" for p in nesting.placements}
+    assert nesting.sheet_of == {panels[p.panel].id: f"SHEET{p.sheet + 1:02d}" for p in nesting.placements}
     path = write_sheets_picture(nesting, panels, tmp_path / "sheets.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -162,6 +162,6 @@ def test_panels_go_on_the_first_stock_size_they_fit_and_the_rest_are_left_out():
     check_nesting(nesting0, [panels[i] for i in members0], small)
     check_nesting(nesting1, [panels[i] for i in members1], large)
     names = stock.sheet_of(panels)
-    assert names[panels[1].id] == f"S{nesting0.n_sheets + 1:02d}" and panels[3].id not in names
+    assert names[panels[1].id] == f"SHEET{nesting0.n_sheets + 1:02d}" and panels[3].id not in names
     area = 2 * 300 * 200 + 900 * 500
     assert stock.utilisation == pytest.approx(area / (nesting0.n_sheets * 600 * 400 + 1200 * 800))

@@ -1,7 +1,7 @@
 """Stage ``fabrication``: everything a workshop needs to build the checked grid-shell.
 
 Artifacts (07-fabrication/): joints/ (J0001.step, J0001.stl ..., joints.step), beams/
-(cutlist.csv, cutlist.xlsx, bars.csv, beams.step), panels/ (P0001.dxf ..., sheets/S01.dxf
+(cutlist.csv, cutlist.xlsx, bars.csv, beams.step), panels/ (P0001.dxf ..., sheets/SHEET01.dxf
 ..., panels.csv), assembly/ (sequence.csv, steps/*.png), drawings/ (plan.dxf, plan.pdf),
 gridshell.step, gridshell.3dm and fabrication.json (counts and checks; the seconds each step took
 go into the manifest, ``step_seconds``). Lengths in mm.
