@@ -73,6 +73,7 @@ def _write_dxf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.nd
     doc = ezdxf.new("R2010", setup=True)
     doc.header["$INSUNITS"] = 4
     doc.header["$MEASUREMENT"] = 1
+    doc.header["$DIMLFAC"] = 1.0
     for name, colour in PLAN_LAYERS.items():
         doc.layers.add(name, color=colour)
     msp = doc.modelspace()
@@ -99,8 +100,9 @@ def _write_dxf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.nd
                            dxfattribs={"layer": "SUPPORTS"})
     lo, hi = plan.min(axis=0), plan.max(axis=0)
     gap = 6 * height
+    # drawing units are mm: the text is the measurement itself (ezdxf's own style scales by 100)
     override = {"dimtxt": height * 1.5, "dimasz": height, "dimexe": height * 0.5, "dimexo": height * 0.5,
-                "dimdec": 0}
+                "dimdec": 0, "dimlfac": 1.0}
     msp.add_linear_dim(base=(lo[0], lo[1] - gap), p1=(lo[0], lo[1]), p2=(hi[0], lo[1]), angle=0,
                        override=override, dxfattribs={"layer": "DIMENSIONS"}).render()
     msp.add_linear_dim(base=(lo[0] - gap, lo[1]), p1=(lo[0], lo[1]), p2=(lo[0], hi[1]), angle=90,

@@ -136,11 +136,20 @@ def test_plan_drawings_and_whole_model(small_run):
     assert not doc.audit().has_errors
     texts = {e.dxf.text for e in doc.modelspace().query("TEXT")}
     assert "N0001" in texts and "B0001" in texts
+    # the overall dimensions read the plan's extent in mm: measurement x DIMLFAC, and the text drawn
+    polymesh = _polymesh(out)
+    extent_mm = 1000 * np.ptp(polymesh.nodes[:, :2], axis=0)
+    dimensions = list(doc.modelspace().query("DIMENSION"))
+    assert len(dimensions) == 2
+    for dimension, expected in zip(dimensions, extent_mm):
+        factor = dimension.override().get("dimlfac", doc.dimstyles.get(dimension.dxf.dimstyle).dxf.dimlfac)
+        assert dimension.get_measurement() * factor == pytest.approx(expected, abs=0.5)
+        drawn = [t.dxf.text for t in doc.blocks.get(dimension.dxf.geometry) if t.dxftype() in ("TEXT", "MTEXT")]
+        assert drawn == [f"{expected:.0f}"]
     assert (folder / "drawings" / "plan.pdf").read_bytes()[:4] == b"%PDF"
     model = rhino3dm.File3dm.Read(str(folder / "gridshell.3dm"))
     layers = {model.Layers[i].Name for i in range(len(model.Layers))}
     assert {"joints", "beams", "panels"} <= layers
-    polymesh = _polymesh(out)
     assert len(model.Objects) >= polymesh.n_nodes + len(polymesh.edges)
     step = (folder / "gridshell.step").read_text(errors="ignore")
     assert "'J0001'" in step and "'B0001'" in step
