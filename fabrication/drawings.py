@@ -23,7 +23,36 @@ __all__ = ["write_plan_drawings", "node_id", "beam_id", "panel_id", "joint_id", 
 #: DXF layers of the plan: name -> ACI colour
 PLAN_LAYERS = {"BEAMS": 7, "LABELS_NODES": 3, "LABELS_BEAMS": 4, "LABELS_PANELS": 6, "SUPPORTS": 1,
                "DIMENSIONS": 2, "TITLE": 7}
-_A3_LANDSCAPE_IN = (420 / 25.4, 297 / 25.4)
+_A3_MM = (420, 297)
+_A3_LANDSCAPE_IN = (_A3_MM[0] / 25.4, _A3_MM[1] / 25.4)
+#: The scales a plan is drawn at (1:n), as an architect's or engineer's drawing states them.
+STANDARD_SCALES = (1, 2, 5, 10, 20, 25, 50, 100, 200, 250, 500, 1000, 2000, 2500, 5000, 10000, 20000, 50000)
+
+
+def drawing_scale(extent_mm, paper_mm) -> int:
+    """The smallest standard scale n (1:n) at which ``extent_mm`` (width, height) fits ``paper_mm``."""
+    need = float(np.max(np.asarray(extent_mm, float) / np.asarray(paper_mm, float)))
+    return next((n for n in STANDARD_SCALES if n >= need), int(np.ceil(need)))
+
+
+def _scale_bar(ax, scale: int, paper_mm) -> None:
+    """A scale bar of five black and white segments, some 60 mm of paper long, at the frame's
+    bottom left, with its length in m."""
+    target = 60.0 * scale  # mm in the model
+    step = 10 ** np.floor(np.log10(target / 5))
+    segment = max(step * m for m in (1, 2, 5, 10) if 5 * step * m <= 1.2 * target)
+    x0, y0 = ax.get_xlim()[0] + 8.0 * scale, ax.get_ylim()[0] + 6.0 * scale
+    height = 2.0 * scale
+    for k in range(5):
+        ax.add_patch(_rectangle((x0 + k * segment, y0), segment, height, "black" if k % 2 == 0 else "white"))
+    ax.text(x0, y0 + 1.6 * height, "0", ha="center", va="bottom", fontsize=7)
+    ax.text(x0 + 5 * segment, y0 + 1.6 * height, f"{5 * segment / 1000:g} m", ha="center", va="bottom", fontsize=7)
+
+
+def _rectangle(corner, width: float, height: float, colour: str):
+    from matplotlib.patches import Rectangle
+
+    return Rectangle(corner, width, height, facecolor=colour, edgecolor="black", linewidth=0.5)
 
 
 def _support_nodes(polymesh: PolyMesh, support_nodes: np.ndarray | None) -> np.ndarray:
@@ -128,8 +157,8 @@ def _write_pdf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.nd
 
     fig = Figure(figsize=_A3_LANDSCAPE_IN)
     FigureCanvasAgg(fig)
-    ax = fig.add_axes((0.04, 0.12, 0.92, 0.84))
-    ax.set_aspect("equal")
+    box = (0.04, 0.12, 0.92, 0.84)  # the plan's frame on the sheet, as fractions of A3
+    ax = fig.add_axes(box)
     ax.axis("off")
     ax.add_collection(LineCollection(plan[beams], colors="k", linewidths=0.6))
     font = float(np.clip(240 / np.sqrt(max(len(plan), 1)), 1.0, 7.0))
@@ -148,10 +177,15 @@ def _write_pdf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.nd
     ax.text(0.5 * (lo[0] + hi[0]), lo[1] - gap, f"{span[0]:.0f}", ha="center", va="bottom", fontsize=8)
     ax.annotate("", xy=(lo[0] - gap, lo[1]), xytext=(lo[0] - gap, hi[1]), arrowprops={"arrowstyle": "<->", "lw": 0.8})
     ax.text(lo[0] - gap, 0.5 * (lo[1] + hi[1]), f"{span[1]:.0f}", ha="right", va="center", rotation=90, fontsize=8)
-    ax.set_xlim(lo[0] - 2 * gap, hi[0] + gap)
-    ax.set_ylim(lo[1] - 2 * gap, hi[1] + gap)
-    fig.text(0.96, 0.03, "\n".join(title), ha="right", va="bottom", fontsize=9,
-             bbox={"boxstyle": "square", "facecolor": "white", "edgecolor": "black"})
+    # a true scale: the frame shows scale x its paper size of the plan, centred
+    paper = np.array([_A3_MM[0] * box[2], _A3_MM[1] * box[3]])
+    scale = drawing_scale(span + 3 * gap, paper)
+    centre = 0.5 * (lo + hi) + np.array([-0.5 * gap, -0.5 * gap])
+    ax.set_xlim(centre[0] - 0.5 * scale * paper[0], centre[0] + 0.5 * scale * paper[0])
+    ax.set_ylim(centre[1] - 0.5 * scale * paper[1], centre[1] + 0.5 * scale * paper[1])
+    _scale_bar(ax, scale, paper)
+    fig.text(0.96, 0.03, "\n".join([*title, f"Scale 1:{scale} on A3 ({_A3_MM[0]} x {_A3_MM[1]} mm)"]),
+             ha="right", va="bottom", fontsize=9, bbox={"boxstyle": "square", "facecolor": "white", "edgecolor": "black"})
     with atomic_path(target) as tmp:
         fig.savefig(tmp, format="pdf", metadata={"CreationDate": file_date()})
     return target

@@ -67,3 +67,14 @@ def test_default_supports_and_bad_index(tmp_path):
     assert len(doc.modelspace().query('LWPOLYLINE[layer=="SUPPORTS"]')) == int(mesh.supports.sum())
     with pytest.raises(InputError):
         write_plan_drawings(mesh, tmp_path, project_name="x", support_nodes=np.array([mesh.n_nodes]))
+
+
+@pytest.mark.parametrize("extent, paper, expected", [((2400, 2400), (386, 249), 10), ((100_000, 40_000), (386, 249), 500),
+                                                     ((240, 100), (386, 249), 1), ((386, 249), (386, 249), 1),
+                                                     ((387, 100), (386, 249), 2)])
+def test_plans_are_drawn_at_the_smallest_standard_scale_that_fits(extent, paper, expected):
+    from fabrication.drawings import STANDARD_SCALES, drawing_scale
+
+    scale = drawing_scale(extent, paper)
+    assert scale == expected and scale in STANDARD_SCALES
+    assert all(e / scale <= p for e, p in zip(extent, paper))
