@@ -70,7 +70,7 @@ def ours(model: Roof) -> dict:
     K, _ = shell_stiffness(model.mesh.vertices, model.mesh.faces, THICKNESS, MATERIAL)
     t1 = time.perf_counter()
     free = np.flatnonzero(~model.restrained.ravel())
-    solve = shell._factor(K[free][:, free].tocsc())
+    solve = shell._factor(K[free][:, free].tocsc()).solve
     u = np.zeros(6 * model.mesh.n_vertices)
     u[free] = solve(model.loads.ravel()[free])
     t2 = time.perf_counter()

@@ -59,7 +59,8 @@ class ShellResult:
     force tensors, projected onto each vertex's tangent plane, in global axes;
     vertex_principal_forces (n, 2) and vertex_principal_directions (n, 3) of those;
     load_total (6,): resultant force and moment about the origin of the applied loads;
-    equilibrium_error: |loads + reactions| (forces and moments) / |loads|.
+    equilibrium_error: |loads + reactions| (forces and moments) / |loads|; solver: the library
+    that factored the stiffness (engine.solvers).
     """
 
     displacements: np.ndarray
@@ -74,6 +75,7 @@ class ShellResult:
     vertex_principal_directions: np.ndarray
     load_total: np.ndarray
     equilibrium_error: float
+    solver: str = "superlu"
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -253,20 +255,22 @@ def count_free_rigid_modes(vertices: np.ndarray, restrained: np.ndarray) -> int:
     return int(6 - np.sum(singular > 1e-9 * max(singular.max(), 1e-300)))
 
 
-def _factor(K_free: sp.csc_matrix):
-    """A solve function for the free stiffness, or MechanismError when it is singular."""
+def _factor(K_free: sp.csc_matrix, library: str = "auto"):
+    """The factor of the free stiffness (engine.solvers: SuperLU, or PARDISO for large shells when
+    it is installed), or MechanismError when it is singular."""
+    from .solvers import SingularMatrix, factor_symmetric
+
     try:
-        lu = spla.splu(K_free, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                       options={"SymmetricMode": True})
-    except RuntimeError as exc:
+        factor = factor_symmetric(K_free, library=library)
+    except SingularMatrix as exc:
         raise MechanismError("the shell is a mechanism: its stiffness matrix is singular", n_modes=1,
                              hint="add supports or check for loose parts of the surface") from exc
-    diagonal = np.abs(lu.U.diagonal())
-    if diagonal.size and diagonal.min() <= 1e-11 * diagonal.max():
-        n_modes = int(np.sum(diagonal <= 1e-11 * diagonal.max()))
+    # a positive definite stiffness has neither near-zero nor negative pivots
+    n_modes = factor.tiny_pivots + factor.negative_pivots
+    if n_modes:
         raise MechanismError(f"the shell is a mechanism with {n_modes} free mode(s) beyond rigid-body motion",
                              n_modes=n_modes, hint="add supports or check for loose parts of the surface")
-    return lu.solve
+    return factor
 
 
 # ----------------------------------------------------------------------------- analysis
@@ -332,7 +336,8 @@ def analyse_shell(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, thick
                              hint="support more nodes or restrain more directions (e.g. pinned instead of rollers)")
     K, data = shell_stiffness(mesh.vertices, mesh.faces, thickness, material)
     free = np.flatnonzero(~restrained)
-    solve = _factor(K[free][:, free].tocsc())
+    factor = _factor(K[free][:, free].tocsc())
+    solve = factor.solve
     u = np.zeros(6 * n)
     f = loads.ravel()
     u[free] = solve(f[free])
@@ -363,7 +368,7 @@ def analyse_shell(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, thick
                        face_membrane_forces=membrane, face_moments=moments, face_principal_forces=principal,
                        face_principal_directions=direction, vertex_membrane_forces=vertex_tensors,
                        vertex_principal_forces=vertex_values, vertex_principal_directions=vertex_directions,
-                       load_total=total, equilibrium_error=error)
+                       load_total=total, equilibrium_error=error, solver=factor.library)
 
 
 def _resultant(points: np.ndarray, forces: np.ndarray) -> np.ndarray:

@@ -48,10 +48,17 @@ def product_version() -> str:
         return "0+unknown"
 
 
+def solvers_describe() -> dict:
+    """Which library factors the stiffness matrices here (engine.solvers)."""
+    from engine.solvers import describe
+
+    return describe()
+
+
 def library_versions() -> dict[str, str]:
     out = {"python": platform.python_version(), "gridshell": product_version()}
     for name in ("numpy", "scipy", "trimesh", "pydantic", "pint", "ezdxf", "pandas", "shapely",
-                 "build123d", "cadquery", "matplotlib", "rhino3dm", "pyacvd", "pyfe3d"):
+                 "build123d", "cadquery", "matplotlib", "rhino3dm", "pyacvd", "pyfe3d", "pypardiso", "mkl"):
         try:
             out[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
@@ -237,7 +244,7 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
                     "project_file": project_file, "out_dir": str(out_dir.resolve()),
                     "stopped_at": summary.stopped_at, "message": summary.message,
                     "stages": ordered, "config": project.model_dump(mode="json"),
-                    "versions": library_versions()}
+                    "versions": library_versions(), "factorisation": solvers_describe()}
         write_text_atomic(manifest_path, json.dumps(manifest, indent=2))
 
     last = names.index(until) if until else len(names) - 1

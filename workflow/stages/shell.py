@@ -65,7 +65,7 @@ def run(ctx):
     summary = {"load_case": case.name, "thickness_m": thickness, "E_Pa": project.shell.E, "nu": project.shell.nu,
                "max_displacement_m": float(np.linalg.norm(result.displacements[:, :3], axis=1).max()),
                "N1_max_N_per_m": float(n1.max()), "N2_min_N_per_m": float(n2.min()),
-               "equilibrium_error": float(result.equilibrium_error),
+               "equilibrium_error": float(result.equilibrium_error), "solver": result.solver,
                "total_load_N": [float(x) for x in result.load_total[:3]],
                "total_reaction_N": [float(x) for x in result.reactions[:, :3].sum(axis=0)]}
     write_text_atomic(ctx.folder / "shell.json", json.dumps(summary, indent=1))
