@@ -360,7 +360,7 @@ def write_sheet_dxfs(nesting: SheetNesting, panels: list["Panel"], folder: str |
     sheet = nesting.settings
     paths = []
     for k, members in enumerate(nesting.sheets):
-        doc = new_dxf()
+        doc = new_dxf(drill=settings.hole_diameter_mm > 0)
         msp = doc.modelspace()
         msp.add_lwpolyline([(0, 0), (sheet.width_mm, 0), (sheet.width_mm, sheet.height_mm), (0, sheet.height_mm)],
                            close=True, dxfattribs={"layer": "NOTES"})

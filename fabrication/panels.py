@@ -250,14 +250,17 @@ def flatten_panels(polymesh: PolyMesh, settings: PanelSettings | None = None, *,
 
 # ---------------------------------------------------------------------------- DXF
 
-def new_dxf():
-    """A new ezdxf R2010 document in mm with the fabrication layers and engraving style."""
+def new_dxf(drill: bool = True):
+    """A new ezdxf R2010 document in mm with the fabrication layers and engraving style; without
+    ``drill`` (panels without fixing holes) no DRILL layer, rather than an empty one."""
     import ezdxf
 
     doc = ezdxf.new("R2010", setup=False)
     doc.header["$INSUNITS"] = 4  # mm
     doc.header["$MEASUREMENT"] = 1  # metric
     for name, colour in LAYERS.items():
+        if name == "DRILL" and not drill:
+            continue
         if name not in doc.layers:
             doc.layers.add(name, color=colour)
     if ENGRAVE_STYLE not in doc.styles:
@@ -312,7 +315,7 @@ def write_panel_dxfs(panels: list[Panel], folder: str | os.PathLike,
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
     for panel in panels:
-        doc = new_dxf()
+        doc = new_dxf(drill=settings.hole_diameter_mm > 0)
         add_panel(doc.modelspace(), panel, settings=settings, note=True)
         target = folder / f"{panel.id}.dxf"
         save_dxf(doc, target)

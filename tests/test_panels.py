@@ -170,6 +170,15 @@ def test_panel_dxfs_reread(tmp_path):
         assert "acrylic" in notes and "3 mm" in notes and "planarity" in notes
 
 
+def test_panels_without_fixings_have_no_drill_layer(tmp_path):
+    """No holes asked for: no DRILL layer, not an empty one (issue 17)."""
+    mesh = hex_polymesh(1, 2)
+    settings = PanelSettings(clearance_mm=3, hole_diameter_mm=0)
+    for path in write_panel_dxfs(flatten_panels(mesh, settings), tmp_path / "panels", settings):
+        layers = {layer.dxf.name for layer in ezdxf.readfile(path).layers}
+        assert {"CUT", "ENGRAVE", "NOTES"} <= layers and "DRILL" not in layers
+
+
 def test_panels_csv(tmp_path):
     mesh = hex_polymesh(2, 2)
     settings = PanelSettings(thickness_mm=4, density=1000, hole_diameter_mm=0)
