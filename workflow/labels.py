@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 __all__ = ["LABELS", "label_of", "in_unit", "format_value", "figure_rows", "column_label"]
 
 #: key -> (label, unit, factor from the stored value to the unit)
@@ -122,27 +124,34 @@ def column_label(name: str) -> str:
 _SUPERSCRIPT = str.maketrans("-0123456789", "\u207b\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079")
 
 
-def format_value(value, digits: int = 3) -> str:
+def format_value(value, digits: int = 3, *, text: bool = False) -> str:
     """A number as people write it: whole numbers with thin spaces between thousands, others to
     ``digits`` significant figures in plain decimals, and the very small as 1.2 x 10^-9 with
-    superscripts (never ``1.2e-09``); booleans as yes/no, None as a dash."""
+    superscripts (never ``1.2e-09``); booleans as yes/no, None as a dash. ``text``: for a
+    terminal or a log, in ASCII (plain spaces, 1.2e-09 for the very small)."""
+    space = " " if text else "\u2009"
     if value is None:
         return "-"
     if isinstance(value, bool):
         return "yes" if value else "no"
+    if isinstance(value, np.generic):
+        value = value.item()
     if isinstance(value, int) or (isinstance(value, float) and value.is_integer() and abs(value) >= 1000):
-        return f"{int(value):,}".replace(",", "\u2009")
+        return f"{int(value):,}".replace(",", space)
     if isinstance(value, float):
         if not math.isfinite(value):
-            return "-" if math.isnan(value) else ("\u221e" if value > 0 else "-\u221e")
+            return "-" if math.isnan(value) else ("inf" if text else "\u221e") if value > 0 else \
+                ("-inf" if text else "-\u221e")
         if value == 0:
             return "0"
         magnitude = math.floor(math.log10(abs(value)))
         if magnitude < -3:
+            if text:
+                return f"{value:.{max(digits - 1, 0)}e}"
             mantissa = value / 10**magnitude
             return f"{mantissa:.{max(digits - 1, 0)}f}".rstrip("0").rstrip(".") + f" \u00d7 10{str(magnitude).translate(_SUPERSCRIPT)}"
         if magnitude >= digits:
-            return f"{round(value):,}".replace(",", "\u2009")
+            return f"{round(value):,}".replace(",", space)
         decimals = max(digits - 1 - magnitude, 0)
         return f"{value:.{decimals}f}"
     return str(value)

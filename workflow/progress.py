@@ -12,7 +12,9 @@ import sys
 import threading
 import time
 
-__all__ = ["Progress", "format_number", "PLAIN_INTERVAL_S"]
+from .labels import format_value
+
+__all__ = ["Progress", "PLAIN_INTERVAL_S"]
 
 PLAIN_INTERVAL_S = 10.0
 """The longest a running stage stays silent on a pipe."""
@@ -137,8 +139,8 @@ class Progress:
                             "(failing checks and parts that cannot be built as drawn):")
         for row in rows[:limit]:
             unit = f" {row['unit']}" if row["unit"] else ""
-            worst = "" if row["worst"] is None else f": {format_number(row['worst'])}{unit}"
-            limit_text = "" if row["limit"] is None else f" (limit {format_number(row['limit'])}{unit})"
+            worst = "" if row["worst"] is None else f": {format_value(row['worst'], text=True)}{unit}"
+            limit_text = "" if row["limit"] is None else f" (limit {format_value(row['limit'], text=True)}{unit})"
             parts = escape(", ".join(row["worst_parts"][:3]))
             self._console.print(f"  [red]{row['kind']}[/red] x{row['count']}{worst}{limit_text}"
                                 f"{' at ' + parts if parts else ''}")
@@ -151,10 +153,3 @@ class Progress:
             self._console.print(text)
 
 
-def format_number(value: float) -> str:
-    """A value as an engineer writes it: 3 significant figures, no scientific notation for
-    everyday magnitudes."""
-    value = float(value)
-    if value == 0 or 1e-3 <= abs(value) < 1e6:
-        return f"{value:.3g}" if abs(value) < 1000 else f"{value:.0f}"
-    return f"{value:.3e}"
