@@ -78,6 +78,12 @@ def test_cut_list_matches_the_geometry_and_the_bars_fit(small_run):
         assert sum(values) + kerf * len(values) <= stock + 1e-6
     lower_bound = int(np.ceil((table["cut_length_mm"].sum() + kerf * len(table)) / stock))
     assert len(bars) >= lower_bound
+    # fabrication.json says how big the files are, as the disk says
+    import json as _json
+    sizes = _json.loads((out / "07-fabrication" / "fabrication.json").read_text())["sizes_mb"]
+    on_disk = sum(p.stat().st_size for p in (out / "07-fabrication" / "joints").rglob("*") if p.is_file())
+    assert sizes["joints"] == pytest.approx(on_disk / 1e6, abs=0.01)
+    assert sizes["total"] >= sizes["joints"] + sizes["beams"]
     # stock bars and sheets have names of their own kind (BAR001, SHEET01), not both S...
     assert list(bars["bar"]) == [f"BAR{k:03d}" for k in range(1, len(bars) + 1)]
 

@@ -125,10 +125,24 @@ def run(ctx):
                  for c in summary["joint_clashes"]]
     clock.stop()
     summary["findings"] = [f.to_dict() for f in findings]
+    summary["sizes_mb"] = output_sizes_mb(folder)
     ctx.report_findings(summary["findings"])
     ctx.timings.update(clock.seconds)
     write_text_atomic(folder / "fabrication.json", json.dumps(summary, indent=1, default=_jsonable))
     return summary
+
+
+def output_sizes_mb(folder: Path) -> dict[str, float]:
+    """MB (10^6 bytes, to 10 kB) of the stage's files: each sub-folder, each file at the top, and the total
+    (fabrication.json itself, written after, not counted)."""
+    sizes: dict[str, float] = {}
+    for entry in sorted(Path(folder).iterdir()):
+        if entry.name.startswith("."):
+            continue
+        files = [entry] if entry.is_file() else [p for p in entry.rglob("*") if p.is_file() and not p.name.startswith(".")]
+        sizes[entry.name] = round(sum(p.stat().st_size for p in files) / 1e6, 2)
+    sizes["total"] = round(sum(sizes.values()), 2)
+    return sizes
 
 
 #: Joint solids sharing more than this volume (mm3) clash.
