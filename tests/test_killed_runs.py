@@ -139,6 +139,26 @@ def test_pool_workers_end_within_seconds_of_their_parents_sigkill(watch):
                 pass
 
 
+def _sigkill_when(command: list[str], ready, *, poll_s: float = 0.2, seconds: float = 600.0) -> set[int]:
+    """Start ``command``, SIGKILL it as soon as ``ready()`` holds while it has worker processes,
+    and return those workers' pids."""
+    run = subprocess.Popen(command, cwd=ROOT)
+    below: set[int] = set()
+    try:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end and run.poll() is None and not below:
+            if ready():
+                below = _descendants(run.pid)
+            time.sleep(poll_s)
+        assert below, "the run had its workers when it was killed"
+        run.send_signal(signal.SIGKILL)
+        run.wait()
+    finally:
+        if run.poll() is None:
+            run.kill()
+    return below
+
+
 #: Formats that must be byte-identical between two runs of the same input on one day (the files
 #: that carry a date carry the day: fabrication.files.file_date); pictures are compared by their
 #: pixels. Not yet: 3DM (rhino3dm writes random object ids and its own clock) and gridshell.step
@@ -174,20 +194,14 @@ def test_a_run_killed_during_fabrication_leaves_nothing_and_the_next_run_heals(t
     reference = tmp_path / "reference"
     subprocess.run([*GRIDSHELL, "run", "--out", str(reference), "--quiet"], cwd=ROOT, check=True, timeout=900)
     out = tmp_path / "killed"
-    run = subprocess.Popen([*GRIDSHELL, "run", "--out", str(out), "--quiet"], cwd=ROOT)
-    try:
-        end = time.monotonic() + 600
-        while time.monotonic() < end and not list(out.glob(".07-fabrication.*/joints")):
-            time.sleep(0.2)
-        assert list(out.glob(".07-fabrication.*")), "the run reached fabrication"
+    def building_joints() -> bool:
+        if not list(out.glob(".07-fabrication.*/joints")):
+            return False
         time.sleep(3.0)  # the workers are building joints
-        below = _descendants(run.pid)
-        assert below, "the joint workers run"
-        run.send_signal(signal.SIGKILL)
-        run.wait()
-    finally:
-        if run.poll() is None:
-            run.kill()
+        return True
+
+    below = _sigkill_when([*GRIDSHELL, "run", "--out", str(out), "--quiet"], building_joints)
+    assert list(out.glob(".07-fabrication.*")), "the run reached fabrication"
     assert _wait_gone(below, 5.0) == set(), "no worker outlives the killed run"
     assert list(out.glob(".07-fabrication.*")), "the kill left its temporary folder"
     subprocess.run([*GRIDSHELL, "run", "--out", str(out), "--quiet"], cwd=ROOT, check=True, timeout=900)
@@ -210,22 +224,8 @@ def test_a_run_killed_during_its_nonlinear_paths_leaves_no_worker_and_heals(tmp_
     until = ["--until", "analysis", "--quiet"]
     subprocess.run([*GRIDSHELL, "run", "--out", str(reference), *until], cwd=ROOT, check=True, timeout=900)
     out = tmp_path / "killed"
-    run = subprocess.Popen([*GRIDSHELL, "run", "--out", str(out), *until], cwd=ROOT)
-    below: set[int] = set()
-    try:
-        end = time.monotonic() + 600
-        while time.monotonic() < end and run.poll() is None:
-            if list(out.glob(".06-analysis.*")):
-                below = _descendants(run.pid)
-                if below:
-                    break
-            time.sleep(0.05)
-        assert below, "the analysis's path workers ran"
-        run.send_signal(signal.SIGKILL)
-        run.wait()
-    finally:
-        if run.poll() is None:
-            run.kill()
+    below = _sigkill_when([*GRIDSHELL, "run", "--out", str(out), *until],
+                          lambda: bool(list(out.glob(".06-analysis.*"))), poll_s=0.05)
     assert _wait_gone(below, 5.0) == set(), "no path worker outlives the killed run"
     subprocess.run([*GRIDSHELL, "run", "--out", str(out), *until], cwd=ROOT, check=True, timeout=900)
     assert not [p.name for p in out.iterdir() if p.name.startswith(".") and p.name != LOCK_NAME]
