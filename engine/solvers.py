@@ -35,12 +35,11 @@ class SingularMatrix(RuntimeError):
 
 
 def pardiso_available() -> bool:
-    """Whether pypardiso (and MKL) import here."""
-    try:
-        import pypardiso  # noqa: F401
-    except (ImportError, OSError):
-        return False
-    return True
+    """Whether pypardiso is installed here (found, not imported: loading MKL takes a second, which
+    a cached run should not spend; factor_symmetric falls back on SuperLU if it does not load)."""
+    from importlib.util import find_spec
+
+    return find_spec("pypardiso") is not None
 
 
 def library_for(n_rows: int, library: str = "auto") -> str:
@@ -128,4 +127,10 @@ def factor_symmetric(matrix: sp.spmatrix, *, library: str = "auto") -> Symmetric
     """Factor a sparse symmetric matrix with ``library`` ("auto": see library_for). Raises
     SingularMatrix when SuperLU meets an exactly zero pivot."""
     chosen = library_for(matrix.shape[0], library)
-    return _Pardiso(matrix) if chosen == "pardiso" else _SuperLU(matrix)
+    if chosen == "pardiso":
+        try:
+            return _Pardiso(matrix)
+        except (ImportError, OSError):  # installed, but MKL does not load here
+            if library == "pardiso":
+                raise
+    return _SuperLU(matrix)
