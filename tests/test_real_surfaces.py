@@ -37,5 +37,10 @@ def test_stages_run_on_real_surfaces(path, tmp_path):
     assert field["achieved_size_ratio"] <= project.field.max_size_ratio + 1e-9
     remesh = json.loads((out / "04-remesh" / "remesh.json").read_text())
     assert remesh["valence3_share_interior"] > 0.95
-    assert remesh["n_faces"] > 40
+    # the cells asked for, or fewer where the joints are too big for them (hyperbol2: 48.3 mm
+    # steel nodes on a small saddle), which a finding says
+    coarsened = remesh["coarsened"]["remeshes"] > 0
+    assert remesh["n_faces"] > 40 or coarsened
+    assert coarsened == any(f["kind"] == "grid_coarsened" for f in summary.findings)
+    assert remesh["coarsened"]["cells_asked"] == 60 and remesh["coarsened"]["cells_built"] == remesh["n_faces"]
     assert np.isfinite(remesh["closeness_max_rel"])
