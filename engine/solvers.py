@@ -116,9 +116,10 @@ class _Pardiso(SymmetricFactor):
 def describe() -> dict:
     """What factors the stiffness here, for the manifest: the libraries installed and from which
     size PARDISO takes over."""
-    return {"libraries": ["superlu", "pardiso"] if pardiso_available() else ["superlu"],
-            "pardiso_from_dofs": PARDISO_FROM_DOFS if pardiso_available() else None,
-            "shell": f"PARDISO from {PARDISO_FROM_DOFS} DOF, SuperLU below" if pardiso_available()
+    pardiso = pardiso_available()
+    return {"libraries": ["superlu", "pardiso"] if pardiso else ["superlu"],
+            "pardiso_from_dofs": PARDISO_FROM_DOFS if pardiso else None,
+            "shell": f"PARDISO from {PARDISO_FROM_DOFS} DOF, SuperLU below" if pardiso
             else "SuperLU (pypardiso is not installed)",
             "frame": "SuperLU (its matrices are below the size where PARDISO is faster)"}
 

@@ -355,10 +355,13 @@ def plan_assembly(polymesh: PolyMesh, support_nodes: np.ndarray, beam: dict, *, 
         if progress is not None:
             progress(f"assembly step {len(steps)}", float(growth.beams.mean()))
 
-    def fewer_props() -> float | None:
-        """Remove the props the built structure no longer needs (all together, else one at a
-        time, oldest first); the deflection without them, or None when all stay."""
+    def settled(deflection: float, added: list[int]) -> float:
+        """Take on the ``added`` props; when none was added, remove those the built structure no
+        longer needs (all together, else one at a time, oldest first). The deflection then."""
         nonlocal props
+        props = props + added
+        if added or not props:
+            return deflection
         beams_now, panels_now = np.flatnonzero(growth.beams), np.flatnonzero(growth.panels)
         for trial in [[]] + [[p for p in props if p != q] for q in props[:3]]:
             try:
@@ -368,10 +371,9 @@ def plan_assembly(polymesh: PolyMesh, support_nodes: np.ndarray, beam: dict, *, 
             if value <= limit:
                 props = trial
                 return value
-        return None
+        return deflection
 
     def analysed_step() -> None:
-        nonlocal props
         best = None
         for todo, completed in growth.options(candidates_per_step):
             beams_after = np.concatenate([np.flatnonzero(growth.beams), todo])
@@ -382,17 +384,13 @@ def plan_assembly(polymesh: PolyMesh, support_nodes: np.ndarray, beam: dict, *, 
                 best = (key, todo, completed, deflection, added)
         _, todo, completed, deflection, added = best
         new_nodes = growth.build(todo, completed)
-        props = props + added
-        if props and not added:
-            value = fewer_props()
-            deflection = deflection if value is None else value
-        add_step(todo, completed, deflection, added, new_nodes)
+        add_step(todo, completed, settled(deflection, added), added, new_nodes)
 
     def run_of_steps() -> bool:
         """Up to run_length best-ranked cells, the state after them analysed and propped where it
         deflects over the limit (at most 3 new props, at the last step): kept (True) when it then
         stands within the limit, else undone (False)."""
-        nonlocal growth, props
+        nonlocal growth
         before = growth.copy()
         taken = []
         for _ in range(run_length):
@@ -405,14 +403,10 @@ def plan_assembly(polymesh: PolyMesh, support_nodes: np.ndarray, beam: dict, *, 
         if not deflection <= limit:
             growth = before
             return False
-        for k, (todo, completed, new_nodes) in enumerate(taken):
-            last = k == len(taken) - 1
-            if last:  # the props the run's end needs stand from its last step
-                props = props + added
-                if props and not added:
-                    value = fewer_props()
-                    deflection = deflection if value is None else value
-            add_step(todo, completed, deflection if last else np.nan, added if last else [], new_nodes)
+        for todo, completed, new_nodes in taken[:-1]:
+            add_step(todo, completed, np.nan, [], new_nodes)
+        todo, completed, new_nodes = taken[-1]  # the props the run's end needs stand from its last step
+        add_step(todo, completed, settled(deflection, added), added, new_nodes)
         return True
 
     while not growth.beams.all():

@@ -35,7 +35,7 @@ def drawing_scale(extent_mm, paper_mm) -> int:
     return next((n for n in STANDARD_SCALES if n >= need), int(np.ceil(need)))
 
 
-def _scale_bar(ax, scale: int, paper_mm) -> None:
+def _scale_bar(ax, scale: int) -> None:
     """A scale bar of five black and white segments, some 60 mm of paper long, at the frame's
     bottom left, with its length in m."""
     target = 60.0 * scale  # mm in the model
@@ -180,10 +180,10 @@ def _write_pdf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.nd
     # a true scale: the frame shows scale x its paper size of the plan, centred
     paper = np.array([_A3_MM[0] * box[2], _A3_MM[1] * box[3]])
     scale = drawing_scale(span + 3 * gap, paper)
-    centre = 0.5 * (lo + hi) + np.array([-0.5 * gap, -0.5 * gap])
+    centre = 0.5 * (lo + hi) - 0.5 * gap  # the dimensions take 2 gaps left of and under the plan, 1 beyond
     ax.set_xlim(centre[0] - 0.5 * scale * paper[0], centre[0] + 0.5 * scale * paper[0])
     ax.set_ylim(centre[1] - 0.5 * scale * paper[1], centre[1] + 0.5 * scale * paper[1])
-    _scale_bar(ax, scale, paper)
+    _scale_bar(ax, scale)
     fig.text(0.96, 0.03, "\n".join([*title, f"Scale 1:{scale} on A3 ({_A3_MM[0]} x {_A3_MM[1]} mm)"]),
              ha="right", va="bottom", fontsize=9, bbox={"boxstyle": "square", "facecolor": "white", "edgecolor": "black"})
     with atomic_path(target) as tmp:

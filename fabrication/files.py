@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import itertools
 import os
 import re
 import tempfile
@@ -107,8 +108,6 @@ def file_date() -> _dt.datetime:
 
 
 _STEP_STAMP = re.compile(rb"FILE_NAME\s*\(\s*'(?:[^']|'')*'\s*,\s*'(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d)")
-
-
 _STEP_OCCURRENCE = re.compile(rb"(NEXT_ASSEMBLY_USAGE_OCCURRENCE\s*\(\s*')(\d+)(')")
 
 
@@ -123,7 +122,7 @@ def stamp_step(path: str | os.PathLike) -> None:
     if match:
         stamp = file_date().strftime("%Y-%m-%dT%H:%M:%S").encode()
         data = data[:match.start(1)] + stamp + data[match.end(1):]
-    numbers = iter(range(1, len(data)))
+    numbers = itertools.count(1)
     data = _STEP_OCCURRENCE.sub(lambda m: m.group(1) + str(next(numbers)).encode() + m.group(3), data)
     path.write_bytes(data)
 
@@ -135,9 +134,9 @@ def stamp_zip(path: str | os.PathLike) -> None:
     """Rewrite a ZIP container (XLSX) with file_date() as every member's time and as an Office
     document's created and modified times, members and their compression otherwise unchanged
     (zip writers stamp each member with the time of writing)."""
-    stamp = file_date().timetuple()[:6]
+    day = file_date()
+    stamp, when = day.timetuple()[:6], day.strftime("%Y-%m-%dT%H:%M:%SZ").encode()
     path = Path(path)
-    when = file_date().strftime("%Y-%m-%dT%H:%M:%SZ").encode()
     with zipfile.ZipFile(path) as source:
         members = [(info, source.read(info)) for info in source.infolist()]
     # and the document's own created and modified times (docProps/core.xml)

@@ -139,9 +139,10 @@ def format_value(value, digits: int = 3, *, text: bool = False) -> str:
     if isinstance(value, int) or (isinstance(value, float) and value.is_integer() and abs(value) >= 1000):
         return f"{int(value):,}".replace(",", space)
     if isinstance(value, float):
-        if not math.isfinite(value):
-            return "-" if math.isnan(value) else ("inf" if text else "\u221e") if value > 0 else \
-                ("-inf" if text else "-\u221e")
+        if math.isnan(value):
+            return "-"
+        if math.isinf(value):
+            return ("" if value > 0 else "-") + ("inf" if text else "\u221e")
         if value == 0:
             return "0"
         magnitude = math.floor(math.log10(abs(value)))

@@ -52,7 +52,7 @@ def run(ctx):
                              support_vertices=support_vertices, progress=ctx.step),
             progress=ctx.step)
     if remeshes:
-        ctx.report_findings([coarsened_finding(asked, result, project)])
+        ctx.report_findings([coarsened_finding(asked, result)])
     ctx.step("collapsing beams far shorter than the joints and the shortest cut take")
     polymesh, buildable = buildable_grid(result.polymesh, project, share=REMESH_SHARE)
     write_polymesh_obj(polymesh, ctx.folder / "gridshell.obj",
@@ -119,7 +119,7 @@ def fitted_to_joints(result, project: Project, remesh_with: Callable[[int], obje
     return result, remeshes
 
 
-def coarsened_finding(asked: int, result, project: Project) -> dict:
+def coarsened_finding(asked: int, result) -> dict:
     """The finding that the grid has fewer cells than asked, so that its joints fit (JSON-ready)."""
     from engine.findings import Finding
 
