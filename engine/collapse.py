@@ -21,6 +21,11 @@ set-backs) than the three-beam joints of a Voronoi grid. So a short beam between
 three-beam nodes whose two cells have six sides or more is *flipped* instead (a T1 transition,
 as in foams): its two cells lose a side, the two cells at its ends gain one and share the beam,
 which is turned across and given its buildable length. Every node keeps three beams.
+
+A short beam that can be neither flipped nor collapsed (at a crowded boundary support, or where a
+collapse would break its cells) is *removed* as the last resort (:func:`remove_short_beams`): its
+two cells become one, no node moves, and its end nodes keep at least two beams. A node left with two
+beams is a kinked joint; the wider angles at its ends shorten what their other beams need.
 """
 
 from __future__ import annotations
@@ -32,7 +37,8 @@ import numpy as np
 
 from .mesh import PolyMesh
 
-__all__ = ["CollapseReport", "collapse_beams", "flip_beams", "collapse_short_beams", "MAX_VALENCE"]
+__all__ = ["CollapseReport", "collapse_beams", "flip_beams", "collapse_short_beams", "remove_beams",
+           "remove_short_beams", "open_narrow_joints", "dissolve_kinks", "MAX_VALENCE"]
 
 #: Most beams a merged node may have (a joint with more is crowded, its angles small).
 MAX_VALENCE = 5
@@ -274,3 +280,178 @@ def collapse_short_beams(polymesh: PolyMesh, required: Callable[[PolyMesh], np.n
     if left is None:
         left = np.flatnonzero(polymesh.beam_lengths < required(polymesh))
     return polymesh, CollapseReport(collapsed=total, passes=passes, left=left, flipped=flips)
+
+
+def _merged(first: list[int], second: list[int], a: int, b: int) -> list[int] | None:
+    """The loop of two cells that share only the beam a-b, joined along it; None when the cells do not
+    run along it in opposite directions (the grid is not oriented there)."""
+    def rotated(loop: list[int], start: int) -> list[int]:
+        i = loop.index(start)
+        return loop[i:] + loop[:i]
+
+    one = rotated(first, b)   # b ... a when first runs a -> b
+    two = rotated(second, a)  # a ... b when second runs b -> a
+    if one[-1] != a or two[-1] != b:
+        return None
+    return one + two[1:-1]
+
+
+def remove_beams(polymesh: PolyMesh, beams: np.ndarray) -> tuple[PolyMesh, int]:
+    """Remove, in the order given, those of ``beams`` (indices into ``polymesh.edges``) that are held
+    by two cells sharing no other node, whose two end nodes have three beams or more, touching no cell
+    merged earlier in this call: each beam's two cells become one. No node moves. Returns the grid
+    (same nodes) and the number removed."""
+    faces, node_faces = _cells_at_nodes(polymesh)
+    valence = np.bincount(polymesh.edges.ravel(), minlength=polymesh.n_nodes)
+    merged_cells: set[int] = set()
+    gone: set[int] = set()
+    removed = 0
+    for beam in np.asarray(beams, dtype=int):
+        a, b = map(int, polymesh.edges[beam])
+        if valence[a] < 3 or valence[b] < 3:
+            continue
+        shared = [i for i in node_faces[a] if i in node_faces[b]]
+        if len(shared) != 2 or merged_cells & set(shared):
+            continue
+        first, second = (faces[i] for i in shared)
+        if set(first) & set(second) != {a, b}:
+            continue
+        k = len(first)
+        if (first.index(b) - first.index(a)) % k != 1:
+            first, second = second, first
+        loop = _merged(first, second, a, b)
+        if loop is None:
+            continue
+        keep, drop = shared if shared[0] < shared[1] else shared[::-1]
+        faces[keep] = loop
+        gone.add(drop)
+        merged_cells.update(shared)
+        for v in faces[keep]:
+            node_faces[v] = [keep if i == drop else i for i in node_faces[v]]
+            node_faces[v] = list(dict.fromkeys(node_faces[v]))
+        valence[[a, b]] -= 1
+        removed += 1
+    if not removed:
+        return polymesh, 0
+    result = PolyMesh(nodes=polymesh.nodes, faces=tuple(np.asarray(f, dtype=np.int64)
+                                                        for i, f in enumerate(faces) if i not in gone),
+                      boundary=polymesh.boundary, supports=polymesh.supports, corners=polymesh.corners)
+    return result, removed
+
+
+def _narrowest_pairs(polymesh: PolyMesh, nodes) -> list[tuple[float, int, int, int]]:
+    """(angle rad, node, beam, beam): the narrowest pair of beams at each of ``nodes`` that has three
+    beams or more."""
+    edges, x = polymesh.edges, polymesh.nodes
+    at: dict[int, list[int]] = {}
+    for k, (a, b) in enumerate(edges):
+        at.setdefault(int(a), []).append(k)
+        at.setdefault(int(b), []).append(k)
+    out = []
+    for v in map(int, nodes):
+        beams = at.get(v, [])
+        if len(beams) < 3:
+            continue
+        ends = np.where(edges[beams, 0] == v, edges[beams, 1], edges[beams, 0])
+        d = x[ends] - x[v]
+        d /= np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
+        cosine = d @ d.T
+        np.fill_diagonal(cosine, -2.0)
+        i, j = np.unravel_index(np.argmax(cosine), cosine.shape)
+        out.append((float(np.arccos(np.clip(cosine[i, j], -1.0, 1.0))), v, beams[i], beams[j]))
+    return out
+
+
+def _narrow_partners(polymesh: PolyMesh, short: np.ndarray) -> np.ndarray:
+    """For each of the ``short`` beams, at each end with three beams or more, the beams of the
+    narrowest pair of beams there (the pair that sets the end's joint set-back), the short beam itself
+    left out; ordered by that angle, narrowest first."""
+    ends = np.unique(polymesh.edges[short].ravel())
+    mine = set(map(int, short))
+    found = sorted((angle, k) for angle, v, *pair in _narrowest_pairs(polymesh, ends) for k in pair if k not in mine)
+    return np.array(list(dict.fromkeys(k for _, k in found)), dtype=np.int64)
+
+
+def open_narrow_joints(polymesh: PolyMesh, min_angle_rad: float, *, max_passes: int = 50
+                       ) -> tuple[PolyMesh, int, np.ndarray]:
+    """Where two beams at a node meet at less than ``min_angle_rad``, remove (:func:`remove_beams`) one
+    of them, the longer first (its cells become one, the angle at the node widens), narrowest first,
+    in passes until no angle is too narrow or none can go. Returns the grid, the number removed and
+    the nodes with an angle still too narrow."""
+    removed = 0
+    for _ in range(max_passes):
+        pairs = sorted(p for p in _narrowest_pairs(polymesh, range(polymesh.n_nodes)) if p[0] < min_angle_rad)
+        if not pairs:
+            break
+        lengths = polymesh.beam_lengths
+        order = [k for _, _, i, j in pairs for k in sorted((i, j), key=lambda k: -lengths[k])]
+        polymesh, done = remove_beams(polymesh, np.array(order, dtype=np.int64))
+        removed += done
+        if not done:
+            break
+    left = [v for angle, v, *_ in _narrowest_pairs(polymesh, range(polymesh.n_nodes)) if angle < min_angle_rad]
+    return polymesh, removed, np.array(left, dtype=np.int64)
+
+
+def dissolve_kinks(polymesh: PolyMesh) -> tuple[PolyMesh, int]:
+    """Drop the interior nodes with two beams (left by :func:`remove_beams`; not supports) from their
+    cells where their two neighbours are not joined already and every cell keeps three nodes: the
+    two beams become one straight beam, and a kinked joint that carries nothing across goes. No
+    other node moves. Returns the grid (unused nodes dropped, the others renumbered in order) and the
+    number of nodes dropped."""
+    edges = polymesh.edges
+    valence = np.bincount(edges.ravel(), minlength=polymesh.n_nodes)
+    kinks = np.flatnonzero((valence == 2) & ~(polymesh.boundary | polymesh.supports | polymesh.corners))
+    if not len(kinks):
+        return polymesh, 0
+    faces, node_faces = _cells_at_nodes(polymesh)
+    joined = {tuple(e) for e in np.sort(edges, axis=1).tolist()}
+    neighbours: dict[int, list[int]] = {}
+    for a, b in edges:
+        neighbours.setdefault(int(a), []).append(int(b))
+        neighbours.setdefault(int(b), []).append(int(a))
+    busy = np.zeros(polymesh.n_nodes, dtype=bool)
+    dropped = np.zeros(polymesh.n_nodes, dtype=bool)
+    for v in map(int, kinks):
+        p, q = neighbours[v]
+        if busy[v] or busy[p] or busy[q] or (min(p, q), max(p, q)) in joined:
+            continue
+        if any(len(faces[i]) <= 3 for i in node_faces[v]):
+            continue
+        for i in node_faces[v]:
+            faces[i].remove(v)
+        joined.add((min(p, q), max(p, q)))
+        busy[[v, p, q]] = True
+        dropped[v] = True
+    if not dropped.any():
+        return polymesh, 0
+    keep = ~dropped
+    number = np.cumsum(keep) - 1
+    result = PolyMesh(nodes=polymesh.nodes[keep], faces=tuple(np.asarray(number[f], dtype=np.int64) for f in faces),
+                      boundary=polymesh.boundary[keep], supports=polymesh.supports[keep],
+                      corners=polymesh.corners[keep])
+    return result, int(dropped.sum())
+
+
+def remove_short_beams(polymesh: PolyMesh, required: Callable[[PolyMesh], np.ndarray], *,
+                       max_passes: int = 50) -> tuple[PolyMesh, int, np.ndarray]:
+    """Remove (:func:`remove_beams`) beams shorter than ``required(grid)`` ((n_beams,) m, evaluated on
+    the grid as it is at each pass), shortest relative to its requirement first. Where none of them
+    can go (boundary beams), a beam of the narrowest pair at their ends goes instead: the angle there
+    widens, and with it the joint's set-back shrinks. Passes repeat until none is short or none can
+    go. Returns the grid, the number removed and the ids of the short beams left."""
+    removed = 0
+    for _ in range(max_passes):
+        ratio = polymesh.beam_lengths / np.maximum(required(polymesh), 1e-300)
+        short = np.flatnonzero(ratio < 1.0)
+        if not len(short):
+            break
+        short = short[np.argsort(ratio[short], kind="stable")]
+        polymesh, done = remove_beams(polymesh, short)
+        if not done:
+            polymesh, done = remove_beams(polymesh, _narrow_partners(polymesh, short))
+        removed += done
+        if not done:
+            break
+    left = np.flatnonzero(polymesh.beam_lengths < required(polymesh))
+    return polymesh, removed, left

@@ -64,7 +64,7 @@ from .projections import face_corners, lengthen_short_beams, open_narrow_corners
 from .proximity import closest_point_on_triangles
 
 __all__ = ["OptimizeSettings", "OptimizeResult", "optimize", "regular_targets", "planar_targets",
-           "optimize_quality", "lengthen_short_beams"]
+           "optimize_quality", "grid_quality", "lengthen_short_beams"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -399,6 +399,19 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface
     return out
 
 
+def grid_quality(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, *,
+                 surface: _Surface | None = None, figures: dict | None = None) -> dict:
+    """:func:`optimize_quality` (or ``figures`` already measured) with the remesher's wider figures
+    (cell degrees, sizes against the field: engine.voronoi.polymesh_quality) added."""
+    from .voronoi import polymesh_quality
+
+    out = dict(figures) if figures is not None else optimize_quality(polymesh, mesh if surface is None else None,
+                                                                     surface=surface)
+    for key, value in polymesh_quality(polymesh, mesh=mesh, field=field).items():
+        out.setdefault(key, value)
+    return out
+
+
 # ----------------------------------------------------------------------------- driver
 
 def _check(polymesh: PolyMesh, mesh: TriMesh) -> None:
@@ -637,15 +650,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
         x[moving] = _into_band(x[moving], *surface.closest(x[moving]), CLOSENESS_LIMIT * surface.diagonal)
 
     result = polymesh.replace_nodes(x)
-    after = optimize_quality(result, surface=surface)
-    try:  # the remesher's wider figures (cell degrees, sizes against the field), where available
-        from .voronoi import polymesh_quality
-    except ImportError:  # pragma: no cover
-        polymesh_quality = None
-    if polymesh_quality is not None:
-        for mine, grid in ((before, given), (after, result)):
-            for key, value in polymesh_quality(grid, mesh=mesh, field=field).items():
-                mine.setdefault(key, value)
+    before = grid_quality(given, mesh, field, figures=before)
+    after = grid_quality(result, mesh, field, surface=surface)
     split_length = float(np.linalg.norm(x[new_beams[:, 1]] - x[new_beams[:, 0]], axis=1).sum())
     converged = end["reached"] if ran_end_game else bool(step <= 1e-4 * mean_length)
     quality = {"before": before, "after": after, "iterations": done,

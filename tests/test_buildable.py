@@ -8,7 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from engine.collapse import MAX_VALENCE, collapse_beams, collapse_short_beams, flip_beams
+from engine.collapse import (MAX_VALENCE, collapse_beams, collapse_short_beams, dissolve_kinks, flip_beams,
+                             open_narrow_joints, remove_beams, remove_short_beams)
 from engine.findings import Finding, findings_table
 from engine.mesh import PolyMesh
 from fabrication.joints import JointSettings, build_joint, joint_setback_mm
@@ -145,6 +146,93 @@ def test_short_beams_collapse_until_none_is_shorter_than_required():
     _check_valid(collapsed)
     assert report.collapsed >= 1 and report.flipped == 0 and len(report.left) == 0
     assert collapsed.n_nodes < result.n_nodes <= grid.n_nodes
+
+
+def _euler(grid: PolyMesh) -> int:
+    return grid.n_nodes - len(grid.edges) + grid.n_faces
+
+
+def _area(grid: PolyMesh) -> float:
+    """Sum of the cells' plan areas (shoelace), m2: the same whatever beams inside are removed."""
+    return sum(0.5 * abs(np.dot(grid.nodes[f, 0], np.roll(grid.nodes[f, 1], -1))
+                         - np.dot(grid.nodes[f, 1], np.roll(grid.nodes[f, 0], -1))) for f in grid.faces)
+
+
+def test_removing_a_beam_merges_its_two_cells_and_moves_no_node():
+    grid = _honeycomb()
+    interior = np.flatnonzero(~grid.boundary[grid.edges].any(axis=1))
+    beam = int(interior[5])
+    a, b = grid.edges[beam]
+    result, done = remove_beams(grid, np.array([beam]))
+    assert done == 1
+    _check_valid(result)
+    assert np.array_equal(result.nodes, grid.nodes)
+    assert len(result.edges) == len(grid.edges) - 1 and result.n_faces == grid.n_faces - 1
+    assert _euler(result) == _euler(grid)  # the surface's topology is the same
+    assert np.isclose(_area(result), _area(grid))
+    assert np.isclose(result.total_length, grid.total_length - grid.beam_lengths[beam])
+    assert sorted(result.face_degrees.tolist())[-1] == 10  # two hexagons sharing a beam: a decagon
+    assert result.valence[a] == result.valence[b] == 2
+    # its two straight-through nodes then go: the decagon is an octagon, two beams fewer again
+    straight, dropped = dissolve_kinks(result)
+    assert dropped == 2
+    _check_valid(straight)
+    assert straight.n_nodes == grid.n_nodes - 2 and len(straight.edges) == len(grid.edges) - 3
+    assert _euler(straight) == _euler(grid) and np.isclose(_area(straight), _area(grid))
+    assert straight.valence.min() >= 2 and np.all(straight.valence[~straight.boundary] == 3)
+
+
+def test_boundary_beams_and_beams_at_two_beam_nodes_are_not_removed():
+    grid = _honeycomb(3, 3)
+    sides = np.sort(np.concatenate([np.stack([f, np.roll(f, -1)], 1) for f in grid.faces]), axis=1)
+    pairs, uses = np.unique(sides, axis=0, return_counts=True)
+    index = {tuple(e): k for k, e in enumerate(np.sort(grid.edges, axis=1).tolist())}
+    one_cell = np.array([index[tuple(e)] for e in pairs[uses == 1].tolist()])
+    result, done = remove_beams(grid, one_cell)
+    assert done == 0 and result is grid
+    at_two = np.flatnonzero((grid.valence[grid.edges] == 2).any(axis=1))
+    assert len(at_two) and remove_beams(grid, at_two)[1] == 0
+
+
+def test_short_beams_that_cannot_collapse_are_removed_until_none_is_short():
+    grid = _honeycomb(6, 6)
+    required = lambda g: np.full(len(g.edges), 0.9 * 1.0)  # noqa: E731
+    x = grid.nodes.copy()
+    interior = np.flatnonzero(~grid.boundary[grid.edges].any(axis=1))
+    shortened = []
+    for beam in interior[::7]:
+        a, b = grid.edges[beam]
+        if any(v in np.asarray(shortened).ravel() for v in (a, b)):
+            continue
+        x[b] = x[a] + 0.5 * (x[b] - x[a])
+        shortened.append((a, b))
+    grid = grid.replace_nodes(x)
+    short_before = int(np.sum(grid.beam_lengths < 0.9))
+    assert short_before >= 3
+    result, removed, left = remove_short_beams(grid, required)
+    _check_valid(result)
+    assert len(left) == 0 and result.beam_lengths.min() >= 0.9
+    assert removed <= short_before + 6  # the short beams, and only beams next to them
+    assert _euler(result) == _euler(grid)
+
+
+def test_a_narrow_joint_opens_by_removing_one_of_its_two_beams():
+    grid = _honeycomb(5, 5)
+    x = grid.nodes.copy()
+    # pull one interior node's neighbour round until two of its beams meet at 12 degrees
+    node = int(np.flatnonzero((grid.valence == 3) & ~grid.boundary)[len(grid.nodes) // 3])
+    ends = [int(b if a == node else a) for a, b in grid.edges if node in (a, b)]
+    d0 = x[ends[0]] - x[node]
+    turn = np.radians(12.0)
+    rotation = np.array([[np.cos(turn), -np.sin(turn), 0], [np.sin(turn), np.cos(turn), 0], [0, 0, 1]])
+    x[ends[1]] = x[node] + rotation @ d0
+    grid = grid.replace_nodes(x)
+    assert np.degrees(node_smallest_angles(grid)[node]) < 12.5
+    result, removed, left = open_narrow_joints(grid, np.radians(21.0))
+    assert removed >= 1
+    _check_valid(result)
+    assert _euler(result) == _euler(grid)
+    assert np.degrees(node_smallest_angles(result)[node]) > 21.0 or result.valence[node] == 2
 
 
 def test_a_flip_keeps_three_beams_at_every_node_and_turns_the_beam_across():

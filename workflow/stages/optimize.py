@@ -31,6 +31,8 @@ STRETCH_MARGIN = 1.5
 GRADED_SHORT_SHARE = 0.02
 #: Rounds of (collapse the beams the optimiser left too short, optimise again).
 BUILDABLE_ROUNDS = 2
+#: Rounds of (remove the beams still short, collapse those the removals freed) at the end.
+LAST_RESORT_ROUNDS = 5
 
 __all__ = ["run", "load", "optimize_settings", "panel_pieces_of", "write_panels_obj", "read_panels_obj"]
 
@@ -116,8 +118,17 @@ def run(ctx):
         rounds += 1
         result = reoptimised(result, grid, buildable, "a last time")
         buildable.update({**grid_figures(result.polymesh), "short_beams_left": short_count(result.polymesh, project)})
-    buildable.update({"collapsed_beams": collapsed, "flipped_beams": flipped, "reoptimised": rounds,
-                      "grading_kept": grading_kept, "short_share_at_grading": share_kept})
+    removed = 0
+    if not buildable["too_fine"]:
+        # the last resort for beams that no flip, collapse or optimisation could lengthen, and for
+        # joints too narrow: the beam goes, its two cells become one
+        result, removed = without_unbuildable_beams(result, project, surface, field)
+        if removed:
+            ctx.step(f"{removed} beams too short or too close to another at a joint removed or collapsed")
+            buildable.update({**grid_figures(result.polymesh),
+                              "short_beams_left": short_count(result.polymesh, project)})
+    buildable.update({"collapsed_beams": collapsed, "flipped_beams": flipped, "removed_beams": removed,
+                      "reoptimised": rounds, "grading_kept": grading_kept, "short_share_at_grading": share_kept})
     if buildable["too_fine"]:
         ctx.report_findings([too_fine_finding(buildable, "optimize")])
     elif not grading_kept:
@@ -146,6 +157,34 @@ def run(ctx):
     plot_gridshell(result.polymesh, ctx.folder / "degree.png", color_by="degree",
                    title=f"{project.project.name}: optimised grid-shell, cells by number of sides")
     return result.polymesh
+
+
+def without_unbuildable_beams(result, project: Project, surface, field):
+    """(result, removed): ``result`` with the beams still shorter than their joints and the shortest
+    cut take removed where their two cells can become one, collapsed where the removals freed their
+    end nodes, and one beam of each pair closer than the joint's smallest angle removed
+    (engine.collapse: remove_short_beams, collapse_beams, open_narrow_joints), in rounds while that
+    changes the grid; its "after" figures are measured again. ``removed`` counts the beams removed
+    and collapsed. No node moves but those of the collapses, so nothing is optimised again."""
+    from engine.collapse import collapse_beams, dissolve_kinks, open_narrow_joints, remove_short_beams
+    from engine.optimize import grid_quality
+    from fabrication.limits import required_beam_lengths_m
+
+    limits = build_limits_of(project)
+    grid, removed = result.polymesh, 0
+    for _ in range(LAST_RESORT_ROUNDS):
+        grid, gone, left = remove_short_beams(grid, lambda g: required_beam_lengths_m(g, limits))
+        grid, merged = collapse_beams(grid, left) if len(left) else (grid, 0)
+        grid, straightened = dissolve_kinks(grid)
+        grid, opened, _ = open_narrow_joints(grid, np.radians(limits.min_angle_deg))
+        grid, more = dissolve_kinks(grid)
+        removed += gone + merged + straightened + more + opened
+        if not (merged or opened or straightened or more):
+            break
+    if not removed:
+        return result, 0
+    after = grid_quality(grid, surface.mesh, field)
+    return dataclasses.replace(result, polymesh=grid, quality={**result.quality, "after": after}), removed
 
 
 def grading_finding(share: float, quality: dict) -> dict:
