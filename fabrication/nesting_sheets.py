@@ -11,6 +11,16 @@ the feasible region, and its left-most, then lowest, vertex is the bottom-left p
 The rotation whose placement reaches least far to the right (then least high) wins. Sheets
 are tried first-fit; a new sheet is opened when none takes the panel.
 
+Speed on large sheets: each sheet keeps its *free space* for a disc of radius rho (the sheet less
+its margins and rho, less every part grown by the spacing and rho). A panel's inscribed disc must
+lie there wherever the panel is placed, so the free space's left edge bounds the bottom-left
+position from the left: only the parts to the right of that bound take part in the no-fit union,
+and a sheet whose free space is empty refuses the panel at once. The bound is exact (the same
+placements as without it); on a 6000 x 3210 mm sheet holding 200 panels it leaves a few dozen
+parts in the union instead of all of them. rho is 0.9 times the smallest disc of the next 50 panels
+(by decreasing area), kept while the panels have a disc at least that large, so the free space is
+updated by one difference per placed part and rebuilt now and then.
+
 Placement convention: a panel's sheet outline is  outline_mm @ R(angle).T + (dx, dy),
 with R the counter-clockwise rotation by ``angle_deg``.
 """
@@ -122,6 +132,13 @@ class _Orientation:
     shift: np.ndarray  # (2,) added to R @ outline to reach that normalised frame
     width: float
     height: float
+    centre: np.ndarray  # (2,) centre of the panel's inscribed disc in that frame
+
+
+#: The free space of a sheet is rebuilt for discs of this share of the smallest disc radius among
+#: the next FREE_RADIUS_LOOKAHEAD panels, so that they all reuse it.
+FREE_RADIUS_SHARE = 0.9
+FREE_RADIUS_LOOKAHEAD = 50
 
 
 @dataclass
@@ -130,6 +147,43 @@ class _Sheet:
     bounds: list[np.ndarray] = field(default_factory=list)  # (4,) xmin, ymin, xmax, ymax per part
     area: float = 0.0
     failed_area: float = math.inf  # smallest panel area that did not fit since the last change
+    free: object = None  # where the centre of a disc of radius free_radius can go (shapely), or None
+    free_radius: float = 0.0
+
+    def free_left(self, radius: float, rebuild: float, settings: SheetSettings) -> float | None:
+        """A bound (mm) on the left edge of the region where the centre of a disc of ``radius`` can
+        go (inside the margins, at least the spacing from every part); None when there is no such
+        place. When the free space kept is for a larger disc, it is rebuilt for ``rebuild`` (mm, at
+        most ``radius``)."""
+        if self.free is None or self.free_radius > radius:
+            rho = min(rebuild, radius)
+            m, grow = settings.margin_mm + rho, settings.spacing_mm + rho
+            if settings.width_mm - 2 * m <= 0 or settings.height_mm - 2 * m <= 0:
+                return None
+            room = box(m, m, settings.width_mm - m, settings.height_mm - m)
+            grown = shapely.buffer([shapely.Polygon(h) for h in self.hulls], grow, quad_segs=_QUAD_SEGS)
+            self.free = room.difference(shapely.union_all(grown)) if self.hulls else room
+            self.free_radius = rho
+        if self.free.is_empty:
+            return None
+        return float(shapely.bounds(self.free)[0])
+
+    def add(self, hull: np.ndarray, settings: SheetSettings) -> None:
+        """Put the part of convex outline ``hull`` (mm, sheet frame) on the sheet."""
+        self.hulls.append(hull)
+        self.bounds.append(np.concatenate([hull.min(axis=0), hull.max(axis=0)]))
+        if self.free is not None:
+            grown = shapely.buffer(shapely.Polygon(hull), settings.spacing_mm + self.free_radius, quad_segs=_QUAD_SEGS)
+            self.free = self.free.difference(grown)
+
+
+def _inscribed_disc(hull: np.ndarray) -> tuple[np.ndarray, float]:
+    """(centre, radius) of a disc inside the convex polygon ``hull`` ((k, 2), mm): at its vertex
+    centroid, as large as the nearest edge line allows."""
+    centre = hull.mean(axis=0)
+    edge = np.roll(hull, -1, axis=0) - hull
+    normal = np.column_stack([edge[:, 1], -edge[:, 0]]) / np.maximum(np.linalg.norm(edge, axis=1), 1e-300)[:, None]
+    return centre, float(np.min(np.abs(np.einsum("ki,ki->k", centre - hull, normal))))
 
 
 def _angles(outline: np.ndarray, rotations: bool) -> list[float]:
@@ -149,26 +203,30 @@ def _angles(outline: np.ndarray, rotations: bool) -> list[float]:
 
 def _orientations(outline: np.ndarray, rotations: bool) -> list[_Orientation]:
     hull = np.asarray(MultiPoint(outline).convex_hull.exterior.coords)[:-1]
+    centre, _ = _inscribed_disc(hull)
     result = []
     for angle in _angles(outline, rotations):
         R = rotation(angle)
         rotated = outline @ R.T
         lo, hi = rotated.min(axis=0), rotated.max(axis=0)
         result.append(_Orientation(angle=angle, hull=hull @ R.T - lo, shift=-lo,
-                                   width=float(hi[0] - lo[0]), height=float(hi[1] - lo[1])))
+                                   width=float(hi[0] - lo[0]), height=float(hi[1] - lo[1]),
+                                   centre=centre @ R.T - lo))
     return result
 
 
 def _best_position(sheet: _Sheet, o: _Orientation, settings: SheetSettings,
-                   reach: float) -> tuple[float, float] | None:
+                   reach: float, free_left: float = -math.inf) -> tuple[float, float] | None:
     """Bottom-left feasible reference point (x, y) of orientation ``o`` on ``sheet``, or None
-    (no room, or no position whose right edge stays within ``reach``)."""
+    (no room, or no position whose right edge stays within ``reach``). ``free_left``: the left
+    edge of where the panel's inscribed disc centre can go (no feasible point lies left of it)."""
     m, s = settings.margin_mm, settings.spacing_mm
     x0, y0 = m, m
     x1, y1 = settings.width_mm - m - o.width, settings.height_mm - m - o.height
     if x1 < x0 - 1e-9 or y1 < y0 - 1e-9:
         return None
     x1, y1 = max(x1, x0), max(y1, y0)
+    x0 = min(max(x0, free_left - o.centre[0] - 1e-6), x1)
     if not sheet.hulls:
         return x0, y0
     # GEOS draws buffer arcs with chords of up to pi / (2 quad_segs): grow the radius so the
@@ -200,11 +258,18 @@ def _best_position(sheet: _Sheet, o: _Orientation, settings: SheetSettings,
 
 
 def _place(sheet: _Sheet, k: int, i: int, options: list[_Orientation], settings: SheetSettings,
-           placements: list) -> bool:
+           placements: list, radius: float, rebuild: float) -> bool:
+    """Put panel ``i`` on ``sheet`` (number ``k``) in its best orientation; False when none fits.
+    ``radius``: its inscribed disc's (mm); ``rebuild``: see :meth:`_Sheet.free_left`."""
     best = None
     reach = math.inf
+    free_left = -math.inf
+    if sheet.hulls:
+        free_left = sheet.free_left(radius, rebuild, settings)
+        if free_left is None:
+            return False
     for o in options:
-        position = _best_position(sheet, o, settings, reach)
+        position = _best_position(sheet, o, settings, reach, free_left)
         if position is None:
             continue
         key = (position[0] + o.width) + 1e-3 * (position[1] + o.height)
@@ -214,9 +279,7 @@ def _place(sheet: _Sheet, k: int, i: int, options: list[_Orientation], settings:
     if best is None:
         return False
     _, o, (x, y) = best
-    hull = o.hull + (x, y)
-    sheet.hulls.append(hull)
-    sheet.bounds.append(np.concatenate([hull.min(axis=0), hull.max(axis=0)]))
+    sheet.add(o.hull + (x, y), settings)
     dx, dy = o.shift + (x, y)
     placements[i] = Placement(panel=int(i), sheet=k, angle_deg=float(o.angle), dx=float(dx), dy=float(dy))
     return True
@@ -316,6 +379,11 @@ def nest_sheets(panels: list["Panel"], settings: SheetSettings | None = None) ->
                 hint="add a larger size to [fabrication.sheets] sizes, or set [fabrication.sheets] rotations = true")
     areas = np.array([float(p.area_mm2) for p in panels])
     order = np.argsort(-areas, kind="stable")
+    radii = np.array([_inscribed_disc(options[0].hull)[1] for options in orientations])
+    ahead = radii[order]
+    ahead = np.array([ahead[j:j + FREE_RADIUS_LOOKAHEAD].min() for j in range(n)]) if n else ahead
+    rebuild = np.empty(n)
+    rebuild[order] = FREE_RADIUS_SHARE * ahead
     sheets: list[_Sheet] = []
     members: list[list[int]] = []
     placements: list[Placement | None] = [None] * n
@@ -326,7 +394,7 @@ def nest_sheets(panels: list["Panel"], settings: SheetSettings | None = None) ->
             # skip sheets that just refused a panel of (about) this size or have no area left
             if areas[i] >= 0.98 * sheet.failed_area or sheet.area + areas[i] > sheet_area:
                 continue
-            if _place(sheet, k, i, orientations[i], settings, placements):
+            if _place(sheet, k, i, orientations[i], settings, placements, radii[i], rebuild[i]):
                 members[k].append(int(i))
                 sheet.area += areas[i]
                 sheet.failed_area = math.inf
@@ -337,7 +405,7 @@ def nest_sheets(panels: list["Panel"], settings: SheetSettings | None = None) ->
             sheets.append(_Sheet())
             members.append([int(i)])
             k = len(sheets) - 1
-            if not _place(sheets[k], k, i, orientations[i], settings, placements):  # pragma: no cover
+            if not _place(sheets[k], k, i, orientations[i], settings, placements, radii[i], rebuild[i]):  # pragma: no cover
                 raise InputError(f"panel {panels[i].id} does not fit on an empty sheet")
             sheets[k].area += areas[i]
     per_sheet = [sheet.area / sheet_area for sheet in sheets]

@@ -165,3 +165,44 @@ def test_panels_go_on_the_first_stock_size_they_fit_and_the_rest_are_left_out():
     assert names[panels[1].id] == f"SHEET{nesting0.n_sheets + 1:02d}" and panels[3].id not in names
     area = 2 * 300 * 200 + 900 * 500
     assert stock.utilisation == pytest.approx(area / (nesting0.n_sheets * 600 * 400 + 1200 * 800))
+
+
+def test_the_free_space_bound_finds_the_same_bottom_left_positions():
+    """The free space of a sheet only skips positions that no panel could take: on sheets part
+    filled by a real nesting, every rotation of other panels gets the bottom-left position it gets
+    with the whole no-fit union (to a micrometre)."""
+    import math
+
+    from fabrication import nesting_sheets as ns
+
+    rng = np.random.default_rng(4)
+    outlines = []
+    for r in np.linspace(160, 90, 120):  # cell-like: hexagons and pentagons, jittered, largest first
+        k = rng.integers(5, 7)
+        t = np.linspace(0, 2 * np.pi, k, endpoint=False) + rng.uniform(-0.2, 0.2, k)
+        squash = rng.uniform(0.7, 1.0)
+        hull = shapely.Polygon(np.column_stack([r * np.cos(t), squash * r * np.sin(t)])).convex_hull
+        outlines.append(np.asarray(hull.exterior.coords)[:-1])
+    settings = SheetSettings(width_mm=3000, height_mm=1500, spacing_mm=6, margin_mm=10)
+    checked = bounded = 0
+    sheet = ns._Sheet()
+    for j, outline in enumerate(outlines):
+        options = ns._orientations(outline, True)
+        radius = ns._inscribed_disc(options[0].hull)[1]
+        placements = [None] * len(outlines)
+        if sheet.hulls and j % 3 == 0:  # a probe: every rotation, with and without the bound
+            free_left = sheet.free_left(radius, 0.9 * radius, settings)
+            for o in options:
+                whole = ns._best_position(sheet, o, settings, math.inf)
+                if free_left is None:
+                    assert whole is None
+                    continue
+                fast = ns._best_position(sheet, o, settings, math.inf, free_left)
+                assert (whole is None) == (fast is None)
+                if whole is not None:
+                    assert np.allclose(whole, fast, atol=1e-3)
+                    checked += 1
+                    bounded += free_left - o.centre[0] > settings.margin_mm + 1.0
+        if not ns._place(sheet, 0, j, options, settings, placements, radius, 0.9 * radius):
+            break
+    assert checked >= 20 and bounded >= 10  # the bound did cut the union on most probes

@@ -1,0 +1,90 @@
+"""Sheet nesting speed and yield on cell-like and irregular panels, with and without the free-space
+bound (fabrication.nesting_sheets), in the same run.
+
+    .venv/bin/python benchmarks/sheet_nesting.py [--quick]
+
+Cases: the hexagonal panels of a dome (benchmarks/_bench_panels.py) on 1200 x 600 mm sheets and on
+6000 x 3210 mm jumbo glass; random convex polygons (3-8 sides, 40-250 mm, squashed) on both. Per case
+and variant: seconds, sheets, the area lower bound on sheets and the utilisation. The variant
+"whole union" replaces the bound by none (every part on the sheet in every no-fit union), which is
+what the nester did before 2026-12-02; both must give the same sheets.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import shapely
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _bench_panels import hex_dome  # noqa: E402
+
+from fabrication import nesting_sheets  # noqa: E402
+from fabrication.panels import PanelSettings, flatten_panels  # noqa: E402
+
+
+@dataclass
+class _Panel:
+    id: str
+    outline_mm: np.ndarray
+    area_mm2: float
+
+
+def random_panels(n: int, seed: int) -> list[_Panel]:
+    """``n`` random convex polygons, 3-8 sides, circumradius 40-250 mm, squashed by 0.4-1."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        k = int(rng.integers(3, 9))
+        t = np.sort(rng.uniform(0, 2 * np.pi, k))
+        r, squash = rng.uniform(40, 250), rng.uniform(0.4, 1.0)
+        hull = shapely.Polygon(np.column_stack([r * np.cos(t), squash * r * np.sin(t)])).convex_hull
+        out.append(_Panel(f"P{i + 1:04d}", np.asarray(hull.exterior.coords)[:-1], hull.area))
+    return out
+
+
+def dome_panels(rows: int, cols: int, radius: float) -> list:
+    return flatten_panels(hex_dome(rows, cols, radius=radius), PanelSettings(hole_diameter_mm=0,
+                                                                             planarity_tolerance_mm=50))
+
+
+def _without_bound(self, radius, rebuild, settings):
+    return -math.inf
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="smaller cases")
+    args = parser.parse_args()
+    small = args.quick
+    cases = [
+        ("hexagons, dome", dome_panels(25, 40, 0.1), (1200, 600)),
+        ("hexagons, dome", dome_panels(20, 30, 0.16) if small else dome_panels(40, 60, 0.16), (6000, 3210)),
+        ("random convex", random_panels(300 if small else 800, 1), (1200, 600)),
+        ("random convex", random_panels(500 if small else 1500, 2), (6000, 3210)),
+    ]
+    bound = nesting_sheets._Sheet.free_left
+    print(f"{'panels':28s} {'sheet mm':>11s} {'variant':12s} {'s':>7s} {'sheets':>6s} {'bound':>5s} {'use %':>6s}")
+    for name, panels, (w, h) in cases:
+        settings = nesting_sheets.SheetSettings(width_mm=w, height_mm=h)
+        lower = math.ceil(sum(p.area_mm2 for p in panels) / (w * h))
+        for variant, method in (("free space", bound), ("whole union", _without_bound)):
+            nesting_sheets._Sheet.free_left = method
+            t = time.perf_counter()
+            nesting = nesting_sheets.nest_sheets(panels, settings)
+            seconds = time.perf_counter() - t
+            print(f"{f'{len(panels)} {name}':28s} {f'{w}x{h}':>11s} {variant:12s} {seconds:7.1f} "
+                  f"{nesting.n_sheets:6d} {lower:5d} {100 * nesting.utilisation:6.1f}", flush=True)
+        nesting_sheets._Sheet.free_left = bound
+
+
+if __name__ == "__main__":
+    main()
