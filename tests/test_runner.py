@@ -84,6 +84,16 @@ def test_until_and_only(tmp_path):
     assert calls == ["field"]
 
 
+def test_a_run_until_an_earlier_stage_keeps_the_later_stages_cache(tmp_path):
+    calls: list[str] = []
+    run_project(_project(), tmp_path, _stages(calls))
+    run_project(_project(), tmp_path, _stages(calls), until="shell")
+    calls.clear()
+    run_project(_project(), tmp_path, _stages(calls))
+    assert calls == []
+    assert set(_statuses(tmp_path).values()) == {"cached"}
+
+
 def test_failed_stage_leaves_no_half_written_folder(tmp_path):
     calls: list[str] = []
     with pytest.raises(RuntimeError):

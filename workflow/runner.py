@@ -154,8 +154,14 @@ def _section_value(project: Project, path: str):
     return [item.model_dump(mode="json") for item in value]
 
 
+#: Settings that change how a stage runs, not what it makes: left out of the cache keys.
+NOT_IN_KEYS = ("workers",)
+
+
 def _stage_key(stage: Stage, project: Project, keys: dict[str, str], version: str) -> str:
     config = {name: _section_value(project, name) for name in STAGE_SECTIONS.get(stage.name, ())}
+    config = {name: {k: v for k, v in value.items() if k not in NOT_IN_KEYS} if isinstance(value, dict) else value
+              for name, value in config.items()}
     payload = {"stage": stage.name, "version": version, "config": config,
                "upstream": {d: keys[d] for d in stage.depends},
                "external": stage.external(project) if stage.external else None}
@@ -237,7 +243,9 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
                             earlier_findings=[f for n in earlier for f in (records.get(n) or {}).get("findings", [])])
 
     def write_manifest() -> None:
-        ordered = [records.get(n) or {"name": n, "folder": by_name[n].folder, "status": STATUS_NOT_RUN}
+        # stages after --until keep what an earlier run made (their cache is checked when they run)
+        kept = {n: previous[n] for n in names[last + 1:] if n in previous} if summary.stopped_at is None else {}
+        ordered = [records.get(n) or kept.get(n) or {"name": n, "folder": by_name[n].folder, "status": STATUS_NOT_RUN}
                    for n in names]
         manifest = {"product": "gridshell", "version": version,
                     "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
@@ -260,7 +268,8 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
         folder = out_dir / stage.folder
         entry = previous.get(stage.name)
         if not force and _still_valid(entry, keys[stage.name], out_dir):
-            records[stage.name] = {**entry, "status": STATUS_CACHED, "duration_s": 0.0}
+            records[stage.name] = {**entry, "status": STATUS_CACHED, "duration_s": 0.0,
+                                   "computed_s": entry.get("computed_s", entry.get("duration_s", 0.0))}
             progress.stage_done(stage.name, STATUS_CACHED, 0.0, findings=len(entry.get("findings", [])))
             summary.stages.append(records[stage.name])
             continue
@@ -294,7 +303,8 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
         tmp.rename(folder)
         duration = time.perf_counter() - started
         records[stage.name] = {"name": stage.name, "folder": stage.folder, "status": STATUS_RAN,
-                               "duration_s": round(duration, 3), "key": keys[stage.name],
+                               "duration_s": round(duration, 3), "computed_s": round(duration, 3),
+                               "key": keys[stage.name],
                                "artifacts": _artifacts(folder, out_dir, stage.published),
                                "findings": ctx.findings,
                                **({"step_seconds": ctx.timings} if ctx.timings else {})}
