@@ -155,6 +155,12 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return run_compare(args)
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from .sweep import cmd_sweep as sweep
+
+    return sweep(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .runner import product_version
 
@@ -208,6 +214,15 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--out", metavar="DIR")
     compare.add_argument("--quiet", action="store_true")
     compare.set_defaults(func=cmd_compare)
+
+    sweep = sub.add_parser("sweep", help="run the points of a parameter grid on Dask (see the README)")
+    sweep.add_argument("sweep", metavar="SWEEP.toml")
+    sweep.add_argument("--out", metavar="DIR", help="output folder (default out/SWEEP)")
+    sweep.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. tcp://HOST:8786 "
+                       "(default: a local cluster)")
+    sweep.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: the cores)")
+    sweep.add_argument("--quiet", action="store_true", help="no progress output")
+    sweep.set_defaults(func=cmd_sweep)
     return parser
 
 
