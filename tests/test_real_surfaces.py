@@ -44,3 +44,11 @@ def test_stages_run_on_real_surfaces(path, tmp_path):
     assert coarsened == any(f["kind"] == "grid_coarsened" for f in summary.findings)
     assert remesh["coarsened"]["cells_asked"] == 60 and remesh["coarsened"]["cells_built"] == remesh["n_faces"]
     assert np.isfinite(remesh["closeness_max_rel"])
+    # the optimised grid, read back from its file, has no beam shorter than its joints and the
+    # shortest cut take (what no optimisation lengthens is removed or collapsed, and said)
+    from fabrication.limits import required_beam_lengths_m
+    from workflow.stages.fabrication import build_limits_of
+    from workflow.stages.polymesh_io import read_polymesh_obj
+
+    grid = read_polymesh_obj(out / "05-optimize" / "gridshell.obj")
+    assert np.all(grid.beam_lengths >= required_beam_lengths_m(grid, build_limits_of(project)) - 1e-9)

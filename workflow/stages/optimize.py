@@ -125,6 +125,7 @@ def run(ctx):
         result, removed = without_unbuildable_beams(result, project, surface, field)
         if removed:
             ctx.step(f"{removed} beams too short or too close to another at a joint removed or collapsed")
+            ctx.report_findings([removed_finding(removed, result.polymesh)])
             buildable.update({**grid_figures(result.polymesh),
                               "short_beams_left": short_count(result.polymesh, project)})
     buildable.update({"collapsed_beams": collapsed, "flipped_beams": flipped, "removed_beams": removed,
@@ -185,6 +186,18 @@ def without_unbuildable_beams(result, project: Project, surface, field):
         return result, 0
     after = grid_quality(grid, surface.mesh, field)
     return dataclasses.replace(result, polymesh=grid, quality={**result.quality, "after": after}), removed
+
+
+def removed_finding(removed: int, grid) -> dict:
+    """The finding that beams were removed or collapsed after the last optimisation (JSON-ready)."""
+    from engine.findings import Finding
+
+    return Finding(kind="beams_removed", parts=["grid"], measure=removed, limit=0, unit="beams", stage="optimize",
+                   message=(f"{removed} beams that no optimisation could make as long as their joints take, or as "
+                            "wide apart at a joint as it takes, were removed (their two cells are one panel) or "
+                            f"collapsed: the grid has {grid.n_faces} cells"),
+                   fix="smaller joints ([fabrication.joints] kind, hub_radius, sleeve_length, min_angle) or fewer "
+                       "cells ([remesh] n_cells) keep every beam").to_dict()
 
 
 def grading_finding(share: float, quality: dict) -> dict:
