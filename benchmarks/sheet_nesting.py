@@ -1,13 +1,15 @@
 """Sheet nesting speed and yield on cell-like and irregular panels, with and without the free-space
 bound (fabrication.nesting_sheets), in the same run.
 
-    .venv/bin/python benchmarks/sheet_nesting.py [--quick]
+    .venv/bin/python benchmarks/sheet_nesting.py [--quick] [--run OUT ...]
 
 Cases: the hexagonal panels of a dome (benchmarks/_bench_panels.py) on 1200 x 600 mm sheets and on
 6000 x 3210 mm jumbo glass; random convex polygons (3-8 sides, 40-250 mm, squashed) on both. Per case
 and variant: seconds, sheets, the area lower bound on sheets and the utilisation. The variant
 "whole union" replaces the bound by none (every part on the sheet in every no-fit union), which is
-what the nester did before 2026-12-02; both must give the same sheets.
+what the nester did before 2026-12-02; both must give the same sheets. ``--run OUT`` adds the panels
+of a finished run (its optimised grid and panels.obj, flattened with its own settings, on its stock
+sheets), e.g. a 1500-cell roof of benchmarks/any_roof.py.
 """
 
 from __future__ import annotations
@@ -56,13 +58,36 @@ def dome_panels(rows: int, cols: int, radius: float) -> list:
                                                                              planarity_tolerance_mm=50))
 
 
+def run_panels(out: Path) -> tuple[list, list]:
+    """The panels of the run in ``out`` as its fabrication stage flattens them, and its stock sheets."""
+    import json
+
+    from engine.mesh import PolyMesh
+    from fabrication.panels import PanelSettings
+    from workflow.config import Project
+    from workflow.stages.fabrication import MM, sheet_stock
+    from workflow.stages.optimize import read_panels_obj
+    from workflow.stages.polymesh_io import read_polymesh_obj
+
+    project = Project.model_validate(json.loads((out / "manifest.json").read_text())["config"])
+    grid = read_polymesh_obj(out / "05-optimize" / "gridshell.obj")
+    pieces = read_panels_obj(out / "05-optimize" / "panels.obj")
+    p = project.fabrication.panels
+    settings = PanelSettings(thickness_mm=MM * p.thickness, clearance_mm=MM * p.clearance,
+                             hole_diameter_mm=MM * p.hole_diameter, hole_inset_mm=MM * p.hole_inset,
+                             planarity_tolerance_mm=MM * p.planarity_tolerance, split_nonplanar=p.split_nonplanar)
+    panels = flatten_panels(PolyMesh(nodes=grid.nodes, faces=tuple(x.loop for x in pieces)), settings)
+    return panels, sheet_stock(project)
+
+
 def _without_bound(self, radius, rebuild, settings):
-    return -math.inf
+    return np.array([[-math.inf, -math.inf, math.inf, math.inf]])  # one piece: the whole plane
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smaller cases")
+    parser.add_argument("--run", type=Path, action="append", default=[], help="a finished run's folder")
     args = parser.parse_args()
     small = args.quick
     cases = [
@@ -71,19 +96,25 @@ def main() -> None:
         ("random convex", random_panels(300 if small else 800, 1), (1200, 600)),
         ("random convex", random_panels(500 if small else 1500, 2), (6000, 3210)),
     ]
-    bound = nesting_sheets._Sheet.free_left
+    for out in args.run:
+        panels, stocks = run_panels(out)
+        stock = stocks[0]
+        cases.append((f"{out.name}", [p for p in panels if nesting_sheets.fits_sheet(p, stock)], stock))
+    bound = nesting_sheets._Sheet.free_parts
     print(f"{'panels':28s} {'sheet mm':>11s} {'variant':12s} {'s':>7s} {'sheets':>6s} {'bound':>5s} {'use %':>6s}")
-    for name, panels, (w, h) in cases:
-        settings = nesting_sheets.SheetSettings(width_mm=w, height_mm=h)
-        lower = math.ceil(sum(p.area_mm2 for p in panels) / (w * h))
+    for name, panels, sheet in cases:
+        settings = sheet if isinstance(sheet, nesting_sheets.SheetSettings) else \
+            nesting_sheets.SheetSettings(width_mm=sheet[0], height_mm=sheet[1])
+        w, h = f"{settings.width_mm:g}", f"{settings.height_mm:g}"
+        lower = math.ceil(sum(p.area_mm2 for p in panels) / (settings.width_mm * settings.height_mm))
         for variant, method in (("free space", bound), ("whole union", _without_bound)):
-            nesting_sheets._Sheet.free_left = method
+            nesting_sheets._Sheet.free_parts = method
             t = time.perf_counter()
             nesting = nesting_sheets.nest_sheets(panels, settings)
             seconds = time.perf_counter() - t
             print(f"{f'{len(panels)} {name}':28s} {f'{w}x{h}':>11s} {variant:12s} {seconds:7.1f} "
                   f"{nesting.n_sheets:6d} {lower:5d} {100 * nesting.utilisation:6.1f}", flush=True)
-        nesting_sheets._Sheet.free_left = bound
+        nesting_sheets._Sheet.free_parts = bound
 
 
 if __name__ == "__main__":

@@ -12,10 +12,11 @@ The rotation whose placement reaches least far to the right (then least high) wi
 are tried first-fit; a new sheet is opened when none takes the panel.
 
 Speed on large sheets: each sheet keeps its *free space* for a disc of radius rho (the sheet less
-its margins and rho, less every part grown by the spacing and rho). A panel's inscribed disc must
-lie there wherever the panel is placed, so the free space's left edge bounds the bottom-left
-position from the left: only the parts to the right of that bound take part in the no-fit union,
-and a sheet whose free space is empty refuses the panel at once. The bound is exact (the same
+its margins and rho, less every part grown by the spacing and rho). Wherever a panel can go, the
+panel less a band of rho lies in one piece of that free space, so only pieces at least as big
+count and their left edge bounds the bottom-left position from the left: only the parts to the
+right of that bound take part in the no-fit union, and a sheet with no such piece refuses the
+panel at once. The bound is exact (the same
 placements as without it); on a 6000 x 3210 mm sheet holding 200 panels it leaves a few dozen
 parts in the union instead of all of them. rho is 0.9 times the smallest disc of the next 50 panels
 (by decreasing area), kept while the panels have a disc at least that large, so the free space is
@@ -133,6 +134,15 @@ class _Orientation:
     width: float
     height: float
     centre: np.ndarray  # (2,) centre of the panel's inscribed disc in that frame
+    eroded: dict = field(default_factory=dict)  # disc radius -> bounds of the hull eroded by it, or None
+
+    def eroded_bounds(self, radius: float) -> np.ndarray | None:
+        """(4,) bounds of the hull less a band of ``radius`` (where a disc of that radius inside the
+        panel can have its centre), in the orientation's frame; None when nothing is left."""
+        if radius not in self.eroded:
+            core = shapely.buffer(shapely.Polygon(self.hull), -radius, quad_segs=_QUAD_SEGS)
+            self.eroded[radius] = None if core.is_empty else np.asarray(core.bounds)
+        return self.eroded[radius]
 
 
 #: The free space of a sheet is rebuilt for discs of this share of the smallest disc radius among
@@ -150,11 +160,11 @@ class _Sheet:
     free: object = None  # where the centre of a disc of radius free_radius can go (shapely), or None
     free_radius: float = 0.0
 
-    def free_left(self, radius: float, rebuild: float, settings: SheetSettings) -> float | None:
-        """A bound (mm) on the left edge of the region where the centre of a disc of ``radius`` can
-        go (inside the margins, at least the spacing from every part); None when there is no such
-        place. When the free space kept is for a larger disc, it is rebuilt for ``rebuild`` (mm, at
-        most ``radius``)."""
+    def free_parts(self, radius: float, rebuild: float, settings: SheetSettings) -> np.ndarray | None:
+        """(k, 4) bounds of the pieces of the free space: where the centre of a disc of radius
+        ``free_radius`` (at most ``radius``) can go, inside the margins and at least the spacing from
+        every part; None when there is no such place. When the free space kept is for a larger disc,
+        it is rebuilt for ``rebuild`` (mm, at most ``radius``)."""
         if self.free is None or self.free_radius > radius:
             rho = min(rebuild, radius)
             m, grow = settings.margin_mm + rho, settings.spacing_mm + rho
@@ -166,7 +176,7 @@ class _Sheet:
             self.free_radius = rho
         if self.free.is_empty:
             return None
-        return float(shapely.bounds(self.free)[0])
+        return shapely.bounds(shapely.get_parts(self.free))
 
     def add(self, hull: np.ndarray, settings: SheetSettings) -> None:
         """Put the part of convex outline ``hull`` (mm, sheet frame) on the sheet."""
@@ -216,27 +226,47 @@ def _orientations(outline: np.ndarray, rotations: bool) -> list[_Orientation]:
 
 
 def _best_position(sheet: _Sheet, o: _Orientation, settings: SheetSettings,
-                   reach: float, free_left: float = -math.inf) -> tuple[float, float] | None:
+                   reach: float, free: np.ndarray | None = None) -> tuple[float, float] | None:
     """Bottom-left feasible reference point (x, y) of orientation ``o`` on ``sheet``, or None
-    (no room, or no position whose right edge stays within ``reach``). ``free_left``: the left
-    edge of where the panel's inscribed disc centre can go (no feasible point lies left of it)."""
+    (no room, or no position whose right edge stays within ``reach``). ``free``: the bounds of the
+    sheet's free-space pieces (:meth:`_Sheet.free_parts`). The panel less a band of the free
+    space's disc radius lies in one piece wherever the panel can go, so only pieces at least that
+    big count, and no feasible point lies left of the leftmost of them."""
     m, s = settings.margin_mm, settings.spacing_mm
     x0, y0 = m, m
     x1, y1 = settings.width_mm - m - o.width, settings.height_mm - m - o.height
     if x1 < x0 - 1e-9 or y1 < y0 - 1e-9:
         return None
     x1, y1 = max(x1, x0), max(y1, y0)
-    x0 = min(max(x0, free_left - o.centre[0] - 1e-6), x1)
     if not sheet.hulls:
         return x0, y0
+    # where the reference point can be: the inner-fit rectangle, or with the free space only the
+    # rectangles that keep the eroded panel inside a piece big enough for it (a degenerate one a
+    # hair wider; the parts near them all enter the union, so the result stays exact)
+    windows = np.array([[x0, y0, x1, y1]])
+    core = o.eroded_bounds(sheet.free_radius) if free is not None else None
+    if core is not None:
+        big = ((free[:, 2] - free[:, 0] >= core[2] - core[0] - 1e-6)
+               & (free[:, 3] - free[:, 1] >= core[3] - core[1] - 1e-6))
+        pieces = free[big]
+        windows = np.column_stack([np.maximum(pieces[:, 0] - core[0], x0), np.maximum(pieces[:, 1] - core[1], y0),
+                                   np.minimum(pieces[:, 2] - core[2], x1), np.minimum(pieces[:, 3] - core[3], y1)])
+        windows = windows[(windows[:, 0] <= windows[:, 2] + 1e-6) & (windows[:, 1] <= windows[:, 3] + 1e-6)]
+        if not len(windows):
+            return None
+    wide = windows + np.array([-1e-9, -1e-9, 1e-9, 1e-9])
+    inside = np.column_stack([np.maximum(wide[:, :2], (x0, y0)), np.minimum(wide[:, 2:], (x1, y1))])
+    solid = (inside[:, 2] > inside[:, 0]) & (inside[:, 3] > inside[:, 1])
+    windows = np.where(solid[:, None], inside, wide)
     # GEOS draws buffer arcs with chords of up to pi / (2 quad_segs): grow the radius so the
     # polygonal buffer contains the true rounded one (checked against exact distances in tests)
     radius = s / math.cos(math.pi / (2 * _QUAD_SEGS)) + 1e-6 if s > 0 else 0.0
     a_lo, a_hi = o.hull.min(axis=0), o.hull.max(axis=0)
-    bounds = np.array(sheet.bounds)
-    near = ((bounds[:, 0] - a_hi[0] - radius <= x1) & (bounds[:, 2] - a_lo[0] + radius >= x0)
-            & (bounds[:, 1] - a_hi[1] - radius <= y1) & (bounds[:, 3] - a_lo[1] + radius >= y0))
-    inner = box(x0, y0, x1, y1) if (x1 > x0 and y1 > y0) else shapely.Point(x0, y0).buffer(1e-9)
+    bounds = np.array(sheet.bounds)[:, None, :]
+    near = ((bounds[..., 0] - a_hi[0] - radius <= windows[:, 2]) & (bounds[..., 2] - a_lo[0] + radius >= windows[:, 0])
+            & (bounds[..., 1] - a_hi[1] - radius <= windows[:, 3])
+            & (bounds[..., 3] - a_lo[1] + radius >= windows[:, 1])).any(axis=1)
+    inner = shapely.union_all(shapely.box(*windows.T)) if len(windows) > 1 else box(*windows[0])
     if near.any():
         # no-fit region of each nearby part B for reference points t: hull(B - A) grown by the spacing
         sums = [(sheet.hulls[j][:, None, :] - o.hull[None, :, :]).reshape(-1, 2) for j in np.flatnonzero(near)]
@@ -260,16 +290,16 @@ def _best_position(sheet: _Sheet, o: _Orientation, settings: SheetSettings,
 def _place(sheet: _Sheet, k: int, i: int, options: list[_Orientation], settings: SheetSettings,
            placements: list, radius: float, rebuild: float) -> bool:
     """Put panel ``i`` on ``sheet`` (number ``k``) in its best orientation; False when none fits.
-    ``radius``: its inscribed disc's (mm); ``rebuild``: see :meth:`_Sheet.free_left`."""
+    ``radius``: its inscribed disc's (mm); ``rebuild``: see :meth:`_Sheet.free_parts`."""
     best = None
     reach = math.inf
-    free_left = -math.inf
+    free = None
     if sheet.hulls:
-        free_left = sheet.free_left(radius, rebuild, settings)
-        if free_left is None:
+        free = sheet.free_parts(radius, rebuild, settings)
+        if free is None:
             return False
     for o in options:
-        position = _best_position(sheet, o, settings, reach, free_left)
+        position = _best_position(sheet, o, settings, reach, free)
         if position is None:
             continue
         key = (position[0] + o.width) + 1e-3 * (position[1] + o.height)

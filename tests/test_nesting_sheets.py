@@ -191,18 +191,20 @@ def test_the_free_space_bound_finds_the_same_bottom_left_positions():
         radius = ns._inscribed_disc(options[0].hull)[1]
         placements = [None] * len(outlines)
         if sheet.hulls and j % 3 == 0:  # a probe: every rotation, with and without the bound
-            free_left = sheet.free_left(radius, 0.9 * radius, settings)
+            free = sheet.free_parts(radius, 0.9 * radius, settings)
             for o in options:
                 whole = ns._best_position(sheet, o, settings, math.inf)
-                if free_left is None:
+                if free is None:
                     assert whole is None
                     continue
-                fast = ns._best_position(sheet, o, settings, math.inf, free_left)
+                fast = ns._best_position(sheet, o, settings, math.inf, free)
                 assert (whole is None) == (fast is None)
                 if whole is not None:
                     assert np.allclose(whole, fast, atol=1e-3)
                     checked += 1
-                    bounded += free_left - o.centre[0] > settings.margin_mm + 1.0
+                    core = o.eroded_bounds(sheet.free_radius)
+                    big = (free[:, 2] - free[:, 0] >= core[2] - core[0]) & (free[:, 3] - free[:, 1] >= core[3] - core[1])
+                    bounded += free[big, 0].min() - core[0] > settings.margin_mm + 1.0
         if not ns._place(sheet, 0, j, options, settings, placements, radius, 0.9 * radius):
             break
     assert checked >= 20 and bounded >= 10  # the bound did cut the union on most probes
