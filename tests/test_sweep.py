@@ -240,3 +240,31 @@ def _with_cells(project: str, cells: int) -> str:
     body, tail = (rest.split("\n[", 1) + [""])[:2]
     lines = [line for line in body.splitlines() if not line.strip().startswith("n_cells")]
     return head + "[remesh]\n" + f"n_cells = {cells}\n" + "\n".join(lines) + ("\n[" + tail if tail else "")
+
+
+def test_a_failing_task_is_a_row_and_fails_only_the_points_below_it(tmp_path):
+    """A task whose stage raises returns ``failed`` with the stage range and the message (it does not
+    raise); a child of a failed task reports the same failure without running; the results row
+    carries them."""
+    from tests.generated_surfaces import generate_surface, write_ply
+    from workflow.config import project_from_surface
+    from workflow.sweep import SweepSpec, Task, _row, run_task
+
+    surface = generate_surface(0)
+    path = tmp_path / "roof.ply"
+    write_ply(surface, path)
+    project = project_from_surface(str(path), "flagged")
+    path.unlink()  # gone after validation: the surface stage fails when it runs
+    names = [s.name for s in STAGES][:3]
+    root = Task(id=0, first=0, last=1, points=[1, 2], home=tmp_path / "points" / "0001", project=project, parent=None)
+    child = Task(id=1, first=2, last=2, points=[2], home=tmp_path / "points" / "0002", project=project, parent=root)
+    failed = run_task(root, names, None)
+    assert failed["status"] == "failed" and failed["message"].startswith("surface..shell: ")
+    assert "roof.ply" in failed["message"]
+    below = run_task(child, names, failed)
+    assert below["status"] == "failed" and below["message"] == failed["message"]
+    assert not (tmp_path / "points" / "0002").exists()
+    spec = SweepSpec(file=tmp_path / "s.toml", project_file=path, project_data={}, until="field",
+                     parameters={"remesh.seed": [1, 2]})
+    row = _row(Point(number=2, values={"remesh.seed": 2}, project=project, folder=child.home), below, spec)
+    assert row["status"] == "failed" and row["message"] == failed["message"] and row["lambda_NL_worst"] is None
