@@ -378,19 +378,21 @@ def open_narrow_joints(polymesh: PolyMesh, min_angle_rad: float, *, max_passes: 
     of them, the longer first (its cells become one, the angle at the node widens), narrowest first,
     in passes until no angle is too narrow or none can go. Returns the grid, the number removed and
     the nodes with an angle still too narrow."""
-    removed = 0
+    def too_narrow(grid: PolyMesh) -> list[tuple[float, int, int, int]]:
+        return sorted(p for p in _narrowest_pairs(grid, range(grid.n_nodes)) if p[0] < min_angle_rad)
+
+    removed, pairs = 0, too_narrow(polymesh)
     for _ in range(max_passes):
-        pairs = sorted(p for p in _narrowest_pairs(polymesh, range(polymesh.n_nodes)) if p[0] < min_angle_rad)
         if not pairs:
             break
         lengths = polymesh.beam_lengths
         order = [k for _, _, i, j in pairs for k in sorted((i, j), key=lambda k: -lengths[k])]
         polymesh, done = remove_beams(polymesh, np.array(order, dtype=np.int64))
-        removed += done
         if not done:
             break
-    left = [v for angle, v, *_ in _narrowest_pairs(polymesh, range(polymesh.n_nodes)) if angle < min_angle_rad]
-    return polymesh, removed, np.array(left, dtype=np.int64)
+        removed += done
+        pairs = too_narrow(polymesh)
+    return polymesh, removed, np.array([v for _, v, *_ in pairs], dtype=np.int64)
 
 
 def dissolve_kinks(polymesh: PolyMesh) -> tuple[PolyMesh, int]:

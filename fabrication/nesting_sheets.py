@@ -133,7 +133,6 @@ class _Orientation:
     shift: np.ndarray  # (2,) added to R @ outline to reach that normalised frame
     width: float
     height: float
-    centre: np.ndarray  # (2,) centre of the panel's inscribed disc in that frame
     eroded: dict = field(default_factory=dict)  # disc radius -> bounds of the hull eroded by it, or None
 
     def eroded_bounds(self, radius: float) -> np.ndarray | None:
@@ -187,13 +186,13 @@ class _Sheet:
             self.free = self.free.difference(grown)
 
 
-def _inscribed_disc(hull: np.ndarray) -> tuple[np.ndarray, float]:
-    """(centre, radius) of a disc inside the convex polygon ``hull`` ((k, 2), mm): at its vertex
+def _inscribed_radius(hull: np.ndarray) -> float:
+    """Radius (mm) of a disc inside the convex polygon ``hull`` ((k, 2), mm): centred at its vertex
     centroid, as large as the nearest edge line allows."""
     centre = hull.mean(axis=0)
     edge = np.roll(hull, -1, axis=0) - hull
     normal = np.column_stack([edge[:, 1], -edge[:, 0]]) / np.maximum(np.linalg.norm(edge, axis=1), 1e-300)[:, None]
-    return centre, float(np.min(np.abs(np.einsum("ki,ki->k", centre - hull, normal))))
+    return float(np.min(np.abs(np.einsum("ki,ki->k", centre - hull, normal))))
 
 
 def _angles(outline: np.ndarray, rotations: bool) -> list[float]:
@@ -213,15 +212,13 @@ def _angles(outline: np.ndarray, rotations: bool) -> list[float]:
 
 def _orientations(outline: np.ndarray, rotations: bool) -> list[_Orientation]:
     hull = np.asarray(MultiPoint(outline).convex_hull.exterior.coords)[:-1]
-    centre, _ = _inscribed_disc(hull)
     result = []
     for angle in _angles(outline, rotations):
         R = rotation(angle)
         rotated = outline @ R.T
         lo, hi = rotated.min(axis=0), rotated.max(axis=0)
         result.append(_Orientation(angle=angle, hull=hull @ R.T - lo, shift=-lo,
-                                   width=float(hi[0] - lo[0]), height=float(hi[1] - lo[1]),
-                                   centre=centre @ R.T - lo))
+                                   width=float(hi[0] - lo[0]), height=float(hi[1] - lo[1])))
     return result
 
 
@@ -409,7 +406,7 @@ def nest_sheets(panels: list["Panel"], settings: SheetSettings | None = None) ->
                 hint="add a larger size to [fabrication.sheets] sizes, or set [fabrication.sheets] rotations = true")
     areas = np.array([float(p.area_mm2) for p in panels])
     order = np.argsort(-areas, kind="stable")
-    radii = np.array([_inscribed_disc(options[0].hull)[1] for options in orientations])
+    radii = np.array([_inscribed_radius(options[0].hull) for options in orientations])
     ahead = radii[order]
     ahead = np.array([ahead[j:j + FREE_RADIUS_LOOKAHEAD].min() for j in range(n)]) if n else ahead
     rebuild = np.empty(n)

@@ -188,7 +188,7 @@ def test_the_free_space_bound_finds_the_same_bottom_left_positions():
     sheet = ns._Sheet()
     for j, outline in enumerate(outlines):
         options = ns._orientations(outline, True)
-        radius = ns._inscribed_disc(options[0].hull)[1]
+        radius = ns._inscribed_radius(options[0].hull)
         placements = [None] * len(outlines)
         if sheet.hulls and j % 3 == 0:  # a probe: every rotation, with and without the bound
             free = sheet.free_parts(radius, 0.9 * radius, settings)

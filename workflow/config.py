@@ -25,7 +25,7 @@ from engine.supports import restraint_flags
 
 from .units import AreaLoad, Density, Force, Length, Stress, to_si
 
-__all__ = ["ConfigError", "Project", "load_project", "parse_project", "project_from_surface", "check_inputs",
+__all__ = ["ConfigError", "Project", "load_project", "parse_project", "read_toml", "project_from_surface", "check_inputs",
            "STAGE_SECTIONS"]
 
 
@@ -616,16 +616,22 @@ def load_project(path: str | Path) -> Project:
             raise ConfigError(f"{path} is a folder without a project.toml",
                               hint=f"give the project file, or create one with: gridshell init {path} --template mockup")
         path = path / "project.toml"
+    data = read_toml(path, "project file", hint="create one with: gridshell init DIR --template mockup")
+    return parse_project(data, source=str(path), base_dir=path.parent.resolve())
+
+
+def read_toml(path: Path, what: str, *, hint: str | None = None) -> dict:
+    """The TOML table of the file ``path``; ConfigError when it does not exist (``what`` names it,
+    ``hint`` says what to do), is not TOML or is not text."""
+    path = Path(path)
     if not path.is_file():
-        raise ConfigError(f"project file {path} does not exist",
-                          hint="create one with: gridshell init DIR --template mockup")
+        raise ConfigError(f"{what} {path} does not exist", hint=hint)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        return tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
     except UnicodeDecodeError:
         raise ConfigError(f"{path}: not a text file") from None
-    return parse_project(data, source=str(path), base_dir=path.parent.resolve())
 
 
 def project_from_surface(surface: str | Path, supports: str = "boundary", units: str = "m") -> Project:

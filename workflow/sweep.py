@@ -36,7 +36,6 @@ import os
 import shutil
 import sys
 import time
-import tomllib
 from pathlib import Path
 from typing import Any, Callable
 
@@ -84,16 +83,10 @@ def _stage_names() -> list[str]:
 def load_sweep(path: str | Path) -> SweepSpec:
     """Read and check a sweep file: InputError naming the key for a missing project file, an unknown
     stage, a key that is not a project key, a value that is not a list, or an empty grid."""
-    from .config import _model_for
+    from .config import _model_for, read_toml
 
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"sweep file {path} does not exist",
-                         hint='write one with project = "project.toml" and a [parameters] table')
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: not valid TOML: {exc}") from None
+    data = read_toml(path, "sweep file", hint='write one with project = "project.toml" and a [parameters] table')
     unknown = sorted(set(data) - {"project", "until", "parameters"})
     if unknown:
         raise InputError(f"{path}: unknown key {unknown[0]!r}", hint="a sweep file has project, until and [parameters]")
@@ -121,10 +114,7 @@ def load_sweep(path: str | Path) -> SweepSpec:
         if not isinstance(values, list) or not values:
             raise InputError(f"{path}: [parameters] {key!r} must be a non-empty list of values",
                              hint=f'e.g. "{key}" = [{values!r}]' if not isinstance(values, list) else None)
-    try:
-        project_data = tomllib.loads(project_file.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{project_file}: not valid TOML: {exc}") from None
+    project_data = read_toml(project_file, "project file")
     return SweepSpec(file=path, project_file=project_file, project_data=project_data, until=until,
                      parameters={k: list(v) for k, v in parameters.items()})
 
