@@ -319,6 +319,23 @@ class AnalysisConfig(_Section):
     sls_combination: str | None = None
     control_points: dict[str, list[Length]] = Field(default_factory=dict)
     workers: int | None = Field(None, ge=1)
+    checks: Literal["en1993", "simplified"] = "en1993"
+    buckling_length: Literal["node_to_node", "buckling_modes"] = "node_to_node"
+
+
+class DesignConfig(_Section):
+    """Section sizing (engine.sizing): with size_sections, the lightest tubes of ``catalogue`` (a
+    shipped one: "EN 10210-2 CHS", "EN 10219-2 CHS", "EN 755-8 aluminium tubes"; or a CSV file
+    with diameter_mm and thickness_mm columns, relative to the project file), in at most
+    ``groups`` distinct sections, that pass the member checks, the deflection limit and the
+    buckling limits of [analysis]. nonlinear_rounds: how often the sections are stiffened and
+    re-sized where lambda_NL_worst misses its limit."""
+
+    size_sections: bool = False
+    catalogue: str = "EN 10210-2 CHS"
+    groups: int = Field(3, ge=1, le=30)
+    max_iterations: int = Field(25, ge=1, le=200)
+    nonlinear_rounds: int = Field(2, ge=0, le=10)
 
 
 class JointsConfig(_Section):
@@ -409,8 +426,17 @@ class Project(_Section):
     remesh: RemeshConfig = Field(default_factory=RemeshConfig)
     optimize: OptimizeConfig = Field(default_factory=OptimizeConfig)
     analysis: AnalysisConfig = Field(default_factory=AnalysisConfig)
+    design: DesignConfig = Field(default_factory=DesignConfig)
     fabrication: FabricationConfig = Field(default_factory=FabricationConfig)
     report: ReportConfig = Field(default_factory=ReportConfig)
+
+    @model_validator(mode="after")
+    def _design_needs_tubes(self) -> "Project":
+        if self.design.size_sections and self.section.kind != "circular_hollow":
+            raise ValueError(f'design.size_sections sizes tubes from a catalogue of circular hollow sections, '
+                             f'but [section] kind = "{self.section.kind}"; set kind = "circular_hollow" or '
+                             f'size_sections = false')
+        return self
 
     @model_validator(mode="after")
     def _fabrication_defaults(self) -> "Project":
@@ -453,7 +479,7 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "field": ("field",),
     "remesh": ("remesh", "section", "material", "fabrication.joints", "fabrication.beams"),
     "optimize": ("optimize", "section", "material", "fabrication.joints", "fabrication.beams"),
-    "analysis": ("analysis", "material", "section", "loads"),
+    "analysis": ("analysis", "design", "material", "section", "loads"),
     "fabrication": ("fabrication", "material", "section"),
     "report": ("report", "project"),
 }
@@ -604,6 +630,12 @@ def parse_project(data: dict, *, source: str = "project", base_dir: Path | None 
         if not path.is_absolute():
             surface = project.surface.model_copy(update={"file": str((base_dir / path).resolve())})
             project = project.model_copy(update={"surface": surface})
+    from engine.catalogue import CATALOGUES
+
+    spec = project.design.catalogue
+    if spec not in CATALOGUES and base_dir is not None and not Path(spec).is_absolute():
+        design = project.design.model_copy(update={"catalogue": str((base_dir / spec).resolve())})
+        project = project.model_copy(update={"design": design})
     return project
 
 
@@ -667,6 +699,14 @@ def check_inputs(project: Project, *, quick_start: bool = False) -> float | None
     across in metres (None for a template surface). Raises ``ConfigError``."""
     from .surface_io import read_surface
 
+    if project.design.size_sections:
+        from engine.catalogue import catalogue
+        from engine.errors import InputError
+
+        try:
+            catalogue(project.design.catalogue)
+        except InputError as error:
+            raise ConfigError(f"[design] catalogue: {error.args[0]}", hint=error.hint) from None
     config = project.surface
     if config.file is None:
         return None

@@ -10,7 +10,7 @@ from engine.parts import beam_id
 
 from ._common import frame_3d, pyplot, save_png
 
-__all__ = ["plot_utilisation", "plot_axial_forces", "plot_buckling_modes", "plot_response"]
+__all__ = ["plot_utilisation", "plot_axial_forces", "plot_buckling_modes", "plot_response", "plot_sections"]
 
 
 def _segments(nodes: np.ndarray, beams: np.ndarray) -> np.ndarray:
@@ -46,6 +46,31 @@ def plot_utilisation(nodes: np.ndarray, beams: np.ndarray, utilisation: np.ndarr
                 fontsize=9, arrowprops={"arrowstyle": "->"})
     _frame(ax, nodes)
     ax.set_title(title or "member utilisation")
+    fig.tight_layout()
+    return save_png(fig, path)
+
+
+def plot_sections(nodes: np.ndarray, beams: np.ndarray, profiles: list[str], diameters_m: np.ndarray, path: Path, *,
+                  title: str = "") -> Path:
+    """Plan with beams coloured by their sized tube (legend: profile and count), drawn wider for
+    larger tubes."""
+    plt = pyplot()
+    from matplotlib.collections import LineCollection
+
+    fig, ax = plt.subplots(figsize=(9, 8))
+    diameters = np.asarray(diameters_m, dtype=float)
+    names = np.asarray(profiles)
+    order = sorted(set(names.tolist()), key=lambda n: -diameters[names == n].max())
+    colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, max(len(order), 1)))
+    scale = diameters.max() if diameters.max() > 0 else 1.0
+    segments = _segments(nodes, beams)
+    for colour, name in zip(colours, order):
+        mine = names == name
+        ax.add_collection(LineCollection(segments[mine], colors=[colour], linewidths=1.0 + 4.0 * diameters[mine] / scale,
+                                         label=f"{name} ({int(mine.sum())} beams)"))
+    ax.legend(loc="upper right", fontsize=9, framealpha=0.9)
+    _frame(ax, nodes)
+    ax.set_title(title or "sized sections")
     fig.tight_layout()
     return save_png(fig, path)
 

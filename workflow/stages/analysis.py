@@ -25,18 +25,24 @@ from engine.supports import Supports
 from engine.parts import beam_id, node_id
 from fabrication.files import atomic_path, write_text_atomic
 
+from engine.en1993 import CHECKED, NOT_CHECKED, EndForces
+
 from ..config import Project
 from ._require import require
+from .sizing import (BeamSections, buckling_lengths, checks_method, make_analyse, project_catalogue,
+                     project_sections, start_tubes, tube_checks)
 
 __all__ = ["run", "load", "beam_properties", "build_frame", "pick_combination", "AnalysisSummary"]
 
 
 @dataclass(frozen=True, kw_only=True)
 class AnalysisSummary:
-    """What later stages need: the figures (analysis.json) and per-beam axial forces (N)."""
+    """What later stages need: the figures (analysis.json), per-beam axial forces (N) and, where
+    the tubes were sized ([design] size_sections), each beam's tube."""
 
     figures: dict
     axial_forces: np.ndarray
+    sections: BeamSections | None = None
 
 
 def beam_properties(project: Project):
@@ -118,28 +124,57 @@ def run(ctx):
     run_protocol, ProtocolSettings = require("analysis", "engine.protocol", "run_protocol", "ProtocolSettings")
     member_checks = require("analysis", "engine.checks", "member_checks")
     props, section, material = beam_properties(project)
-    ctx.step("frame model")
-    model, supports, normals = build_frame(polymesh, surface, props, config.elements_per_beam)
+    lengths = polymesh.beam_lengths
+    sections = project_sections(project, len(lengths))
+    method = checks_method(project, material) if sections is not None else "simplified"
     uls_combo, sls_combo = pick_combination(project, surface, "ULS"), pick_combination(project, surface, "SLS")
-    uls_loads = gridshell_loads(polymesh, combine(surface.load_cases, uls_combo),
-                                mass_per_length=props.mass_per_length, surface_vertices=surface.mesh.vertices)
-    sls_loads = gridshell_loads(polymesh, combine(surface.load_cases, sls_combo),
-                                mass_per_length=props.mass_per_length, surface_vertices=surface.mesh.vertices)
     span = _plan_span(polymesh)
+    deflection_limit = span / config.deflection_limit_ratio
     amplitude = config.imperfection_amplitude or span / 300.0
     settings = ProtocolSettings(n_modes=config.n_modes, amplitude=amplitude, shapes=tuple(config.imperfection_shapes),
                                 nonlinear=config.nonlinear, max_load_factor=config.max_load_factor)
-    with path_pool(config.workers if config.nonlinear else 1) as pool:
-        result = run_protocol(model, supports, sls_loads, uls_loads, settings, progress=ctx.step, executor=pool)
+    mass_before = float(lengths.sum() * props.mass_per_length)
+    design = sizer = None
+    if project.design.size_sections:
+        sizer = _Sizer(ctx, project, polymesh, surface, material, method, (uls_combo, sls_combo), deflection_limit)
+        design = sizer.size(None)
+        sections = sizer.sections(design)
+    rounds = 0
+    while True:
+        if sections is not None:
+            props = sections.frame_properties(material)
+        ctx.step("frame model")
+        model, supports, normals = build_frame(polymesh, surface, props, config.elements_per_beam)
+        uls_loads = gridshell_loads(polymesh, combine(surface.load_cases, uls_combo),
+                                    mass_per_length=props.mass_per_length, surface_vertices=surface.mesh.vertices)
+        sls_loads = gridshell_loads(polymesh, combine(surface.load_cases, sls_combo),
+                                    mass_per_length=props.mass_per_length, surface_vertices=surface.mesh.vertices)
+        with path_pool(config.workers if config.nonlinear else 1) as pool:
+            result = run_protocol(model, supports, sls_loads, uls_loads, settings, progress=ctx.step, executor=pool)
+        worst = result.worst
+        short = worst is not None and worst.capacity < config.required_load_factor
+        if design is None or not short or not design.converged or rounds >= project.design.nonlinear_rounds:
+            break
+        rounds += 1
+        stiffer = 1.05 * config.required_load_factor / max(worst.capacity, 1e-3)
+        ctx.step(f"lambda_NL_worst {worst.capacity:.2f} under {config.required_load_factor:g}: "
+                 f"sections {rounds} of {project.design.nonlinear_rounds} made {stiffer:.2f} times stiffer")
+        design = sizer.size(design, stiffness_factor=stiffer)
+        sections = sizer.sections(design)
     ctx.step("member checks")
-    lengths = polymesh.beam_lengths
-    checks = member_checks(result.uls_beam_end_forces, lengths, section, material,
-                           buckling_length_factor=config.buckling_length_factor)
+    if sections is not None:
+        checks = tube_checks(method, EndForces.of(result.uls_beam_end_forces), sections.diameter, sections.thickness,
+                             material, process=sections.process,
+                             buckling_length=buckling_lengths(project, lengths, result.uls_beam_end_forces,
+                                                              sections.properties["I"], material.E, result.lambda_LB))
+    else:
+        checks = member_checks(result.uls_beam_end_forces, lengths, section, material,
+                               buckling_length_factor=config.buckling_length_factor)
     utilisation = np.asarray(checks.utilisation)
-    deflection_limit = span / config.deflection_limit_ratio
     vertical_sls = float(np.abs(result.sls_displacements[:, 2]).max())
-    worst = result.worst
-    stiffer = "a larger [section] diameter or thickness, a stronger [material], or more supports ([[supports]])"
+    stiffer = ("a larger [section] diameter or thickness, a stronger [material], or more supports ([[supports]])"
+               + ("" if project.design.size_sections or sections is None else
+                  "; or let the tubes be sized: [design] size_sections = true"))
     verdicts = [
         {"check": "member utilisation (ULS)", "kind": "utilisation", "value": float(utilisation.max()), "limit": 1.0,
          "pass": bool(utilisation.max() <= 1.0), "part": beam_id(utilisation.argmax()),
@@ -169,7 +204,7 @@ def run(ctx):
     figures = {
         "nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
         "supported_nodes": int(len(supports.nodes)), "total_beam_length_m": float(lengths.sum()),
-        "beam_mass_kg": float(lengths.sum() * props.mass_per_length),
+        "beam_mass_kg": float((lengths * props.mass_per_length).sum()),
         "uls_combination": uls_combo.name, "sls_combination": sls_combo.name,
         "material": project.material.name, "section": project.section.model_dump(mode="json"),
         "delta_L_m": result.delta_L, "max_vertical_sls_m": vertical_sls, "deflection_limit_m": deflection_limit,
@@ -184,6 +219,7 @@ def run(ctx):
         "imperfections": [{"shape": c.name, "lambda_NL": c.capacity, "limit_point": c.limit_load_factor is not None,
                            "path_complete": c.converged} for c in result.imperfect],
         "verdicts": verdicts,
+        "checks": _checks_note(method, checks),
         "findings": [Finding(kind=v["kind"], parts=[v["part"]],
                              measure=v["value"], limit=v["limit"],
                              unit=v.get("unit", ""), stage="analysis", fix=v["fix"],
@@ -191,6 +227,10 @@ def run(ctx):
                              f"{v['check']}: {v['value']:.3g} against {v['limit']:.3g}").to_dict()
                      for v in verdicts if not v["pass"]],
     }
+    if design is not None:
+        figures["design"] = sizer.summary(design, sections, checks, lengths, mass_before, rounds)
+        if not design.converged:
+            figures["findings"].append(sizer.finding(design))
     ctx.report_findings(figures["findings"])
     ctx.step("writing")
     write_text_atomic(ctx.folder / "analysis.json", json.dumps(figures, indent=1, default=float))
@@ -201,6 +241,12 @@ def run(ctx):
                             "end_node": [node_id(b) for b in polymesh.edges[:, 1]],
                             "length_m": lengths, "axial_force_kN": axial / 1e3, "utilisation": utilisation,
                             "governing_check": list(getattr(checks, "governing", [""] * len(lengths)))})
+    if sections is not None:
+        members["profile"] = sections.names
+        members["diameter_mm"] = np.round(sections.diameter * 1000, 3)
+        members["thickness_mm"] = np.round(sections.thickness * 1000, 3)
+        members["section_class"] = np.asarray(getattr(checks, "section_class", np.zeros(len(lengths), int)))
+        members["buckling_length_m"] = np.asarray(getattr(checks, "buckling_length", lengths))
     with atomic_path(ctx.folder / "members.csv") as tmp:
         members.to_csv(tmp, index=False, float_format="%.6g")
     rows = []
@@ -210,6 +256,11 @@ def run(ctx):
         pd.DataFrame(rows, columns=["shape", "load_factor", "control_displacement_m"]).to_csv(tmp, index=False)
     ctx.step("drawing")
     _draw(ctx, polymesh, result, utilisation, axial, project)
+    if design is not None:
+        from workflow.plots.analysis import plot_sections
+
+        plot_sections(polymesh.nodes, polymesh.edges, sections.names, sections.diameter, ctx.folder / "sections.png",
+                      title=f"{project.project.name}: sized sections ({figures['design']['catalogue']})")
     if config.control_points and config.nonlinear:
         ctx.step("incremental load test")
         figures["load_test"] = _load_test(ctx, project, surface, polymesh, model, supports, props, sls_combo)
@@ -285,4 +336,99 @@ def load(folder: Path, ctx):
     import pandas as pd
 
     members = pd.read_csv(folder / "members.csv")
-    return AnalysisSummary(figures=figures, axial_forces=members["axial_force_kN"].to_numpy() * 1e3)
+    sections = None
+    if "design" in figures and {"profile", "diameter_mm", "thickness_mm"} <= set(members.columns):
+        sections = BeamSections(names=members["profile"].astype(str).tolist(),
+                                diameter=members["diameter_mm"].to_numpy(float) / 1000,
+                                thickness=members["thickness_mm"].to_numpy(float) / 1000,
+                                process=figures["design"].get("process"))
+    return AnalysisSummary(figures=figures, axial_forces=members["axial_force_kN"].to_numpy() * 1e3, sections=sections)
+
+
+def _checks_note(method: str, checks) -> dict:
+    """What the member checks cover, for analysis.json and the report."""
+    if method == "en1993":
+        return {"method": "EN 1993-1-1 (circular hollow sections)", "checked": list(CHECKED),
+                "not_checked": list(NOT_CHECKED)}
+    return {"method": "simplified (linear N+M interaction, elastic moduli, flexural buckling with k = 1)",
+            "checked": ["axial force with bending", "flexural buckling"],
+            "not_checked": ["section class", "shear", "torsion", "joints", "fatigue", "fire"]}
+
+
+class _Sizer:
+    """The stage's use of engine.sizing: a design's linear response (ULS forces, SLS deflection,
+    lambda_LB) and what analysis.json says of the sizing."""
+
+    def __init__(self, ctx, project: Project, polymesh, surface, material, method: str, combos, deflection_limit):
+        self.ctx, self.project, self.polymesh, self.surface = ctx, project, polymesh, surface
+        self.material, self.method, self.deflection_limit = material, method, deflection_limit
+        self.catalogue = project_catalogue(project)
+        self.lengths = polymesh.beam_lengths
+        self.cases = [combine(surface.load_cases, c) for c in combos]
+        self.history: list[dict] = []
+
+    def _solve(self, sections: BeamSections):
+        from engine.errors import ConvergenceError
+        from engine.frame import factor_stiffness, linear_buckling, linear_static
+
+        props = sections.frame_properties(self.material)
+        model, supports, _ = build_frame(self.polymesh, self.surface, props,
+                                         self.project.analysis.elements_per_beam)
+        uls, sls = (gridshell_loads(self.polymesh, case, mass_per_length=props.mass_per_length,
+                                    surface_vertices=self.surface.mesh.vertices) for case in self.cases)
+        stiffness = factor_stiffness(model, supports)
+        uls_result = linear_static(model, supports, uls, stiffness=stiffness)
+        deflection = float(np.abs(linear_static(model, supports, sls, stiffness=stiffness).displacements[:, 2]).max())
+        try:
+            factors = linear_buckling(model, supports, uls, n_modes=1, stiffness=stiffness).factors
+        except ConvergenceError:
+            factors = np.zeros(0)
+        return uls_result.beam_end_forces, deflection, (float(factors[0]) if len(factors) else None)
+
+    def size(self, previous, *, stiffness_factor: float = 1.0):
+        from engine.sizing import size_sections
+
+        cat, design = self.catalogue, self.project.design
+        start = start_tubes(self.project, cat, len(self.lengths)) if previous is None else previous.tube
+        floor = None if previous is None else stiffness_factor * cat.I[previous.tube]
+        analyse = make_analyse(self.method, cat, self.material, self.lengths, self._solve, self.project)
+        result = size_sections(analyse, cat, self.lengths, self.material.density, start=start, groups=design.groups,
+                               deflection_limit=self.deflection_limit,
+                               required_load_factor=self.project.analysis.required_load_factor,
+                               stiffness_floor=floor, max_iterations=design.max_iterations,
+                               progress=lambda text: self.ctx.step(text))
+        round_ = 0 if previous is None else self.history[-1]["round"] + 1
+        self.history += [{"round": round_, **record} for record in result.iterations]
+        return result
+
+    def sections(self, design) -> BeamSections:
+        return BeamSections.of_catalogue(self.catalogue, design.tube)
+
+    def summary(self, design, sections: BeamSections, checks, lengths, mass_before: float, rounds: int) -> dict:
+        mass = self.catalogue.mass_per_length(self.material.density)[design.tube] * lengths
+        groups = []
+        governing = np.asarray(checks.governing if checks.governing is not None else [""] * len(lengths))
+        utilisation = np.asarray(checks.utilisation)
+        for tube in sorted(set(design.tube.tolist()), key=lambda k: -self.catalogue.A[k]):
+            beams = design.tube == tube
+            names, counts = np.unique(governing[beams], return_counts=True)
+            groups.append({"profile": self.catalogue.names[tube], "diameter_mm": round(1000 * self.catalogue.diameter[tube], 3),
+                           "thickness_mm": round(1000 * self.catalogue.thickness[tube], 3),
+                           "beams": int(beams.sum()), "length_m": float(lengths[beams].sum()),
+                           "mass_kg": float(mass[beams].sum()), "max_utilisation": float(utilisation[beams].max()),
+                           "governing": str(names[np.argmax(counts)]) if len(names) else ""})
+        names, counts = np.unique(governing, return_counts=True)
+        return {"catalogue": self.catalogue.name, "process": self.catalogue.process, "catalogue_source": self.catalogue.source.splitlines()[:2],
+                "checks": self.method, "groups_asked": self.project.design.groups, "converged": design.converged,
+                "reason": design.reason,
+                "failing_member": None if design.failing_beam is None else beam_id(design.failing_beam),
+                "iterations": len(self.history), "history": self.history, "nonlinear_rounds": rounds,
+                "mass_before_kg": mass_before, "mass_after_kg": float(mass.sum()), "groups": groups,
+                "governing_checks": {str(n): int(c) for n, c in zip(names, counts)}}
+
+    def finding(self, design) -> dict:
+        part = beam_id(design.failing_beam) if design.failing_beam is not None else "design"
+        return Finding(kind="sizing", parts=[part], measure=None, limit=None, unit="", stage="analysis",
+                       fix="a catalogue with larger tubes ([design] catalogue), more supports ([[supports]]) or a "
+                           "stronger [material]; the analysis used the heaviest tube where none passed",
+                       message=f"section sizing: {design.reason}").to_dict()

@@ -35,6 +35,7 @@ FIGURES = {
                  ("05-optimize/planarity.png", "Optimised grid-shell, planarity of the cells")],
     "analysis": [("06-analysis/axial.png", "Axial forces (ULS): compression red, tension blue"),
                  ("06-analysis/utilisation.png", "Member utilisation (ULS)"),
+                 ("06-analysis/sections.png", "Sized sections: each beam's tube from the catalogue"),
                  ("06-analysis/modes.png", "Linear buckling modes, coloured by displacement (each drawn at 8 % of "
                                            "the span), with their load factors"),
                  ("06-analysis/response.png", "Load factor against control-node deflection, worst imperfection bold"),
@@ -184,10 +185,23 @@ def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
     if imperfections:
         tables.append(Table(name="imperfections", caption="Non-linear limit load factor per imperfection",
                             columns=["imperfection", "non-linear limit load factor"], rows=[[i["shape"], i["lambda_NL"]] for i in imperfections]))
+    design = analysis.get("design")
+    if design:
+        tables.append(Table(name="design", caption=(
+            f"Section sizing from {design['catalogue']}: {design['mass_before_kg']:,.0f} kg with the project's section, "
+            f"{design['mass_after_kg']:,.0f} kg sized, {design['iterations']} analyses"
+            + ("" if design["converged"] else f"; not settled: {design['reason']} ({design['failing_member']})")),
+            columns=["profile", "beams", "length (m)", "mass (kg)", "largest utilisation", "governing check"],
+            rows=[[g["profile"], g["beams"], round(g["length_m"], 1), round(g["mass_kg"], 1),
+                   round(g["max_utilisation"], 3), g["governing"]] for g in design["groups"]]))
     members = _csv_table(out_dir / "06-analysis/members.csv", "members", "Most utilised members", sort_by="utilisation")
     if members:
         tables.append(members)
-    sections.append(Section(title="6. Structural analysis", figures=_figures(out_dir, "analysis"), tables=tables,
+    checks = analysis.get("checks") or {}
+    checks_text = (f"Member checks: {checks['method']}. Checked: {'; '.join(checks['checked'])}. "
+                   f"Not checked: {'; '.join(checks['not_checked'])}." if checks else "")
+    sections.append(Section(title="6. Structural analysis", text=checks_text, figures=_figures(out_dir, "analysis"),
+                            tables=tables,
                             links=[("members.csv", "06-analysis/members.csv"), ("response.csv", "06-analysis/response.csv"),
                                    ("analysis.json", "06-analysis/analysis.json")]))
     compare = _csv_table(out_dir / "compare/compare.csv", "compare", "Grids of the same total length", max_rows=20)

@@ -1,0 +1,190 @@
+"""Section sizing: the grouping against brute force, the iteration on responses with known
+answers, and a sized roof that passes a separate check run (engine.frame and engine.en1993
+called here, not through the stage)."""
+
+from __future__ import annotations
+
+import itertools
+import json
+from importlib import resources
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from engine.catalogue import catalogue
+from engine.sizing import DesignState, group_by_demand, size_sections
+
+
+def _brute_force(required, lengths, mass, groups):
+    """The least mass over every choice of at most ``groups`` tubes, each beam taking the lightest
+    chosen tube at least its required one (feasibility nested: a heavier tube passes too)."""
+    best = np.inf
+    candidates = sorted(set(required.tolist()) | {int(required.max())})
+    for k in range(1, groups + 1):
+        for chosen in itertools.combinations(range(len(mass)), k):
+            chosen = np.array(chosen)
+            if chosen.max() < required.max():
+                continue
+            tube = np.array([chosen[chosen >= r].min() for r in required])
+            best = min(best, float((mass[tube] * lengths).sum()))
+    return best, candidates
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_grouping_by_demand_is_the_least_mass_partition(seed):
+    rng = np.random.default_rng(seed)
+    s, b = 9, 14
+    mass = np.sort(rng.uniform(1, 30, s))
+    required = rng.integers(0, s, b)
+    lengths = rng.uniform(0.5, 3.0, b)
+    feasible = np.arange(s)[None, :] >= required[:, None]
+    for groups in (1, 2, 3):
+        tube = group_by_demand(required, feasible, lengths, mass, groups)
+        assert len(set(tube.tolist())) <= groups
+        assert np.all(tube >= required)
+        assert float((mass[tube] * lengths).sum()) == pytest.approx(_brute_force(required, lengths, mass, groups)[0])
+
+
+def test_a_group_takes_a_tube_every_member_passes_even_where_passing_is_not_nested():
+    """Beam 0 passes tubes 1 and 3, beam 1 only 2 and 3: one group must take tube 3."""
+    feasible = np.array([[False, True, False, True], [False, False, True, True]])
+    tube = group_by_demand(np.array([1, 2]), feasible, np.ones(2), np.arange(1.0, 5.0), 1)
+    assert tube.tolist() == [3, 3]
+
+
+def _statically_determinate(utilisation_of_unit: np.ndarray, loads: np.ndarray):
+    """analyse() of a structure whose forces do not depend on its sections: the utilisation of beam
+    i with tube k is loads[i] x utilisation_of_unit[k]; no deflection or buckling limit."""
+    def analyse(tube):
+        return DesignState(utilisation=loads[:, None] * utilisation_of_unit[None, :], deflection=0.0, lambda_LB=None)
+    return analyse
+
+
+def test_sizing_a_statically_determinate_structure_takes_the_lightest_passing_tube():
+    cat = catalogue("EN 10210-2 CHS")
+    unit = 1.0 / (cat.W_pl * 355e6)  # a bending utilisation per N m
+    loads = np.array([1e3, 5e3, 20e3, 80e3])
+    lengths = np.ones(4)
+    design = size_sections(_statically_determinate(unit, loads), cat, lengths, 7850.0, start=np.zeros(4, int),
+                           groups=10, deflection_limit=1.0, required_load_factor=None)
+    assert design.converged
+    for beam, tube in enumerate(design.tube):
+        assert loads[beam] * unit[tube] <= 1.0
+        lighter = np.arange(tube)
+        assert np.all(loads[beam] * unit[lighter] > 1.0)  # no lighter tube passes
+    one = size_sections(_statically_determinate(unit, loads), cat, lengths, 7850.0, start=np.zeros(4, int),
+                        groups=1, deflection_limit=1.0, required_load_factor=None)
+    assert len(set(one.tube.tolist())) == 1 and one.tube[0] == design.tube[3]
+
+
+def test_a_stiffness_limit_is_met_and_a_hopeless_one_is_said():
+    """Deflection C / I (one tube for all): the sizing reaches the lightest tube with C / I <= limit."""
+    cat = catalogue("EN 10210-2 CHS")
+    C = 1e-6
+
+    def analyse(tube):
+        return DesignState(utilisation=np.zeros((3, len(cat))), deflection=float(C / cat.I[tube].min()), lambda_LB=None)
+
+    design = size_sections(analyse, cat, np.ones(3), 7850.0, start=np.zeros(3, int), groups=1,
+                           deflection_limit=0.05, required_load_factor=None)
+    assert design.converged and C / cat.I[design.tube[0]] <= 0.05
+    mass = cat.mass_per_length(7850.0)
+    lighter = mass < mass[design.tube[0]]
+    assert np.all(C / cat.I[lighter] > 0.05) or design.iterations[-1]["deflection_m"] <= 0.05
+    hopeless = size_sections(_statically_determinate(np.full(len(cat), 2.0), np.ones(3)), cat, np.ones(3), 7850.0,
+                             start=np.zeros(3, int), groups=3, deflection_limit=1.0, required_load_factor=None)
+    assert not hopeless.converged and hopeless.failing_beam is not None
+    assert "no catalogue tube passes" in hopeless.reason
+
+
+def _sized_cap(tmp_path, *, nonlinear: bool, cells: int = 40):
+    from workflow.config import load_project
+    from workflow.progress import Progress
+    from workflow.runner import run_project
+    from workflow.stages import STAGES
+
+    project = load_project(resources.files("templates") / "cap.toml")
+    project = project.model_copy(update={
+        "remesh": project.remesh.model_copy(update={"n_cells": cells}),
+        "analysis": project.analysis.model_copy(update={"nonlinear": nonlinear, "n_modes": 3,
+                                                        "imperfection_shapes": ["linear", "mode1"]}),
+        "design": project.design.model_copy(update={"size_sections": True, "groups": 3}),
+    })
+    out = tmp_path / "out"
+    summary = run_project(project, out, STAGES, until="analysis", progress=Progress(enabled=False))
+    assert summary.message is None, summary.message
+    return project, out
+
+
+def _separate_check(project, out):
+    """Linear analysis and EN 1993-1-1 checks of the sections in members.csv, built here."""
+    from engine.en1993 import EndForces, chs_checks
+    from engine.frame import FrameModel, linear_buckling, linear_static
+    from engine.loads import combine
+    from engine.structure import beam_up_vectors, gridshell_loads, node_normals, support_restraints
+    from engine.supports import Supports
+    from engine.catalogue import chs_properties
+    from workflow.stages.analysis import pick_combination
+    from workflow.stages.polymesh_io import read_polymesh_obj
+    from workflow.stages.surface import load as load_surface
+
+    polymesh = read_polymesh_obj(out / "05-optimize" / "gridshell.obj")
+    from types import SimpleNamespace
+
+    surface = load_surface(out / "01-surface", SimpleNamespace(project=project))
+    members = pd.read_csv(out / "06-analysis" / "members.csv")
+    D, t = members["diameter_mm"].to_numpy() / 1000, members["thickness_mm"].to_numpy() / 1000
+    p = chs_properties(D, t)
+    steel_E, steel_G, density, fy = 210e9, 81e9, 7850.0, 355e6
+    normals = node_normals(polymesh, surface.mesh)
+    n = len(polymesh.edges)
+    model = FrameModel(nodes=polymesh.nodes, beams=polymesh.edges, E=np.full(n, steel_E), G=np.full(n, steel_G),
+                       A=p["A"], Iy=p["I"], Iz=p["I"], J=p["J"], up=beam_up_vectors(polymesh, normals),
+                       elements_per_beam=project.analysis.elements_per_beam)
+    nodes, flags = support_restraints(polymesh, surface.supports.nodes, surface.supports.restraints,
+                                      surface.mesh.vertices)
+    supports = Supports(nodes=nodes, restraints=flags)
+    loads = {state: gridshell_loads(polymesh, combine(surface.load_cases, pick_combination(project, surface, state)),
+                                    mass_per_length=p["A"] * density, surface_vertices=surface.mesh.vertices)
+             for state in ("ULS", "SLS")}
+    uls = linear_static(model, supports, loads["ULS"])
+    sls = linear_static(model, supports, loads["SLS"])
+    from engine.sections import material
+
+    checks = chs_checks(EndForces.of(uls.beam_end_forces), D, t, material("steel_s355"), alpha=0.21,
+                        buckling_length=polymesh.beam_lengths)
+    span = float(np.ptp(polymesh.nodes[:, :2], axis=0).min())
+    lam = linear_buckling(model, supports, loads["ULS"], n_modes=1).factors[0]
+    assert fy == material("steel_s355").fy
+    return checks, float(np.abs(sls.displacements[:, 2]).max()), span / project.analysis.deflection_limit_ratio, lam
+
+
+def test_a_sized_roof_passes_a_separate_check_run(tmp_path):
+    project, out = _sized_cap(tmp_path, nonlinear=False)
+    figures = json.loads((out / "06-analysis" / "analysis.json").read_text())
+    design = figures["design"]
+    assert design["converged"] and design["iterations"] >= 1
+    assert len(design["groups"]) <= 3 and sum(g["beams"] for g in design["groups"]) == figures["beams"]
+    members = pd.read_csv(out / "06-analysis" / "members.csv")
+    assert members["profile"].nunique() == len(design["groups"])
+    assert members["profile"].str.startswith("CHS ").all()
+    checks, deflection, limit, lam = _separate_check(project, out)
+    assert checks.utilisation.max() <= 1.0 + 1e-9
+    assert np.allclose(checks.utilisation, members["utilisation"], rtol=1e-4, atol=1e-6)
+    assert deflection <= limit
+    assert lam >= project.analysis.required_load_factor
+    assert all(v["pass"] for v in figures["verdicts"])
+    mass = (members["length_m"] * [catalogue("EN 10210-2 CHS").mass_per_length(7850.0)[
+        catalogue("EN 10210-2 CHS").names.index(name)] for name in members["profile"]]).sum()
+    assert design["mass_after_kg"] == pytest.approx(mass, rel=1e-6)
+    assert figures["beam_mass_kg"] == pytest.approx(mass, rel=1e-6)
+
+
+@pytest.mark.slow
+def test_a_sized_roof_meets_the_nonlinear_limit(tmp_path):
+    project, out = _sized_cap(tmp_path, nonlinear=True, cells=60)
+    figures = json.loads((out / "06-analysis" / "analysis.json").read_text())
+    assert figures["design"]["converged"]
+    assert figures["lambda_NL_worst"] >= project.analysis.required_load_factor
+    assert all(v["pass"] for v in figures["verdicts"]), figures["verdicts"]

@@ -1,0 +1,137 @@
+"""The analysis stage's sections: one tube per beam, its member checks, and the sizing of
+``[design] size_sections`` (engine.sizing) on the project's catalogue."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+import numpy as np
+
+from engine.catalogue import Catalogue, catalogue, chs_properties
+from engine.en1993 import EndForces, TubeChecks, buckling_alpha, chs_checks, simplified_checks
+from engine.sections import Material
+from engine.structure import BeamProperties
+
+from ..config import Project
+
+__all__ = ["BeamSections", "project_sections", "checks_method", "tube_checks", "buckling_lengths",
+           "project_catalogue", "MM"]
+
+MM = 1000.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class BeamSections:
+    """Per beam (b,): profile names, outer diameter and wall (m), and the arrays of the analysis."""
+
+    names: list[str]
+    diameter: np.ndarray
+    thickness: np.ndarray
+    process: str | None = None
+
+    @property
+    def properties(self) -> dict[str, np.ndarray]:
+        return chs_properties(self.diameter, self.thickness)
+
+    def frame_properties(self, material: Material) -> BeamProperties:
+        p = self.properties
+        return BeamProperties(E=material.E, G=material.G, A=p["A"], Iy=p["I"], Iz=p["I"], J=p["J"],
+                              mass_per_length=p["A"] * material.density)
+
+    @classmethod
+    def of_catalogue(cls, cat: Catalogue, tube: np.ndarray) -> "BeamSections":
+        return cls(names=[cat.names[k] for k in tube], diameter=cat.diameter[tube], thickness=cat.thickness[tube],
+                   process=cat.process)
+
+
+def profile_name(project: Project) -> str:
+    """The project's [section] as a fabricator names it (CHS 48.3x3.2, RHS 100x50x4, ...)."""
+    s = project.section
+    order = {"circular_hollow": ("diameter", "thickness"), "rectangular_hollow": ("height", "width", "thickness"),
+             "solid_round": ("diameter",), "solid_rectangle": ("height", "width")}[s.kind]
+    mm = [f"{round(MM * getattr(s, k), 2):g}" for k in order]
+    prefix = {"circular_hollow": "CHS ", "rectangular_hollow": "RHS ", "solid_round": "RD ", "solid_rectangle": ""}
+    return prefix[s.kind] + "x".join(mm)
+
+
+def project_sections(project: Project, n_beams: int) -> BeamSections | None:
+    """The project's one [section] on every beam, where it is a tube (None otherwise)."""
+    s = project.section
+    if s.kind != "circular_hollow":
+        return None
+    process = None
+    if project.design.catalogue is not None:
+        try:
+            process = project_catalogue(project).process
+        except Exception:  # a bad catalogue is reported by the sizing that needs it
+            process = None
+    return BeamSections(names=[profile_name(project)] * n_beams, diameter=np.full(n_beams, s.diameter),
+                        thickness=np.full(n_beams, s.thickness), process=process)
+
+
+def project_catalogue(project: Project) -> Catalogue:
+    return catalogue(project.design.catalogue)
+
+
+def checks_method(project: Project, material: Material) -> str:
+    """en1993 (steel tubes, [analysis] checks = "en1993") or simplified (every other case)."""
+    if (project.analysis.checks == "en1993" and project.section.kind == "circular_hollow"
+            and material.kind == "steel"):
+        return "en1993"
+    return "simplified"
+
+
+def buckling_lengths(project: Project, lengths: np.ndarray, end_forces: np.ndarray, I: np.ndarray, E: float,
+                     lambda_LB: float | None) -> np.ndarray:
+    """Buckling length per beam (m): k x node-to-node length, or (``[analysis] buckling_length =
+    "buckling_modes"``) the length at which the beam's Euler load is lambda_LB times its ULS
+    compression, N_cr = lambda_LB N_Ed (the node-to-node one where it is not compressed)."""
+    node_to_node = project.analysis.buckling_length_factor * np.asarray(lengths, float)
+    if project.analysis.buckling_length != "buckling_modes" or lambda_LB is None:
+        return node_to_node
+    compression = np.maximum(-np.asarray(end_forces)[:, :, 0], 0.0).max(axis=1)
+    from_modes = np.pi * np.sqrt(E * I / np.maximum(lambda_LB * compression, 1e-300))
+    return np.where(compression > 0, from_modes, node_to_node)
+
+
+def tube_checks(method: str, forces: EndForces, diameter: np.ndarray, thickness: np.ndarray, material: Material,
+                *, process: str | None, buckling_length: np.ndarray) -> TubeChecks:
+    """The member checks of ``method`` on tubes (arrays broadcast: one per beam, or candidates)."""
+    alpha = buckling_alpha(process, material)
+    if method == "en1993":
+        return chs_checks(forces, diameter, thickness, material, alpha=alpha, buckling_length=buckling_length)
+    p = chs_properties(diameter, thickness)
+    return simplified_checks(forces, p["A"], p["I"], p["W_el"], material, alpha=alpha,
+                             buckling_length=buckling_length)
+
+
+def candidate_utilisation(method: str, end_forces: np.ndarray, cat: Catalogue, material: Material,
+                          buckling_length: np.ndarray) -> np.ndarray:
+    """(b, s) utilisation of every beam with every catalogue tube under these forces."""
+    forces = EndForces.of(end_forces).column()
+    return tube_checks(method, forces, cat.diameter[None, :], cat.thickness[None, :], material,
+                       process=cat.process, buckling_length=np.asarray(buckling_length)[:, None]).utilisation
+
+
+def start_tubes(project: Project, cat: Catalogue, n_beams: int) -> np.ndarray:
+    """The first design: the lightest catalogue tube at least as stiff as the project's section."""
+    I = chs_properties(project.section.diameter, project.section.thickness)["I"]
+    stiff = np.flatnonzero(cat.I >= I * (1 - 1e-9))
+    return np.full(n_beams, int(stiff[0]) if len(stiff) else len(cat) - 1)
+
+
+def make_analyse(method: str, cat: Catalogue, material: Material, lengths: np.ndarray,
+                 solve: Callable[[BeamSections], tuple[np.ndarray, float, float | None]],
+                 project: Project):
+    """analyse(tube indices) for engine.sizing: ``solve`` gives (ULS end forces, SLS deflection,
+    lambda_LB) of a design."""
+    from engine.sizing import DesignState
+
+    def analyse(tube: np.ndarray) -> DesignState:
+        sections = BeamSections.of_catalogue(cat, tube)
+        end_forces, deflection, lambda_LB = solve(sections)
+        L_cr = buckling_lengths(project, lengths, end_forces, cat.I[tube], material.E, lambda_LB)
+        return DesignState(utilisation=candidate_utilisation(method, end_forces, cat, material, L_cr),
+                           deflection=deflection, lambda_LB=lambda_LB)
+
+    return analyse
