@@ -56,25 +56,31 @@ def roll_angles_deg(polymesh: PolyMesh, normals: np.ndarray) -> np.ndarray:
     return np.degrees(np.arctan2(sine, cosine))
 
 
-def cut_list(polymesh: PolyMesh, normals: np.ndarray, settings: BeamSettings, joint_settings: JointSettings) -> pd.DataFrame:
-    """One row per beam: ids, profile, material, node and cut lengths, end angles, roll, mass, label."""
+def cut_list(polymesh: PolyMesh, normals: np.ndarray, settings: BeamSettings, joint_settings: JointSettings, *,
+             profiles: list[str] | None = None, areas_m2: np.ndarray | None = None,
+             outer_sizes_mm: np.ndarray | None = None) -> pd.DataFrame:
+    """One row per beam: ids, profile, material, node and cut lengths, end angles, roll, mass, label.
+    ``profiles``, ``areas_m2`` and ``outer_sizes_mm`` (b,) where the beams' sections differ (sized);
+    a joint's set-back then follows the largest tube at it."""
     e = polymesh.edges
     node_length = 1000 * polymesh.beam_lengths
     setback = np.zeros(polymesh.n_nodes)
-    for geometry in joint_geometry(polymesh, normals, settings.outer_size_mm):
-        setback[geometry.node] = joint_setback_mm(joint_settings, settings.outer_size_mm,
+    sizes = settings.outer_size_mm if outer_sizes_mm is None else np.asarray(outer_sizes_mm, dtype=float)
+    for geometry in joint_geometry(polymesh, normals, sizes):
+        setback[geometry.node] = joint_setback_mm(joint_settings, geometry.beam_size_mm,
                                                   smallest_angle(geometry.directions))
     # a beam shorter than its two joints take keeps a zero cut length; the caller reports it
     cut = np.maximum(node_length - setback[e[:, 0]] - setback[e[:, 1]], 0.0)
     ids = [beam_id(i) for i in range(len(e))]
     return pd.DataFrame({
         "id": ids, "start_node": [node_id(a) for a in e[:, 0]], "end_node": [node_id(b) for b in e[:, 1]],
-        "profile": settings.profile_name, "material": settings.material_name,
+        "profile": settings.profile_name if profiles is None else list(profiles), "material": settings.material_name,
         "node_length_mm": np.round(node_length, 1), "setback_start_mm": np.round(setback[e[:, 0]], 1),
         "setback_end_mm": np.round(setback[e[:, 1]], 1), "cut_length_mm": np.round(cut, 1),
         "end_angle_start_deg": 0.0, "end_angle_end_deg": 0.0,
         "roll_deg": np.round(roll_angles_deg(polymesh, normals), 2),
-        "mass_kg": np.round(cut / 1000 * settings.area_m2 * settings.density, 4),
+        "mass_kg": np.round(cut / 1000 * (settings.area_m2 if areas_m2 is None else np.asarray(areas_m2))
+                            * settings.density, 4),
         "label": [f"{i} {a}-{b}" for i, a, b in zip(ids, e[:, 0] + 1, e[:, 1] + 1)],
     })
 
@@ -101,20 +107,21 @@ def write_cut_list(table: pd.DataFrame, folder: Path) -> tuple[Path, Path]:
     return folder / "cutlist.csv", folder / "cutlist.xlsx"
 
 
-def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, outer_size_mm: float) -> Path:
+def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, outer_size_mm: float | np.ndarray) -> Path:
     """Every beam as a named cylinder of its cut length, placed between its joints (mm); a beam of
     zero cut length (shorter than its joints take, reported by the caller) has no solid."""
     from build123d import Align, Compound, Cylinder, Location, Plane, export_step
 
     e = polymesh.edges
     solids = []
-    for row, (a, b) in zip(table.itertuples(index=False), e):
+    sizes = np.broadcast_to(np.asarray(outer_size_mm, dtype=float), (len(e),))
+    for row, (a, b), size in zip(table.itertuples(index=False), e, sizes):
         if row.cut_length_mm <= 0:
             continue
         start, end = 1000 * polymesh.nodes[a], 1000 * polymesh.nodes[b]
         direction = (end - start) / np.linalg.norm(end - start)
         origin = start + direction * row.setback_start_mm
-        solid = Cylinder(0.5 * outer_size_mm, row.cut_length_mm, align=(Align.CENTER, Align.CENTER, Align.MIN))
+        solid = Cylinder(0.5 * size, row.cut_length_mm, align=(Align.CENTER, Align.CENTER, Align.MIN))
         solid = solid.moved(Location(Plane(origin=tuple(map(float, origin)), z_dir=tuple(map(float, direction)))))
         solid.label = row.id
         solids.append(solid)

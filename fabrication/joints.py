@@ -65,13 +65,23 @@ class JointSettings:
 
 @dataclass(frozen=True, kw_only=True)
 class JointGeometry:
-    """What a joint needs, in mm and unit vectors: position, beam directions (k,3), axis (3,)."""
+    """What a joint needs, in mm and unit vectors: position, beam directions (k,3), axis (3,), the
+    largest outer size of its beams (the hub's and the set-back's size), and each beam's own outer
+    size (k,) for its socket (None: every beam is beam_size_mm)."""
 
     node: int
     position_mm: np.ndarray
     directions: np.ndarray
     axis: np.ndarray
     beam_size_mm: float
+    beam_sizes_mm: np.ndarray | None = None
+
+    @property
+    def sizes_mm(self) -> np.ndarray:
+        """(k,) outer size of each beam at this joint."""
+        if self.beam_sizes_mm is None:
+            return np.full(len(self.directions), float(self.beam_size_mm))
+        return np.asarray(self.beam_sizes_mm, dtype=float)
 
 
 def joint_name(node: int) -> str:
@@ -119,23 +129,31 @@ def joint_setback_mm(settings: JointSettings, beam_size_mm: float,
     return float(setback) if setback.ndim == 0 else setback
 
 
-def joint_geometry(polymesh: PolyMesh, normals: np.ndarray, beam_size_mm: float) -> list[JointGeometry]:
-    """Per node: its beam directions and axis (mm positions)."""
+def joint_geometry(polymesh: PolyMesh, normals: np.ndarray, beam_size_mm: float | np.ndarray) -> list[JointGeometry]:
+    """Per node: its beam directions and axis (mm positions); ``beam_size_mm`` one outer size for
+    every beam, or one per beam (b,) where the sections were sized."""
     edges = polymesh.edges
+    per_beam = np.ndim(beam_size_mm) > 0
+    sizes = np.broadcast_to(np.asarray(beam_size_mm, dtype=float), (len(edges),))
     out = []
     incident: list[list[int]] = [[] for _ in range(polymesh.n_nodes)]
+    beams_at: list[list[int]] = [[] for _ in range(polymesh.n_nodes)]
     for b, (i, j) in enumerate(edges):
         incident[i].append(j)
         incident[j].append(i)
+        beams_at[i].append(b)
+        beams_at[j].append(b)
     for node in range(polymesh.n_nodes):
         if not incident[node]:
             continue
         others = np.array(incident[node], dtype=int)
         d = polymesh.nodes[others] - polymesh.nodes[node]
         d /= np.linalg.norm(d, axis=1)[:, None]
+        own = sizes[beams_at[node]]
         out.append(JointGeometry(node=node, position_mm=1000 * polymesh.nodes[node], directions=d,
                                  axis=np.asarray(normals[node], float) / np.linalg.norm(normals[node]),
-                                 beam_size_mm=beam_size_mm))
+                                 beam_size_mm=float(own.max()),
+                                 beam_sizes_mm=own.copy() if per_beam and np.ptp(own) > 0 else None))
     return out
 
 
@@ -379,15 +397,18 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
         hub_height = 2.0 * outer + 1.0  # taller than a sleeve: no tangent faces between hub top and sleeves
         hub = _cylinder(-0.5 * hub_height * axis, axis, hub_radius, hub_height)
         sleeves, tools, features = [], [], []
-        for d in directions:
-            sleeves.append(_cylinder(np.zeros(3), d, outer, setback + sleeve))
-            features.append(("sleeve", np.zeros(3), d * (setback + sleeve), outer))
-            tools.append(_cylinder(d * setback, d, bore, sleeve + 1.0))
-            features.append(("hole", d * setback, d * (setback + sleeve + 1.0), bore))
+        # each socket fits its own tube; the hub and the set-back take the largest
+        for d, own in zip(directions, geometry.sizes_mm):
+            bore_k = 0.5 * own + settings.clearance_mm
+            outer_k, sleeve_k = bore_k + settings.wall_mm, joint_sleeve_mm(settings, own)
+            sleeves.append(_cylinder(np.zeros(3), d, outer_k, setback + sleeve_k))
+            features.append(("sleeve", np.zeros(3), d * (setback + sleeve_k), outer_k))
+            tools.append(_cylinder(d * setback, d, bore_k, sleeve_k + 1.0))
+            features.append(("hole", d * setback, d * (setback + sleeve_k + 1.0), bore_k))
             side = _upright(d, axis)
-            pin_centre = d * (setback + 0.6 * sleeve)
-            tools.append(_cylinder(pin_centre - 2 * outer * side, side, 0.5 * settings.pin_hole_mm, 4 * outer))
-            features.append(("hole", pin_centre - 2 * outer * side, pin_centre + 2 * outer * side,
+            pin_centre = d * (setback + 0.6 * sleeve_k)
+            tools.append(_cylinder(pin_centre - 2 * outer_k * side, side, 0.5 * settings.pin_hole_mm, 4 * outer_k))
+            features.append(("hole", pin_centre - 2 * outer_k * side, pin_centre + 2 * outer_k * side,
                              0.5 * settings.pin_hole_mm))
         # one fuse and one cut with all tools: faster than a boolean per feature
         shape = _boolean("cut", [_boolean("fuse", [hub], sleeves)], tools)
@@ -422,8 +443,10 @@ def _clashes(directions: np.ndarray, outer: float, setback: float, sleeve: float
     return out
 
 
-def _axis_errors_deg(solid, directions: np.ndarray, bore_radius: float) -> float:
-    """Largest angle (degrees) between each bore's cylinder axis in the solid and its beam."""
+def _axis_errors_deg(solid, directions: np.ndarray, bore_radius: float | np.ndarray) -> float:
+    """Largest angle (degrees) between each bore's cylinder axis in the solid and its beam (one
+    bore radius, or one per beam)."""
+    radii = np.atleast_1d(np.asarray(bore_radius, dtype=float))
     from OCP.BRepAdaptor import BRepAdaptor_Surface
     from OCP.GeomAbs import GeomAbs_Cylinder
 
@@ -432,7 +455,7 @@ def _axis_errors_deg(solid, directions: np.ndarray, bore_radius: float) -> float
         surface = BRepAdaptor_Surface(face.wrapped)
         if surface.GetType() == GeomAbs_Cylinder:
             cylinder = surface.Cylinder()
-            if abs(cylinder.Radius() - bore_radius) < 1e-6:
+            if np.abs(radii - cylinder.Radius()).min() < 1e-6:
                 d = cylinder.Axis().Direction()
                 axes.append([d.X(), d.Y(), d.Z()])
     if not axes:
@@ -522,8 +545,9 @@ def _build_and_write_checked(job: tuple) -> dict:
     started = time.perf_counter()
     solid, report = build_joint(geometry, settings)
     built = time.perf_counter()
-    bore = 0.5 * geometry.beam_size_mm + settings.clearance_mm
-    report["max_axis_error_deg"] = _axis_errors_deg(solid, geometry.directions, bore) if settings.kind == "socket" else 0.0
+    bores = 0.5 * geometry.sizes_mm + settings.clearance_mm
+    report["max_axis_error_deg"] = (_axis_errors_deg(solid, geometry.directions, bores) if settings.kind == "socket"
+                                    else 0.0)
     report["single_solid"] = len(solid.solids()) == 1
     report["valid"] = bool(report["valid"]) if "valid" in report else _is_valid(solid.wrapped)
     placed = solid.moved(Location(tuple(map(float, geometry.position_mm))))

@@ -15,8 +15,10 @@ from .files import atomic_path, stamp_step
 __all__ = ["write_gridshell_step", "write_gridshell_3dm"]
 
 
-def write_gridshell_step(polymesh: PolyMesh, panels, beam_radius_mm: float, joint_radius_mm: float, path: Path) -> Path:
-    """Joints as spheres J0001..., beams as cylinders B0001..., panels as 3 mm plates P0001... ."""
+def write_gridshell_step(polymesh: PolyMesh, panels, beam_radius_mm: float | np.ndarray, joint_radius_mm: float,
+                         path: Path) -> Path:
+    """Joints as spheres J0001..., beams as cylinders B0001... (one radius, or one per beam),
+    panels as 3 mm plates P0001... ."""
     import cadquery as cq
 
     nodes = 1000 * polymesh.nodes
@@ -25,10 +27,11 @@ def write_gridshell_step(polymesh: PolyMesh, panels, beam_radius_mm: float, join
     for i, p in enumerate(nodes):
         assembly.add(cq.Workplane().sphere(joint_radius_mm), name=joint_id(i), loc=cq.Location(cq.Vector(*p)),
                      color=grey)
+    radii = np.broadcast_to(np.asarray(beam_radius_mm, dtype=float), (len(polymesh.edges),))
     for k, (a, b) in enumerate(polymesh.edges):
         direction = nodes[b] - nodes[a]
         length = float(np.linalg.norm(direction))
-        solid = cq.Solid.makeCylinder(beam_radius_mm, length, cq.Vector(*nodes[a]), cq.Vector(*(direction / length)))
+        solid = cq.Solid.makeCylinder(float(radii[k]), length, cq.Vector(*nodes[a]), cq.Vector(*(direction / length)))
         assembly.add(cq.Workplane().add(solid), name=beam_id(k), color=blue)
     for panel in panels:
         outline = 1000 * np.asarray(panel.outline_3d_m)
@@ -43,7 +46,8 @@ def write_gridshell_step(polymesh: PolyMesh, panels, beam_radius_mm: float, join
     return Path(path)
 
 
-def write_gridshell_3dm(polymesh: PolyMesh, panels, beam_radius_mm: float, joint_radius_mm: float, path: Path) -> Path:
+def write_gridshell_3dm(polymesh: PolyMesh, panels, beam_radius_mm: float | np.ndarray, joint_radius_mm: float,
+                        path: Path) -> Path:
     """Layers joints (spheres), beams (centre lines), panels (meshes); object names are the ids."""
     import rhino3dm
 

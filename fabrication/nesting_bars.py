@@ -44,18 +44,24 @@ class BarNesting:
     def waste_mm(self) -> float:
         return float(sum(self.offcuts_mm))
 
+    def rows(self, *, first_number: int = 1, profile: str | None = None) -> list[dict]:
+        """One row per bar: bar id (numbered from ``first_number``), profile where given, pieces
+        (labels), piece lengths (mm), count, used and offcut (mm)."""
+        rows = []
+        for number, (pieces, offcut) in enumerate(zip(self.bars, self.offcuts_mm), start=first_number):
+            rows.append({"bar": bar_id(number - 1), **({} if profile is None else {"profile": profile}),
+                         "pieces": " ".join(self.labels[i] for i in pieces),
+                         "lengths_mm": " ".join(f"{self.lengths_mm[i]:.1f}" for i in pieces),
+                         "count": len(pieces), "used_mm": round(self.stock_length_mm - offcut, 1),
+                         "offcut_mm": round(offcut, 1)})
+        return rows
+
     def to_csv(self, path: Path) -> Path:
         """bars.csv: bar, pieces (labels), piece lengths (mm), used and offcut (mm)."""
         import pandas as pd
 
-        rows = []
-        for number, (pieces, offcut) in enumerate(zip(self.bars, self.offcuts_mm), start=1):
-            rows.append({"bar": bar_id(number - 1), "pieces": " ".join(self.labels[i] for i in pieces),
-                         "lengths_mm": " ".join(f"{self.lengths_mm[i]:.1f}" for i in pieces),
-                         "count": len(pieces), "used_mm": round(self.stock_length_mm - offcut, 1),
-                         "offcut_mm": round(offcut, 1)})
         with atomic_path(path) as tmp:
-            pd.DataFrame(rows).to_csv(tmp, index=False)
+            pd.DataFrame(self.rows()).to_csv(tmp, index=False)
         return Path(path)
 
 

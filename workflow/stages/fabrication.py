@@ -84,10 +84,11 @@ def run(ctx):
     config = project.fabrication
     surface = ctx.result("surface")
     polymesh = ctx.result("optimize")
-    ctx.result("analysis")
+    sections = getattr(ctx.result("analysis"), "sections", None)
     folder: Path = ctx.folder
     normals = node_normals(polymesh, surface.mesh)
-    size_mm = beam_outer_size_mm(project)
+    # one outer size, or one per beam where the analysis sized the tubes
+    size_mm = beam_outer_size_mm(project) if sections is None else MM * sections.diameter
     limits = build_limits_of(project)
     summary: dict = {"nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
                      "limits": limits.to_dict()}
@@ -101,7 +102,8 @@ def run(ctx):
     clock.start("joints: start")
     with JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
                             workers=config.workers) as joints:
-        _beams_panels_drawings_assembly(ctx, clock, polymesh, normals, joint_settings, limits, summary, findings)
+        _beams_panels_drawings_assembly(ctx, clock, polymesh, normals, joint_settings, limits, summary, findings,
+                                        sections)
         clock.start("joints: waiting")
         joints.wait(ctx.step)
     clock.stop()
@@ -211,12 +213,14 @@ def sheet_stock(project: Project):
 
 
 def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: np.ndarray, joint_settings, limits,
-                                    summary: dict, findings: list[Finding]) -> None:
-    """Every step but the joints (they run meanwhile); fills ``summary`` and ``findings``."""
+                                    summary: dict, findings: list[Finding], sections=None) -> None:
+    """Every step but the joints (they run meanwhile); fills ``summary`` and ``findings``.
+    ``sections``: the analysis's per-beam tubes where it sized them (workflow.stages.sizing)."""
     project: Project = ctx.project
     config = project.fabrication
     folder: Path = ctx.folder
     size_mm = beam_outer_size_mm(project)
+    sizes_mm = np.full(len(polymesh.edges), size_mm) if sections is None else MM * sections.diameter
     clock.start("beams: cut list")
     beams = require("fabrication", "fabrication.beams", "BeamSettings", "cut_list", "write_cut_list", "write_beams_step")
     BeamSettings, cut_list, write_cut_list, write_beams_step = beams
@@ -228,17 +232,27 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     beam_settings = BeamSettings(profile_name=_profile_name(project), material_name=project.material.name,
                                  density=_density(project), stock_length_mm=MM * b.stock_length, kerf_mm=MM * b.kerf,
                                  area_m2=section.A, outer_size_mm=size_mm)
-    table = cut_list(polymesh, normals, beam_settings, joint_settings)
+    if sections is None:
+        table = cut_list(polymesh, normals, beam_settings, joint_settings)
+    else:
+        table = cut_list(polymesh, normals, beam_settings, joint_settings, profiles=sections.names,
+                         areas_m2=sections.properties["A"], outer_sizes_mm=sizes_mm)
     write_cut_list(table, folder / "beams")
     cut = table["cut_length_mm"].to_numpy()
+    # the shortest cut each beam's own tube needs (the setting where given)
+    min_cut = np.full(len(cut), limits.min_cut_length_mm)
+    if sections is not None and b.min_cut_length is None:
+        from fabrication.limits import default_min_cut_length_mm
+
+        min_cut = np.array([default_min_cut_length_mm(joint_settings, s) for s in sizes_mm])
     ids = table["id"].tolist()
     fix_short = ("no valid collapse could remove this beam (its cells or joints would break): fewer cells "
                  "([remesh] n_cells) or another [remesh] seed; or, if the fabricator accepts it, a smaller "
                  "[fabrication.beams] min_cut_length or [fabrication.joints] sleeve_length")
-    for i in np.flatnonzero(cut < limits.min_cut_length_mm - 0.05):
+    for i in np.flatnonzero(cut < min_cut - 0.05):
         a, z = table["start_node"].iloc[i], table["end_node"].iloc[i]
         findings.append(Finding(kind="cut_length", parts=[ids[i], a, z], measure=float(cut[i]),
-                                limit=limits.min_cut_length_mm, unit="mm", stage="fabrication",
+                                limit=float(min_cut[i]), unit="mm", stage="fabrication",
                                 message=(f"beam {ids[i]} ({a}-{z}) is shorter than its two joints take"
                                          if cut[i] <= 0 else f"beam {ids[i]} ({a}-{z}) cuts to {cut[i]:.1f} mm"),
                                 fix=fix_short))
@@ -247,14 +261,22 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
         findings.append(Finding(kind="stock_length", parts=[ids[i]], measure=float(cut[i]), limit=stock, unit="mm",
                                 stage="fabrication", message=f"beam {ids[i]} ({cut[i]:.0f} mm) is longer than a stock bar",
                                 fix="raise [fabrication.beams] stock_length, or more cells ([remesh] n_cells)"))
-    nestable = np.flatnonzero((cut > 0) & (cut + MM * b.kerf <= stock))
+    nestable = (cut > 0) & (cut + MM * b.kerf <= stock)
     clock.start("beams: bar nesting")
-    nesting = nest_bars(cut[nestable], [ids[i] for i in nestable], stock, MM * b.kerf)
-    _write_bars(nesting, folder / "beams" / "bars.csv")
+    # bars of each profile are nested apart: a bar is cut into pieces of its own tube only
+    profiles = table["profile"].to_numpy()
+    nestings = []
+    for profile in sorted(set(profiles.tolist())):
+        members = np.flatnonzero(nestable & (profiles == profile))
+        nestings.append((profile, nest_bars(cut[members], [ids[i] for i in members], stock, MM * b.kerf)))
+    _write_bars_by_profile(nestings, folder / "beams" / "bars.csv")
     clock.start("beams: beams.step")
-    write_beams_step(polymesh, table, folder / "beams" / "beams.step", outer_size_mm=size_mm)
-    summary.update({"bars_used": int(nesting.bars_used), "bars_lower_bound": int(nesting.lower_bound),
-                    "bar_nesting_method": getattr(nesting, "method", ""), "bar_waste_mm": float(nesting.waste_mm),
+    write_beams_step(polymesh, table, folder / "beams" / "beams.step", outer_size_mm=sizes_mm)
+    summary.update({"bars_used": sum(int(n.bars_used) for _, n in nestings),
+                    "bars_lower_bound": sum(int(n.lower_bound) for _, n in nestings),
+                    "bar_nesting_method": ", ".join(sorted({getattr(n, "method", "") for _, n in nestings})),
+                    "bar_waste_mm": float(sum(n.waste_mm for _, n in nestings)),
+                    "bars_by_profile": {p: int(n.bars_used) for p, n in nestings},
                     "total_cut_length_m": float(table["cut_length_mm"].sum() / MM),
                     "shortest_cut_length_mm": float(cut.min()) if len(cut) else 0.0,
                     "shortest_beam_m": float(polymesh.beam_lengths.min()) if len(cut) else 0.0,
@@ -315,13 +337,15 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     clock.start("model: gridshell.step")
     write_gridshell_step, write_gridshell_3dm = require("fabrication", "fabrication.model3d", "write_gridshell_step",
                                                         "write_gridshell_3dm")
-    joint_radius_mm = getattr(joint_settings, "hub_radius_mm", None) or 1.5 * size_mm
-    write_gridshell_step(polymesh, panels, size_mm / 2, joint_radius_mm, folder / "gridshell.step")
+    joint_radius_mm = getattr(joint_settings, "hub_radius_mm", None) or 1.5 * float(sizes_mm.max())
+    write_gridshell_step(polymesh, panels, sizes_mm / 2, joint_radius_mm, folder / "gridshell.step")
     clock.start("model: gridshell.3dm")
-    write_gridshell_3dm(polymesh, panels, size_mm / 2, joint_radius_mm, folder / "gridshell.3dm")
+    write_gridshell_3dm(polymesh, panels, sizes_mm / 2, joint_radius_mm, folder / "gridshell.3dm")
 
     clock.start("assembly sequence: plan")
     plan_assembly, write_assembly = require("fabrication", "fabrication.assembly", "plan_assembly", "write_assembly")
+    if sections is not None:  # the sized tubes carry the erection stages too
+        props = sections.frame_properties(beam_properties(project)[2])
     beam = {"E": props.E, "G": props.G, "A": props.A, "Iy": props.Iy, "Iz": props.Iz, "J": props.J,
             "mass_per_length": props.mass_per_length}
     sequence = plan_assembly(polymesh, np.flatnonzero(polymesh.supports), beam,
@@ -357,13 +381,19 @@ def _density(project: Project) -> float:
     return material(project.material.name).density
 
 
-def _write_bars(nesting, path: Path) -> None:
-    writer = getattr(nesting, "to_csv", None)
-    if writer is not None:
-        writer(path)
-        return
-    write_bars_csv = require("fabrication", "fabrication.nesting_bars", "write_bars_csv")
-    write_bars_csv(nesting, path)
+def _write_bars_by_profile(nestings: list, path: Path) -> None:
+    """bars.csv of every profile's nesting, bars numbered on from one profile to the next, with a
+    profile column."""
+    import pandas as pd
+
+    from fabrication.files import atomic_path
+
+    rows: list[dict] = []
+    for profile, nesting in nestings:
+        rows += nesting.rows(first_number=len(rows) + 1, profile=profile)
+    columns = ["bar", "profile", "pieces", "lengths_mm", "count", "used_mm", "offcut_mm"]
+    with atomic_path(path) as tmp:
+        pd.DataFrame(rows, columns=columns).to_csv(tmp, index=False)
 
 
 def load(folder: Path, ctx):
