@@ -98,7 +98,7 @@ def test_a_stiffness_limit_is_met_and_a_hopeless_one_is_said():
     assert "no catalogue tube passes" in hopeless.reason
 
 
-def _sized_cap(tmp_path, *, nonlinear: bool, cells: int = 40):
+def _sized_cap(tmp_path, *, nonlinear: bool, cells: int = 40, **analysis):
     from workflow.config import load_project
     from workflow.progress import Progress
     from workflow.runner import run_project
@@ -108,7 +108,7 @@ def _sized_cap(tmp_path, *, nonlinear: bool, cells: int = 40):
     project = project.model_copy(update={
         "remesh": project.remesh.model_copy(update={"n_cells": cells}),
         "analysis": project.analysis.model_copy(update={"nonlinear": nonlinear, "n_modes": 3,
-                                                        "imperfection_shapes": ["linear", "mode1"]}),
+                                                        "imperfection_shapes": ["linear", "mode1"], **analysis}),
         "design": project.design.model_copy(update={"size_sections": True, "groups": 3}),
     })
     out = tmp_path / "out"
@@ -188,3 +188,72 @@ def test_a_sized_roof_meets_the_nonlinear_limit(tmp_path):
     assert figures["design"]["converged"]
     assert figures["lambda_NL_worst"] >= project.analysis.required_load_factor
     assert all(v["pass"] for v in figures["verdicts"]), figures["verdicts"]
+
+
+def _cylinder_radii(shape) -> list[float]:
+    """Radii of the cylindrical faces of an OCP shape, read with OCCT's surface adaptor."""
+    from OCP.BRepAdaptor import BRepAdaptor_Surface
+    from OCP.GeomAbs import GeomAbs_Cylinder
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    radii, explorer = [], TopExp_Explorer(shape, TopAbs_FACE)
+    while explorer.More():
+        surface = BRepAdaptor_Surface(TopoDS.Face_s(explorer.Current()))
+        if surface.GetType() == GeomAbs_Cylinder:
+            radii.append(round(surface.Cylinder().Radius(), 4))
+        explorer.Next()
+    return radii
+
+
+def test_a_socket_fits_each_of_its_tubes():
+    """Three beams of 10, 12 and 16 mm at one node: three bores of radius D / 2 + clearance, and
+    the set-back of the largest tube."""
+    from fabrication.joints import JointGeometry, JointSettings, build_joint, joint_setback_mm, smallest_angle
+
+    turns = 2 * np.pi * np.arange(3) / 3
+    directions = np.stack([np.cos(turns), np.sin(turns), np.zeros(3)], axis=1)
+    sizes = np.array([10.0, 12.0, 16.0])
+    settings = JointSettings(kind="socket", engrave=False)
+    geometry = JointGeometry(node=0, position_mm=np.zeros(3), directions=directions, axis=np.array([0.0, 0.0, 1.0]),
+                             beam_size_mm=16.0, beam_sizes_mm=sizes)
+    solid, report = build_joint(geometry, settings)
+    radii = set(_cylinder_radii(solid.wrapped))
+    for size in sizes:
+        assert round(0.5 * size + settings.clearance_mm, 4) in radii
+    assert report["setback_mm"] == pytest.approx(joint_setback_mm(settings, 16.0, smallest_angle(directions)))
+
+
+@pytest.mark.slow
+def test_fabrication_builds_the_sized_tubes(tmp_path):
+    """The sized cap through fabrication: the cut list's profiles are members.csv's, every stock bar
+    is cut into pieces of one profile, and beams.step's cylinders (read back with OCCT) have the
+    radius of each beam's tube."""
+    from workflow.progress import Progress
+    from workflow.runner import run_project
+    from workflow.stages import STAGES
+
+    # lenient stiffness limits, so that the stresses govern and the tubes differ
+    project, out = _sized_cap(tmp_path, nonlinear=False, required_load_factor=0.5, deflection_limit_ratio=50.0)
+    project = project.model_copy(update={"fabrication": project.fabrication.model_copy(update={
+        "panels": project.fabrication.panels.model_copy(update={"enabled": False})})})
+    summary = run_project(project, out, STAGES, until="fabrication", progress=Progress(enabled=False))
+    assert summary.message is None, summary.message
+    members = pd.read_csv(out / "06-analysis" / "members.csv")
+    assert members["profile"].nunique() >= 2
+    cut = pd.read_csv(out / "07-fabrication" / "beams" / "cutlist.csv")
+    assert cut["profile"].tolist() == members["profile"].tolist()
+    profile_of = dict(zip(cut["id"], cut["profile"]))
+    bars = pd.read_csv(out / "07-fabrication" / "beams" / "bars.csv")
+    for bar in bars.itertuples():
+        assert {profile_of[p] for p in bar.pieces.split()} == {bar.profile}
+    assert set(bars["profile"]) == set(cut.loc[cut["cut_length_mm"] > 0, "profile"])
+    from OCP.IFSelect import IFSelect_RetDone
+    from OCP.STEPControl import STEPControl_Reader
+
+    reader = STEPControl_Reader()
+    assert reader.ReadFile(str(out / "07-fabrication" / "beams" / "beams.step")) == IFSelect_RetDone
+    reader.TransferRoots()
+    radii = set(_cylinder_radii(reader.OneShape()))
+    assert radii == {round(d / 2, 4) for d in members["diameter_mm"]}
