@@ -6,10 +6,13 @@ Per member, from the section forces at both ends of the linear ULS analysis:
   d/t over the class 3 limit;
 - shear (6.2.6, A_v = 2 A / pi) with torsion (6.2.7: Bredt's shear stress, V_pl,T,Rd of 6.2.7(9)),
   and the reduced yield strength for bending where V_Ed > V_pl,T,Rd / 2 (6.2.8);
+- utilisations are load factors: the cross-section's is 1 / the factor by which all its forces may
+  grow together (so 2.0 needs twice the resistance), which passes exactly where the clauses do;
 - axial force with biaxial bending (6.2.9): class 1-2 with the resultant moment against
   M_N,Rd = M_pl,Rd (1 - n^1.7) (6.2.9.1(6) with alpha = beta = 2; the CHS formula of
   EN 1993-1-1:2022 8.2.9.1), reported as the factor by which N and M may grow together;
-  class 3 with the linear elastic stress N / A + M / W_el <= fy / gamma_M0 (6.2.9.2);
+  class 3 with the linear elastic stress N / A + M / W_el <= fy / gamma_M0 (6.2.9.2); both
+  reported as the factor by which N, M, V and T may grow together;
 - flexural buckling (6.3.1) with chi on the curve of Table 6.2 (hot-finished a, cold-formed c,
   otherwise the material's), and compression with biaxial bending (6.3.3, equations 6.61 and
   6.62) with the interaction factors of Annex B, Table B.1 for hollow sections (CHS are not
@@ -127,17 +130,29 @@ def _governing(parts: list[np.ndarray]) -> list[str] | None:
     return [_NAMES[k] for k in stacked.argmax(axis=0)]
 
 
-def _interaction_load_factor(n: np.ndarray, m: np.ndarray, exponent: float = 1.7) -> np.ndarray:
-    """1 / lambda with lambda m + (lambda n)^exponent = 1: how far N and M may grow together."""
-    n, m = np.broadcast_arrays(np.asarray(n, float), np.asarray(m, float))
-    upper = 1.0 / np.maximum(np.maximum(n, m), 1e-300)
+def _cross_section_load_factor(n: np.ndarray, m: np.ndarray, v: np.ndarray, tau: np.ndarray,
+                               plastic: np.ndarray) -> np.ndarray:
+    """1 / lambda, lambda the factor by which N, M, V and T may grow together until the section
+    yields: n, m, v and tau are N / N_pl,Rd, M / M_c,Rd, V / V_pl,Rd and tau_t / tau_Rd at lambda = 1.
+    At lambda: V_pl,T,Rd = (1 - lambda tau) V_pl,Rd (6.2.7(9)); rho = (2 s - 1)^2 where s = lambda v /
+    (1 - lambda tau) > 1/2 (6.2.8); class 1-2 yield where lambda m / (1 - rho) > 1 - (lambda n)^1.7
+    (6.2.9.1), class 3 where lambda n + lambda m / (1 - rho) > 1 (6.2.9.2); s >= 1 fails in shear."""
+    n, m, v, tau, plastic = np.broadcast_arrays(*(np.asarray(x, float) for x in (n, m, v, tau)),
+                                                np.asarray(plastic, bool))
+    largest = np.maximum.reduce([n, m, v + tau])
+    upper = 1.0 / np.maximum(largest, 1e-300)
     lower = np.zeros_like(upper)
     for _ in range(50):
         mid = 0.5 * (lower + upper)
-        over = mid * m + (mid * n) ** exponent > 1.0
+        remaining = np.maximum(1.0 - mid * tau, 1e-300)
+        s = mid * v / remaining
+        rho = np.where(s > 0.5, (2 * np.minimum(s, 1.0) - 1) ** 2, 0.0)
+        bending = mid * m / np.maximum(1.0 - rho, 1e-300)
+        yields = np.where(plastic, bending + (mid * n) ** 1.7 > 1.0, mid * n + bending > 1.0)
+        over = (s >= 1.0) | (mid * tau >= 1.0) | yields
         upper = np.where(over, mid, upper)
         lower = np.where(over, lower, mid)
-    return np.where(np.maximum(n, m) > 0, 1.0 / np.maximum(lower, 1e-300), 0.0)
+    return np.where(largest > 0, 1.0 / np.maximum(lower, 1e-300), 0.0)
 
 
 def chs_checks(forces: EndForces, diameter: np.ndarray, thickness: np.ndarray, material: Material, *,
@@ -154,21 +169,16 @@ def chs_checks(forces: EndForces, diameter: np.ndarray, thickness: np.ndarray, m
     tau_Rd = fy / np.sqrt(3) / g0
     mean_radius = (D - t) / 2
     torsion = forces.T / (2 * np.pi * mean_radius**2 * t) / tau_Rd
-    V_pl_T = np.maximum(1.0 - torsion, 0.0) * 2 * p["A"] / np.pi * tau_Rd
-    shear = np.divide(forces.V, V_pl_T, out=np.full(np.broadcast(forces.V, V_pl_T).shape, 1e6), where=V_pl_T > 0)
-    shear = np.where(forces.V > 0, np.minimum(shear, 1e6), 0.0)
-    rho = np.where(shear > 0.5, (2 * np.minimum(shear, 1.0) - 1) ** 2, 0.0)
-    fy_bending = (1 - rho) * fy
-    # axial force and biaxial bending (6.2.9): the resultant moment of each end, the worse end
+    v = forces.V / (2 * p["A"] / np.pi * tau_Rd)
+    # V <= V_pl,T,Rd = (1 - tau_t / tau_Rd) V_pl,Rd is v + torsion <= 1: the utilisation in shear
+    shear = np.where(forces.V > 0, v + torsion, 0.0)
+    # axial force and biaxial bending (6.2.9): the resultant moment of each end, the worse end,
+    # with the yield strength that the shear leaves (6.2.8)
     N_abs = np.abs(forces.N).max(axis=-1)
     M_res = np.hypot(forces.My, forces.Mz).max(axis=-1)
-    N_pl = p["A"] * fy / g0
     W = np.where(plastic, p["W_pl"], p["W_el"])
-    M_Rd = W * fy_bending / g0
-    # where the shear leaves no bending resistance, a utilisation of 1e6 (the member fails in shear)
-    n, m = N_abs / N_pl, np.divide(M_res, M_Rd, out=np.full(np.broadcast(M_res, M_Rd).shape, 1e6), where=M_Rd > 0)
-    m = np.where(M_res > 0, np.minimum(m, 1e6), 0.0)
-    cross_section = np.where(plastic, _interaction_load_factor(n, m), n + m)
+    n, m = N_abs / (p["A"] * fy / g0), M_res / (W * fy / g0)
+    cross_section = _cross_section_load_factor(n, m, v, torsion, plastic)
     # flexural buckling with bending (6.3.1, 6.3.3, Annex B)
     L = np.asarray(buckling_length, float)
     N_cr = np.pi**2 * material.E * p["I"] / L**2

@@ -129,22 +129,31 @@ def size_sections(analyse: Callable[[np.ndarray], DesignState], catalogue: Catal
         # the cap 8 % heavier than scaling the uniform one, the stiffness that buckling needs not
         # being where the stresses are (docs/decisions.md)
         if stiffer > 1.0:
-            I_floor = np.maximum(I_floor, stiffer * 1.02 * catalogue.I[tube])
+            # never past the stiffest tube: a limit it cannot meet is said at the end
+            I_floor = np.minimum(np.maximum(I_floor, stiffer * 1.02 * catalogue.I[tube]), catalogue.I.max())
         if iteration > free_rounds:
             floor_tube = np.maximum(floor_tube, tube)
-        feasible = ((state.utilisation <= 1.0) & (catalogue.I[None, :] >= I_floor[:, None] * (1 - 1e-9))
-                    & (np.arange(len(catalogue))[None, :] >= floor_tube[:, None]))
+        allowed = ((catalogue.I[None, :] >= I_floor[:, None] * (1 - 1e-9))
+                   & (np.arange(len(catalogue))[None, :] >= floor_tube[:, None]))
+        feasible = allowed & (state.utilisation <= 1.0)
         has = feasible.any(axis=1)
         if not has.all():
-            beam = int(np.flatnonzero(~has)[np.argmax(chosen[~has])])
-            heaviest = np.minimum(np.where(has, np.argmax(feasible, axis=1), len(catalogue) - 1), len(catalogue) - 1)
-            return Design(tube=np.maximum(tube, heaviest), iterations=iterations, converged=False, failing_beam=beam,
-                          reason="no catalogue tube passes this beam" if I_floor[beam] <= catalogue.I.max()
-                          else "no catalogue tube is stiff enough for the deflection or buckling limit")
+            # no tube passes these beams under this design's forces: they take their least utilised
+            # tube, and the iteration goes on (stiffer neighbours may take load off them)
+            least = np.argmin(np.where(allowed, state.utilisation, np.inf), axis=1)
+            within = allowed & (state.utilisation <= state.utilisation[np.arange(len(tube)), least][:, None])
+            feasible = np.where(has[:, None], feasible, within)
         required = np.argmax(feasible, axis=1)
         grouped = group_by_demand(required, feasible, lengths, mass, groups)
-        if passes and np.array_equal(grouped, tube):
-            return Design(tube=tube, iterations=iterations)
+        if np.array_equal(grouped, tube) and (passes or not has.all() or stiffer > 1.0):
+            if passes:
+                return Design(tube=tube, iterations=iterations)
+            if not has.all():
+                beam = int(np.flatnonzero(~has)[np.argmax(chosen[~has])])
+                return Design(tube=tube, iterations=iterations, converged=False, failing_beam=beam,
+                              reason="no catalogue tube passes this beam")
+            return Design(tube=tube, iterations=iterations, converged=False,
+                          reason="no catalogue tube is stiff enough for the deflection or buckling limit")
         tube = grouped
     return Design(tube=tube, iterations=iterations, converged=False,
                   reason=f"the sizing did not settle in {max_iterations} iterations")

@@ -123,15 +123,22 @@ def test_axial_force_and_bending_by_hand_6_2_9():
 
 
 def test_shear_reduces_the_bending_resistance_6_2_8():
-    """V = 0.75 V_pl,Rd: rho = (2 x 0.75 - 1)^2 = 0.25, so M_pl,Rd falls to 0.75 of itself."""
+    """V = 0.75 V_pl,Rd: rho = (2 x 0.75 - 1)^2 = 0.25, so M_pl,Rd falls to 0.75 of itself. The
+    check passes exactly where M <= 0.75 M_pl,Rd, and at its utilisation u the forces / u lie on the
+    clause's boundary."""
     D, t = 0.1143, 0.0063
     A = math.pi * t * (D - t)
     V_pl = 2 * A / math.pi * 355e6 / math.sqrt(3)
-    W_pl = (D**3 - (D - 2 * t) ** 3) / 6
-    M = 10e3
-    checks = _check(D, t, _forces(Vz=0.75 * V_pl, My=(M, M)))
-    assert checks.shear[0] == pytest.approx(0.75)
-    assert checks.cross_section[0] == pytest.approx(M / (0.75 * W_pl * 355e6))
+    M_pl = (D**3 - (D - 2 * t) ** 3) / 6 * 355e6
+    for M, passes in ((0.74 * M_pl, True), (0.76 * M_pl, False)):
+        checks = _check(D, t, _forces(Vz=0.75 * V_pl, My=(M, M)))
+        assert checks.shear[0] == pytest.approx(0.75)
+        assert (checks.cross_section[0] <= 1.0) == passes
+        u = checks.cross_section[0]
+        s = 0.75 / u
+        rho = (2 * s - 1) ** 2 if s > 0.5 else 0.0
+        assert M / u == pytest.approx((1 - rho) * M_pl, rel=1e-9)
+    assert _check(D, t, _forces(Vz=1.2 * V_pl)).shear[0] == pytest.approx(1.2)  # fails in shear, finitely
 
 
 def test_torsion_by_bredt_6_2_7():
@@ -140,6 +147,10 @@ def test_torsion_by_bredt_6_2_7():
     r_m = (D - t) / 2
     tau = T / (2 * math.pi * r_m**2 * t)
     assert _check(D, t, _forces(T=T)).torsion[0] == pytest.approx(tau / (355e6 / math.sqrt(3)))
+    # with a shear force: V <= V_pl,T,Rd = (1 - tau / tau_Rd) V_pl,Rd (6.2.7(9))
+    V_pl = 2 * math.pi * t * (D - t) / math.pi * 355e6 / math.sqrt(3)
+    both = _check(D, t, _forces(T=T, Vz=0.5 * V_pl))
+    assert both.shear[0] == pytest.approx(0.5 + tau / (355e6 / math.sqrt(3)))
 
 
 def test_compression_and_bending_by_hand_annex_b():
