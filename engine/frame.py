@@ -94,21 +94,26 @@ class LinearResult:
     forces [N, Vy, Vz, T, My, Mz] in each beam's local axes at its start and end, N > 0 in
     tension (at the end: the element's end forces; at the start: their negatives, so a beam
     carrying a constant N, T or M shows the same value at both ends); equilibrium_error:
-    |loads + reactions| (forces, and moments about the origin over the model size) / |loads|."""
+    |loads + reactions| (forces, and moments about the origin over the model size) / |loads|;
+    beam_energy (b,): each beam's share of the strain energy (sums to 1)."""
 
     displacements: np.ndarray
     reactions: np.ndarray
     beam_end_forces: np.ndarray
     equilibrium_error: float
+    beam_energy: np.ndarray | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
 class BucklingResult:
     """Positive buckling load factors (k,) ascending and mode shapes (k,n,6), largest translation 1,
-    each mode signed so that its largest translation component is positive (``_signed_modes``)."""
+    each mode signed so that its largest translation component is positive (``_signed_modes``);
+    beam_energy (b,): each beam's share of the first mode's strain energy (where the stiffness
+    that raises lambda_1 counts most)."""
 
     factors: np.ndarray
     modes: np.ndarray
+    beam_energy: np.ndarray | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -455,6 +460,17 @@ def _solve_linear(model: FrameModel, supports: Supports, loads: np.ndarray,
                    stiffness=stiffness, K_elements=stiffness.K_elements)
 
 
+def _beam_energy_shares(stiffness: "FrameStiffness", u: np.ndarray) -> np.ndarray:
+    """(b,) each beam's share of the strain energy u' K u of a displacement field u (all DOFs)."""
+    el = stiffness.el
+    dofs = _dofs(el.connectivity)
+    local_u = np.matmul(stiffness.T, u[dofs][:, :, None])
+    energy = (np.matmul(stiffness.K_local, local_u) * local_u).sum(axis=(1, 2))
+    per_beam = np.bincount(el.beam, weights=np.maximum(energy, 0.0), minlength=len(el.first))
+    total = per_beam.sum()
+    return per_beam / total if total > 0 else per_beam
+
+
 def _section_forces(el: _Elements, local_forces: np.ndarray) -> np.ndarray:
     out = np.zeros((len(el.first), 2, 6))
     out[:, 0] = -local_forces[el.first, :6]
@@ -474,7 +490,8 @@ def linear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *,
     reactions = reactions_all[:n]
     return LinearResult(displacements=displacements, reactions=reactions,
                         beam_end_forces=_section_forces(state.el, state.local_forces),
-                        equilibrium_error=_equilibrium_error(model.nodes, np.asarray(loads, float), reactions))
+                        equilibrium_error=_equilibrium_error(model.nodes, np.asarray(loads, float), reactions),
+                        beam_energy=_beam_energy_shares(state.stiffness, state.u))
 
 
 def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_modes: int = 6, *,
@@ -543,10 +560,11 @@ def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_
     factors, vectors = factors[order], vectors[:, order]
     modes = np.zeros((len(factors), len(state.u)))
     modes[:, free] = vectors.T
+    energy = _beam_energy_shares(state.stiffness, modes[0]) if len(factors) else None
     modes = modes.reshape(len(factors), -1, 6)[:, :el.n_original]
     peak = np.linalg.norm(modes[:, :, :3], axis=2).max(axis=1)
     modes = modes / np.where(peak > 0, peak, 1.0)[:, None, None]
-    return BucklingResult(factors=factors, modes=_signed_modes(modes))
+    return BucklingResult(factors=factors, modes=_signed_modes(modes), beam_energy=energy)
 
 
 #: Lanczos steps of the rough first buckling factor (it only places the shift).

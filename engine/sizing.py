@@ -7,8 +7,8 @@ second moment of area:
 2. per beam, the lightest tube that passes every member check under those forces, has at least
    the beam's floor on I, and (after ``free_rounds``) is no lighter than the beam's last tube, so
    that the iteration cannot cycle;
-3. where the deflection or lambda_LB misses its limit, every beam's floor on I grows by the
-   ratio missed (both scale with the bending stiffness);
+3. where the deflection or lambda_LB misses its limit, the floors on I grow where the strain
+   energy of the SLS displacements or of the first buckling mode is, per kg (``_stiffening``);
 4. group the beams by that demand into at most ``groups`` tubes of the least mass (an exact
    partition of the beams sorted by demand, each group the lightest tube all of its beams pass);
 5. repeat until the grouped design is unchanged and passes under its own forces.
@@ -30,11 +30,15 @@ __all__ = ["DesignState", "Design", "size_sections", "group_by_demand"]
 @dataclass(frozen=True, kw_only=True)
 class DesignState:
     """A design's linear response: utilisation (b, s) of every beam with every catalogue tube
-    under this design's forces, deflection (m, SLS), lambda_LB (None: nothing in compression)."""
+    under this design's forces, deflection (m, SLS), lambda_LB (None: nothing in compression), and
+    each beam's share (b,) of the strain energy of the SLS displacements and of the first buckling
+    mode (None: stiffen uniformly)."""
 
     utilisation: np.ndarray
     deflection: float
     lambda_LB: float | None
+    deflection_energy: np.ndarray | None = None
+    buckling_energy: np.ndarray | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -94,6 +98,27 @@ def group_by_demand(required: np.ndarray, feasible: np.ndarray, lengths: np.ndar
     return tube_of_level[level_of]
 
 
+def _stiffening(state: DesignState, tube: np.ndarray, lengths: np.ndarray, mass: np.ndarray,
+                deflection_limit: float, required_load_factor: float | None) -> np.ndarray:
+    """(b,) factor on each beam's I for the stiffness limits missed. Where the strain energy shares
+    w are known, the missing ratio f goes to the beams of most energy per kg (the Rayleigh quotient
+    grows by sum w_i s_i): s_i = 1 + (f - 1) e_i / sum_j w_j e_j, e_i = w_i / m_i; else uniform."""
+    scale = np.ones(len(tube))
+    misses = [(state.deflection / deflection_limit, state.deflection_energy)]
+    if required_load_factor is not None and state.lambda_LB is not None:
+        misses.append((required_load_factor / max(state.lambda_LB, 1e-12), state.buckling_energy))
+    for ratio, shares in misses:
+        if ratio <= 1.0:
+            continue
+        ratio *= 1.02
+        if shares is None or not np.isfinite(shares).all() or shares.sum() <= 0:
+            scale = np.maximum(scale, ratio)
+            continue
+        density = shares / (mass[tube] * lengths)
+        scale = np.maximum(scale, 1.0 + (ratio - 1.0) * density / float((shares * density).sum()))
+    return scale
+
+
 def size_sections(analyse: Callable[[np.ndarray], DesignState], catalogue: Catalogue, lengths: np.ndarray,
                   density: float, *, start: np.ndarray, groups: int, deflection_limit: float,
                   required_load_factor: float | None, stiffness_floor: np.ndarray | None = None,
@@ -125,12 +150,10 @@ def size_sections(analyse: Callable[[np.ndarray], DesignState], catalogue: Catal
         stiffer = max(state.deflection / deflection_limit,
                       1.0 if required_load_factor is None or state.lambda_LB is None
                       else required_load_factor / max(state.lambda_LB, 1e-12))
-        # from the first (uniform) design on: scaling a design graded for the stresses instead made
-        # the cap 8 % heavier than scaling the uniform one, the stiffness that buckling needs not
-        # being where the stresses are (docs/decisions.md)
         if stiffer > 1.0:
+            scale = _stiffening(state, tube, lengths, mass, deflection_limit, required_load_factor)
             # never past the stiffest tube: a limit it cannot meet is said at the end
-            I_floor = np.minimum(np.maximum(I_floor, stiffer * 1.02 * catalogue.I[tube]), catalogue.I.max())
+            I_floor = np.minimum(np.maximum(I_floor, scale * catalogue.I[tube]), catalogue.I.max())
         if iteration > free_rounds:
             floor_tube = np.maximum(floor_tube, tube)
         allowed = ((catalogue.I[None, :] >= I_floor[:, None] * (1 - 1e-9))

@@ -257,3 +257,38 @@ def test_fabrication_builds_the_sized_tubes(tmp_path):
     reader.TransferRoots()
     radii = set(_cylinder_radii(reader.OneShape()))
     assert radii == {round(d / 2, 4) for d in members["diameter_mm"]}
+
+
+def test_strain_energy_shares_follow_clapeyron():
+    """Two bars in series under an axial force P, areas A and 3A, lengths 1 and 2 m: each stores
+    P^2 L / (2 E A), so their shares are 1 / (1 + 2/3) and (2/3) / (1 + 2/3)."""
+    from engine.frame import FrameModel, linear_static
+    from engine.supports import Supports
+
+    nodes = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
+    model = FrameModel(nodes=nodes, beams=np.array([[0, 1], [1, 2]]), E=np.full(2, 210e9), G=np.full(2, 81e9),
+                       A=np.array([1e-4, 3e-4]), Iy=np.full(2, 1e-8), Iz=np.full(2, 1e-8), J=np.full(2, 2e-8),
+                       up=np.tile([0.0, 0.0, 1.0], (2, 1)), elements_per_beam=3)
+    fixed = np.zeros((1, 6), dtype=bool)
+    fixed[:] = True
+    loads = np.zeros((3, 6))
+    loads[2, 0] = 1e4
+    result = linear_static(model, Supports(nodes=np.array([0]), restraints=fixed), loads)
+    # the free end's other DOFs rest on the bars' bending stiffness alone: no other load
+    assert result.beam_energy == pytest.approx([1 / (1 + 2 / 3), (2 / 3) / (1 + 2 / 3)], rel=1e-9)
+
+
+def test_stiffening_raises_the_rayleigh_quotient_by_the_ratio_missed():
+    """s_i = 1 + (f - 1) e_i / sum w e: sum w_i s_i = f (1.02 f with the margin); a beam without
+    energy keeps its tube; without shares every beam takes f."""
+    from engine.sizing import _stiffening
+
+    shares = np.array([0.5, 0.3, 0.2, 0.0])
+    mass, lengths, tube = np.array([1.0, 2.0]), np.array([1.0, 2.0, 1.0, 1.0]), np.array([0, 1, 0, 0])
+    state = DesignState(utilisation=np.zeros((4, 2)), deflection=0.0, lambda_LB=0.75, buckling_energy=shares)
+    scale = _stiffening(state, tube, lengths, mass, deflection_limit=1.0, required_load_factor=1.5)
+    assert (shares * scale).sum() == pytest.approx(1.02 * 2.0)
+    assert scale[3] == 1.0 and scale[0] > scale[2] > scale[1]
+    uniform = _stiffening(DesignState(utilisation=np.zeros((4, 2)), deflection=0.0, lambda_LB=0.75), tube, lengths,
+                          mass, deflection_limit=1.0, required_load_factor=1.5)
+    assert np.allclose(uniform, 1.02 * 2.0)

@@ -158,8 +158,13 @@ def run(ctx):
         rounds += 1
         stiffer = 1.05 * config.required_load_factor / max(worst.capacity, 1e-3)
         ctx.step(f"lambda_NL_worst {worst.capacity:.2f} under {config.required_load_factor:g}: "
-                 f"sections {rounds} of {project.design.nonlinear_rounds} made {stiffer:.2f} times stiffer")
-        design = sizer.size(design, stiffness_factor=stiffer)
+                 f"sections {rounds} of {project.design.nonlinear_rounds} sized for {stiffer:.2f} times lambda_LB")
+        # the knock-down lambda_NL / lambda_LB taken as it is: lambda_LB must grow by the ratio missed,
+        # and the sizing puts the stiffness where the first mode's energy is (uniformly without modes)
+        if result.lambda_LB is not None:
+            design = sizer.size(design, buckling_target=stiffer * result.lambda_LB)
+        else:
+            design = sizer.size(design, stiffness_factor=stiffer)
         sections = sizer.sections(design)
     ctx.step("member checks")
     if sections is not None:
@@ -366,6 +371,7 @@ class _Sizer:
         self.lengths = polymesh.beam_lengths
         self.cases = [combine(surface.load_cases, c) for c in combos]
         self.history: list[dict] = []
+        self.required = project.analysis.required_load_factor  # lambda_LB asked of the design
 
     def _solve(self, sections: BeamSections):
         from engine.errors import ConvergenceError
@@ -378,24 +384,29 @@ class _Sizer:
                                     surface_vertices=self.surface.mesh.vertices) for case in self.cases)
         stiffness = factor_stiffness(model, supports)
         uls_result = linear_static(model, supports, uls, stiffness=stiffness)
-        deflection = float(np.abs(linear_static(model, supports, sls, stiffness=stiffness).displacements[:, 2]).max())
+        sls_result = linear_static(model, supports, sls, stiffness=stiffness)
+        deflection = float(np.abs(sls_result.displacements[:, 2]).max())
         try:
-            factors = linear_buckling(model, supports, uls, n_modes=1, stiffness=stiffness).factors
+            buckling = linear_buckling(model, supports, uls, n_modes=1, stiffness=stiffness)
+            factors, buckling_energy = buckling.factors, buckling.beam_energy
         except ConvergenceError:
-            factors = np.zeros(0)
-        return uls_result.beam_end_forces, deflection, (float(factors[0]) if len(factors) else None)
+            factors, buckling_energy = np.zeros(0), None
+        return (uls_result.beam_end_forces, deflection, (float(factors[0]) if len(factors) else None),
+                (sls_result.beam_energy, buckling_energy))
 
-    def size(self, previous, *, stiffness_factor: float = 1.0):
+    def size(self, previous, *, stiffness_factor: float = 1.0, buckling_target: float | None = None):
+        """A design from the start tubes, or from ``previous`` with every I raised by
+        ``stiffness_factor`` or with lambda_LB at least ``buckling_target``."""
         from engine.sizing import size_sections
 
         cat, design = self.catalogue, self.project.design
         start = start_tubes(self.project, cat, len(self.lengths)) if previous is None else previous.tube
-        floor = None if previous is None else stiffness_factor * cat.I[previous.tube]
+        floor = None if previous is None or buckling_target is not None else stiffness_factor * cat.I[previous.tube]
+        self.required = max(self.required, buckling_target or 0.0)
         analyse = make_analyse(self.method, cat, self.material, self.lengths, self._solve, self.project)
         result = size_sections(analyse, cat, self.lengths, self.material.density, start=start, groups=design.groups,
                                deflection_limit=self.deflection_limit,
-                               required_load_factor=self.project.analysis.required_load_factor,
-                               stiffness_floor=floor, max_iterations=design.max_iterations,
+                               required_load_factor=self.required, stiffness_floor=floor, max_iterations=design.max_iterations,
                                progress=lambda text: self.ctx.step(text))
         round_ = 0 if previous is None else self.history[-1]["round"] + 1
         self.history += [{"round": round_, **record} for record in result.iterations]

@@ -124,14 +124,15 @@ def make_analyse(method: str, cat: Catalogue, material: Material, lengths: np.nd
                  solve: Callable[[BeamSections], tuple[np.ndarray, float, float | None]],
                  project: Project):
     """analyse(tube indices) for engine.sizing: ``solve`` gives (ULS end forces, SLS deflection,
-    lambda_LB) of a design."""
+    lambda_LB, (SLS and buckling strain energy shares per beam)) of a design."""
     from engine.sizing import DesignState
 
     def analyse(tube: np.ndarray) -> DesignState:
         sections = BeamSections.of_catalogue(cat, tube)
-        end_forces, deflection, lambda_LB = solve(sections)
+        end_forces, deflection, lambda_LB, energies = solve(sections)
         L_cr = buckling_lengths(project, lengths, end_forces, cat.I[tube], material.E, lambda_LB)
         return DesignState(utilisation=candidate_utilisation(method, end_forces, cat, material, L_cr),
-                           deflection=deflection, lambda_LB=lambda_LB)
+                           deflection=deflection, lambda_LB=lambda_LB, deflection_energy=energies[0],
+                           buckling_energy=energies[1])
 
     return analyse
