@@ -292,3 +292,29 @@ def test_stiffening_raises_the_rayleigh_quotient_by_the_ratio_missed():
     uniform = _stiffening(DesignState(utilisation=np.zeros((4, 2)), deflection=0.0, lambda_LB=0.75), tube, lengths,
                           mass, deflection_limit=1.0, required_load_factor=1.5)
     assert np.allclose(uniform, 1.02 * 2.0)
+
+
+@pytest.mark.parametrize("design,expected", [
+    ('[design]\nsize_sections = true\ncatalogue = "EN 99999 tubes"\n', "[design] catalogue"),
+    ('[design]\nsize_sections = true\ncatalogue = "mine.csv"\n', "mine.csv"),
+    ('[section]\nkind = "solid_round"\ndiameter = "40 mm"\n[design]\nsize_sections = true\n', "design.size_sections"),
+    ('[design]\ngroups = 0\n', "design.groups"),
+])
+def test_validate_names_the_design_key(capsys, tmp_path, design, expected):
+    """gridshell validate stops a sizing that could not run, with one message naming the key."""
+    from workflow.cli import main
+
+    path = tmp_path / "p.toml"
+    path.write_text('[surface]\ntemplate = "cap"\n' + design)
+    code = main(["validate", str(path)])
+    err = capsys.readouterr().err
+    assert code == 2 and expected in err and "Traceback" not in err
+
+
+def test_a_project_catalogue_file_is_read_from_the_project_folder(capsys, tmp_path):
+    from workflow.cli import main
+
+    (tmp_path / "tubes.csv").write_text("diameter_mm,thickness_mm\n114.3,6.3\n139.7,8\n")
+    path = tmp_path / "p.toml"
+    path.write_text('[surface]\ntemplate = "cap"\n[design]\nsize_sections = true\ncatalogue = "tubes.csv"\n')
+    assert main(["validate", str(path)]) == 0
