@@ -112,7 +112,10 @@ def _summary(project: Project, surface, polymesh, analysis: dict, fabrication: d
         "D (largest size ratio)": project.field.max_size_ratio,
         "A (largest aspect)": project.field.max_aspect,
         "material / section": f"{project.material.name} / {project.section.kind} "
-                              + " x ".join(f"{1000 * v:g} mm" for v in project.section.dimensions().values()),
+                              + " x ".join(f"{1000 * v:g} mm" for v in project.section.dimensions().values())
+                              + ("" if not analysis.get("design") else
+                                 f"; sized from {analysis['design']['catalogue']}: "
+                                 + ", ".join(g["profile"] for g in analysis["design"]["groups"])),
         "nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
         "panels": fabrication.get("panels", "-"), "joints": fabrication.get("joints", "-"),
         "total beam length (m)": float(polymesh.total_length),
