@@ -46,6 +46,13 @@ def write_gridshell_step(polymesh: PolyMesh, panels, beam_radius_mm: float | np.
     return Path(path)
 
 
+def _stable_id(name: str):
+    """A GUID that follows from the part's name, so that the same model gives the same file."""
+    import uuid
+
+    return uuid.uuid5(uuid.NAMESPACE_URL, f"gridshell:{name}")
+
+
 def write_gridshell_3dm(polymesh: PolyMesh, panels, beam_radius_mm: float | np.ndarray, joint_radius_mm: float,
                         path: Path) -> Path:
     """Layers joints (spheres), beams (centre lines), panels (meshes); object names are the ids."""
@@ -58,6 +65,7 @@ def write_gridshell_3dm(polymesh: PolyMesh, panels, beam_radius_mm: float | np.n
         layer = rhino3dm.Layer()
         layer.Name = name
         layer.Color = colour
+        layer.Id = _stable_id(f"layer {name}")
         layers[name] = model.Layers.Add(layer)
     nodes = 1000 * polymesh.nodes
 
@@ -65,6 +73,7 @@ def write_gridshell_3dm(polymesh: PolyMesh, panels, beam_radius_mm: float | np.n
         a = rhino3dm.ObjectAttributes()
         a.LayerIndex = layers[layer]
         a.Name = name
+        a.Id = _stable_id(name)  # rhino3dm draws a random GUID per object otherwise
         return a
 
     for i, p in enumerate(nodes):

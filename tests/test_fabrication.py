@@ -157,6 +157,12 @@ def test_plan_drawings_and_whole_model(small_run):
     layers = {model.Layers[i].Name for i in range(len(model.Layers))}
     assert {"joints", "beams", "panels"} <= layers
     assert len(model.Objects) >= polymesh.n_nodes + len(polymesh.edges)
+    # object ids follow the part names, so that a re-export keeps Rhino's references to the objects
+    import uuid
+
+    ids = {o.Attributes.Name: o.Attributes.Id for o in model.Objects}
+    assert ids["J0001"] == uuid.uuid5(uuid.NAMESPACE_URL, "gridshell:J0001")
+    assert len(set(ids.values())) == len(ids)
     step = (folder / "gridshell.step").read_text(errors="ignore")
     assert "'J0001'" in step and "'B0001'" in step
 

@@ -161,7 +161,7 @@ def _sigkill_when(command: list[str], ready, *, poll_s: float = 0.2, seconds: fl
 
 #: Formats that must be byte-identical between two runs of the same input on one day (the files
 #: that carry a date carry the day: fabrication.files.file_date); pictures are compared by their
-#: pixels. Not yet: 3DM (rhino3dm writes random object ids and its own clock) and gridshell.step
+#: pixels. Not yet: 3DM (rhino3dm writes its own clock and the path it wrote to) and gridshell.step
 #: (the CAD kernel's assembly writer numbers its styles in an order of its own).
 DETERMINISTIC = (".csv", ".json", ".obj", ".ply", ".npz", ".stl", ".dxf", ".nc1", ".html", ".step", ".pdf", ".xlsx")
 NOT_YET = ("07-fabrication/gridshell.step",)
