@@ -61,9 +61,11 @@ def project_sections(project: Project, n_beams: int) -> BeamSections | None:
         return None
     process = None
     if project.design.catalogue is not None:
+        from engine.errors import InputError
+
         try:
             process = project_catalogue(project).process
-        except Exception:  # a bad catalogue is reported by the sizing that needs it
+        except InputError:  # a bad catalogue is reported by the sizing that needs it
             process = None
     return BeamSections(names=[profile_name(project)] * n_beams, diameter=np.full(n_beams, s.diameter),
                         thickness=np.full(n_beams, s.thickness), process=process)
