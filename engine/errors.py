@@ -32,6 +32,19 @@ class GridshellError(Exception):
         text = super().__str__()
         return f"{text}\n  hint: {self.hint}" if self.hint else text
 
+    def __reduce__(self):
+        # pickled by state, not by calling __init__ again: a subclass with required keyword
+        # arguments (MechanismError's n_modes) then comes back from a worker process as itself
+        return _rebuild, (type(self), self.args, self.__dict__)
+
+
+def _rebuild(cls: type, args: tuple, state: dict) -> GridshellError:
+    """A GridshellError of class ``cls`` from its arguments and attributes (unpickling)."""
+    error = Exception.__new__(cls)
+    error.args = args
+    error.__dict__.update(state)
+    return error
+
 
 class InputError(GridshellError, ValueError):
     """Raised for a missing file, an unreadable format or a bad value."""

@@ -2,15 +2,20 @@
 and a regular square grid over the surface's plan, clipped to its outline (holes too), lifted
 onto the surface, with the spacing found so that the total beam length matches a target within
 1 % (the lattice is aligned with the plan's principal axes, shifted or turned when an alignment
-cannot reach 1 %). Surfaces must be height fields over their plan (a surface that folds over itself in plan
-is refused with a clear error)."""
+cannot reach 1 %). Where lattice lines meet the outline, nodes closer than a tenth of the spacing
+(``MIN_BEAM_FRACTION``) are merged, onto the outline, so that no beam is near zero long. Surfaces
+must be height fields over their plan (a surface that folds over itself in plan is refused with a
+clear error)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from .errors import ConvergenceError, InputError
-from .mesh import PolyMesh, TriMesh
+from .mesh import PolyMesh, TriMesh, unique_edges
+
+#: cell edges shorter than this fraction of the lattice spacing (in plan) are merged away
+MIN_BEAM_FRACTION = 0.1
 
 __all__ = ["is_height_field", "triangular_grid", "quad_grid", "lattice_grid", "principal_angle"]
 
@@ -86,7 +91,7 @@ def _clipped(kind: str, spacing: float, polygon, centre) -> tuple[np.ndarray, li
                 loop.pop()
             if len(loop) >= 3:
                 faces.append(np.array(loop))
-    return np.array(points), faces
+    return np.array(points, dtype=np.float64).reshape(-1, 2), faces
 
 
 def _insert_hanging_nodes(points: np.ndarray, faces: list[np.ndarray]) -> list[np.ndarray]:
@@ -115,6 +120,68 @@ def _insert_hanging_nodes(points: np.ndarray, faces: list[np.ndarray]) -> list[n
     return out
 
 
+def _merge_short_beams(points: np.ndarray, faces: list[np.ndarray], rank: np.ndarray,
+                       min_length: float) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Merge the end nodes of cell edges shorter than ``min_length`` in plan (m).
+
+    Clipping the lattice to the outline puts nodes wherever a lattice line crosses the outline,
+    as close as round-off to a lattice node or an outline vertex: beams a thousand times shorter
+    than the spacing, which make the frame's stiffness numerically singular. Each short edge,
+    shortest first, is collapsed into the end node of higher ``rank`` (n,) int (3 a surface corner,
+    2 an outline vertex, 1 another boundary node, 0 an inner lattice node; between equals, the one
+    that moves the merged nodes least), so the outline keeps its corners and boundary nodes stay
+    on it; a merge that would move a node by twice ``min_length`` or more, or join two surface
+    corners, is left out (a chain of short edges is not collapsed into one point). Cells left with
+    fewer than three nodes go; a cell that meets itself at a merged node is split there.
+
+    Returns the surviving node ids (old ids, ascending) and the cells renumbered to them.
+    """
+    n = len(points)
+    target = np.arange(n)
+    for _ in range(8):                       # new short edges can appear after a merge
+        edges = unique_edges([target[f] for f in faces])
+        lengths = np.linalg.norm(points[edges[:, 1]] - points[edges[:, 0]], axis=1)
+        short = np.flatnonzero(lengths < min_length)
+        if len(short) == 0:
+            break
+        merged = False
+        for a, b in edges[short[np.argsort(lengths[short], kind="stable")]]:
+            a, b = int(target[a]), int(target[b])
+            if a == b or (rank[a] == 3 and rank[b] == 3):
+                continue
+            members = np.flatnonzero((target == a) | (target == b))
+            # the higher rank stays; between equals, the one that moves the merged nodes least
+            choices = [v for v in sorted((a, b)) if rank[v] == max(rank[a], rank[b])]
+            reach = [np.linalg.norm(points[members] - points[v], axis=1).max() for v in choices]
+            if min(reach) >= 2 * min_length:
+                continue
+            keep = choices[int(np.argmin(reach))]
+            target[members] = keep
+            merged = True
+        if not merged:
+            break
+    out = []
+    for face in faces:
+        loop = [int(v) for v in target[face]]
+        loop = [v for i, v in enumerate(loop) if v != loop[i - 1]]      # cyclic: consecutive repeats
+        out.extend(_simple_loops(loop))
+    survivors = np.unique(target)
+    renumber = np.full(n, -1, dtype=np.int64)
+    renumber[survivors] = np.arange(len(survivors))
+    return survivors, [renumber[np.array(loop)] for loop in out]
+
+
+def _simple_loops(loop: list[int]) -> list[list[int]]:
+    """A node loop split where it meets itself, keeping the parts with three nodes or more."""
+    seen: dict[int, int] = {}
+    for i, v in enumerate(loop):
+        if v in seen:
+            inner, outer = loop[seen[v]:i], loop[:seen[v]] + loop[i:]
+            return _simple_loops(inner) + _simple_loops(outer)
+        seen[v] = i
+    return [loop] if len(loop) >= 3 else []
+
+
 def lattice_grid(mesh: TriMesh, kind: str, spacing: float, support_vertices: np.ndarray | None = None,
                  angle_deg: float = 0.0, offset: tuple[float, float] = (0.0, 0.0)) -> PolyMesh:
     """The ``kind`` ("triangle" or "quad") lattice of ``spacing`` (m), turned by ``angle_deg`` in
@@ -135,34 +202,38 @@ def lattice_grid(mesh: TriMesh, kind: str, spacing: float, support_vertices: np.
     centre = np.array(polygon.centroid.coords[0])
     turned = affinity.rotate(polygon, -angle_deg, origin=tuple(centre))
     plan, faces = _clipped(kind, spacing, turned, centre + spacing * np.asarray(offset, dtype=float))
+    if not faces:  # a spacing larger than the plan: no cell is left (the caller shrinks it)
+        return PolyMesh(nodes=np.zeros((0, 3)), faces=())
     if angle_deg:
         c, s = np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg))
         plan = (plan - centre) @ np.array([[c, s], [-s, c]]) + centre
     faces = _insert_hanging_nodes(plan, faces)
-    interpolate = LinearTriInterpolator(Triangulation(mesh.vertices[:, 0], mesh.vertices[:, 1], mesh.faces), mesh.vertices[:, 2])
-    z = np.asarray(interpolate(plan[:, 0], plan[:, 1]).filled(np.nan))
-    if np.any(np.isnan(z)):
-        _, nearest = cKDTree(mesh.vertices[:, :2]).query(plan[np.isnan(z)])
-        z[np.isnan(z)] = mesh.vertices[nearest, 2]
-    nodes = np.c_[plan, z]
     boundary = polygon.boundary
     from shapely.geometry import Point
 
     on_boundary = np.array([boundary.distance(Point(p)) < 1e-6 * spacing for p in plan])
     corner_points = np.concatenate([np.array(polygon.exterior.coords)[:-1]] +
                                    [np.array(r.coords)[:-1] for r in polygon.interiors])
-    corners = np.zeros(len(plan), dtype=bool)
+    outline_vertex = np.zeros(len(plan), dtype=bool)
     if len(corner_points):
         distance, _ = cKDTree(corner_points).query(plan)
-        corners = distance < 1e-6 * spacing
+        outline_vertex = distance < 1e-6 * spacing
     from .voronoi import _support_nodes, surface_corners
 
     kept = sorted(surface_corners(mesh).tolist())
+    corners = np.zeros(len(plan), dtype=bool)
     if kept:
         distance, _ = cKDTree(mesh.vertices[kept, :2]).query(plan)
-        corners &= distance < 1e-3 * spacing
-    else:
-        corners[:] = False
+        corners = outline_vertex & (distance < 1e-3 * spacing)
+    rank = on_boundary.astype(np.int64) + outline_vertex + corners
+    survivors, faces = _merge_short_beams(plan, faces, rank, MIN_BEAM_FRACTION * spacing)
+    plan, on_boundary, corners = plan[survivors], on_boundary[survivors], corners[survivors]
+    interpolate = LinearTriInterpolator(Triangulation(mesh.vertices[:, 0], mesh.vertices[:, 1], mesh.faces), mesh.vertices[:, 2])
+    z = np.asarray(interpolate(plan[:, 0], plan[:, 1]).filled(np.nan))
+    if np.any(np.isnan(z)):
+        _, nearest = cKDTree(mesh.vertices[:, :2]).query(plan[np.isnan(z)])
+        z[np.isnan(z)] = mesh.vertices[nearest, 2]
+    nodes = np.c_[plan, z]
     supports = _support_nodes(mesh, nodes, on_boundary, support_vertices)
     return PolyMesh(nodes=nodes, faces=tuple(faces), boundary=on_boundary, supports=supports, corners=corners)
 
@@ -212,7 +283,7 @@ def _matched(mesh: TriMesh, kind: str, total_length: float, support_vertices) ->
                 best = (error, grid, trial_spacing, angle, offset)
             if abs(error) < 0.005:
                 return grid
-            trial_spacing *= 1 + error
+            trial_spacing *= max(1 + error, 0.5)  # no cell left (error -1): halve the spacing
         if abs(best[0]) < 0.01:
             return best[1]
     for factor in np.linspace(0.9, 1.1, 41):

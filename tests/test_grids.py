@@ -91,3 +91,61 @@ def test_real_surfaces_get_both_grids_within_one_percent():
             grid = make(mesh, total_length=target)
             assert grid.total_length == pytest.approx(target, rel=0.01), (path.name, make.__name__)
             assert grid.supports.any() == bool(flagged.any())
+
+
+def _flat_square(side: float = 10.0, n: int = 10) -> TriMesh:
+    from engine.parametric import grid_triangles
+
+    x, y = np.meshgrid(np.linspace(0, side, n + 1), np.linspace(0, side, n + 1), indexing="ij")
+    return TriMesh(vertices=np.c_[x.ravel(), y.ravel(), np.zeros(x.size)], faces=grid_triangles(n, n))
+
+
+@pytest.mark.parametrize("offset", [0.002, 0.998])
+def test_a_lattice_line_2_mm_from_the_outline_is_merged_into_it(offset):
+    """Squares of 1 m on a flat 10 m x 10 m square, shifted so that a lattice line runs 2 mm inside
+    one edge: the 2 mm beams between that line and the edge would make the frame singular. The
+    grid must be the plain 10 x 10 lattice on the square instead: 11 lines of 10 m each way
+    (220 m), no beam shorter than the spacing, the four corners kept."""
+    from engine.grids import lattice_grid
+
+    grid = lattice_grid(_flat_square(), "quad", 1.0, offset=(offset, 0.0))
+    assert grid.beam_lengths.min() > 0.99
+    assert grid.total_length == pytest.approx(220.0, rel=0.005)
+    assert grid.corners.sum() == 4
+    assert grid.n_nodes - len(grid.edges) + grid.n_faces == 1
+    x = grid.nodes[grid.boundary, 0]
+    assert x.min() == pytest.approx(0.0, abs=1e-9) and x.max() == pytest.approx(10.0, abs=1e-9), "outline kept"
+
+
+#: lengths (in sqrt(area)) at which the courtyard's grids had beams under 1 % of the median before
+#: nodes closer than a tenth of the spacing were merged (18, 27 and 39: triangles down to 0.1 %)
+COURTYARD_LENGTHS = (18.0, 21.0, 27.0, 33.0, 38.0, 39.0)
+
+
+@pytest.mark.parametrize("make", [triangular_grid, quad_grid])
+def test_courtyard_grids_have_no_near_zero_beams(make):
+    """The courtyard (an outline with a hole): where lattice lines meet the outline, no beam is
+    shorter than 5 % of the median beam (the frame refuses beams under 0.1 % as singular), and
+    L_tot stays within 1 % of the target; the grid stays one piece with its hole."""
+    mesh = courtyard()
+    support = np.zeros(mesh.n_vertices, dtype=bool)
+    support[mesh.boundary_loops[0]] = True
+    holes = len(mesh.boundary_loops) - 1
+    for k in COURTYARD_LENGTHS:
+        target = k * np.sqrt(mesh.area)
+        grid = make(mesh, total_length=target, support_vertices=support)
+        assert grid.total_length == pytest.approx(target, rel=0.01), k
+        lengths = grid.beam_lengths
+        assert lengths.min() >= 0.05 * np.median(lengths), (k, lengths.min(), np.median(lengths))
+        assert grid.n_nodes - len(grid.edges) + grid.n_faces == 1 - holes, k
+        assert closest_points(mesh.vertices, mesh.faces, grid.nodes)[1].max() < 1e-6 * mesh.diagonal
+
+
+def test_a_target_below_the_outline_length_is_refused_with_a_hint():
+    """No lattice can be shorter than the cells it keeps: a target of a tenth of the square's
+    perimeter ends in a ConvergenceError naming the length (not an empty grid or a crash)."""
+    from engine.errors import ConvergenceError
+
+    with pytest.raises(ConvergenceError, match="total length 4.00 m") as caught:
+        quad_grid(_flat_square(), total_length=4.0)
+    assert caught.value.hint

@@ -94,3 +94,31 @@ def test_response_picture(tmp_path):
     curves = {"perfect": np.column_stack([3 * np.sin(2 * t), -0.05 * t]),
               "LB mode 1 +": np.column_stack([2.4 * np.sin(2 * t), -0.06 * t])}
     _check_png(plot_response(curves, tmp_path / "response.png", worst="LB mode 1 +", required=1.5))
+
+
+@pytest.mark.parametrize("bad", ["nan", "inf", "huge", "empty", "all"])
+def test_response_picture_copes_with_curves_that_cannot_be_drawn(tmp_path, bad):
+    """A path that diverged (NaN, inf, values near the float range) or is empty: the PNG is
+    written, the good curve drawn, the bad one named in the title (nothing finite) or counted in
+    the legend (some points left out). Before, load factors of +-1e308 ended in a LinAlgError from
+    matplotlib's transforms."""
+    t = np.linspace(0, 1, 40)
+    good = np.column_stack([3 * np.sin(2 * t), -0.05 * t])
+    broken = {"nan": np.full((5, 2), np.nan), "inf": np.array([[0.0, 0.0], [1.0, -np.inf], [np.inf, -0.1]]),
+              "huge": np.array([[-1e308, 0.0], [1e308, -1.0]]), "empty": np.zeros((0, 2)),
+              "all": np.full((3, 2), np.inf)}[bad]
+    curves = {"perfect": broken} if bad == "all" else {"perfect": good, "worst (mode1+)": broken}
+    path = plot_response(curves, tmp_path / "response.png", worst="worst (mode1+)", required=1.5,
+                         title="grids of equal length")
+    _check_png(path)
+
+
+def test_response_picture_with_some_points_left_out_keeps_the_curve(tmp_path):
+    from workflow.plots.analysis import _drawable
+
+    curve = np.array([[0.0, 0.0], [0.5, -0.01], [np.nan, -0.02], [1.0, -np.inf], [1.2, -0.03]])
+    xy, dropped = _drawable(curve)
+    assert dropped == 2
+    np.testing.assert_allclose(xy, [[0.0, 0.0], [10.0, 0.5], [30.0, 1.2]])
+    assert _drawable(np.zeros((0, 2))) == (None, 0) and _drawable(np.full((2, 2), np.nan))[0] is None
+    _check_png(plot_response({"worst": curve}, tmp_path / "response.png", worst="worst"))

@@ -6,6 +6,11 @@ a quadrilateral grid of the same L_tot (within 1 %) are built on the same surfac
 same supports, section and loads; each goes through the structural protocol (LS, LB, GNL with
 every imperfection). Writes OUT/compare/: compare.csv, compare.md, response.png and each
 grid as a polygon OBJ.
+
+A grid that cannot be built on the surface, or whose protocol ends in a user error (a
+``GridshellError``: a mechanism, a path that does not converge, a surface that is not a height
+field), is a ``failed`` row whose message says why and what to do; the other grids are compared
+all the same and the command exits 0 with the table.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from engine.errors import ConvergenceError, GridshellError
 from engine.loads import combine
 from engine.mesh import PolyMesh
 from fabrication.files import atomic_path, write_text_atomic
@@ -24,19 +30,43 @@ from fabrication.files import atomic_path, write_text_atomic
 from .config import Project, check_inputs, load_project
 from .progress import Progress
 
-__all__ = ["GridRow", "compare_grids", "run_compare", "markdown_table"]
+__all__ = ["GridRow", "compare_grids", "failure_message", "run_compare", "markdown_table"]
 
 COLUMNS = ["grid", "nodes", "beams", "L_tot_m", "weight_kg", "delta_L_mm", "lambda_LB", "lambda_NL_perfect",
-           "lambda_NL_worst", "worst_shape", "limit_point", "knock_down"]
+           "lambda_NL_worst", "worst_shape", "limit_point", "knock_down", "status", "message"]
+
+#: what to do when an error comes without a hint of its own, by what failed
+_FIXES = {"built": "check the surface in gridshell validate PROJECT, or change remesh.n_cells",
+          "analysed": "check the supports and the section; gridshell run PROJECT analyses the Voronoi grid alike"}
 
 
 @dataclass(frozen=True, kw_only=True)
 class GridRow:
-    """One grid's line in the comparison table and its response curves."""
+    """One grid's line in the comparison table and its response curves; ``status`` "ok" or
+    "failed", with ``message`` (one line: what failed, why and what to do) when failed."""
 
     values: dict
     curves: dict[str, np.ndarray]
     worst: str | None
+    status: str = "ok"
+    message: str = ""
+
+
+def failure_message(label: str, what: str, error: GridshellError) -> str:
+    """One line for a failed grid: "``label`` grid not ``what``: reason; fix" (the error's hint,
+    else a fix for what failed: ``what`` is "built" or "analysed")."""
+    reason = " ".join(str(error.args[0] if error.args else type(error).__name__).split())
+    fix = error.hint
+    if what == "built" and isinstance(error, ConvergenceError):
+        # the target is the Voronoi grid's length, not the user's to choose
+        fix = "the Voronoi grid sets the target length: more cells (remesh.n_cells) make it longer"
+    fix = " ".join((fix or _FIXES[what]).split())
+    return f"{label} grid not {what}: {reason}; {fix}"
+
+
+def _grid_values(polymesh: PolyMesh, mass_per_length: float) -> dict:
+    return {"nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "L_tot_m": polymesh.total_length,
+            "weight_kg": polymesh.total_length * mass_per_length}
 
 
 def _protocol(polymesh: PolyMesh, surface, project: Project, progress, executor=None) -> GridRow:
@@ -59,8 +89,7 @@ def _protocol(polymesh: PolyMesh, surface, project: Project, progress, executor=
                                 max_load_factor=config.max_load_factor)
     result = run_protocol(model, supports, loads["SLS"], loads["ULS"], settings, progress=progress, executor=executor)
     worst = result.worst
-    values = {"nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "L_tot_m": polymesh.total_length,
-              "weight_kg": polymesh.total_length * props.mass_per_length, "delta_L_mm": 1000 * result.delta_L,
+    values = {**_grid_values(polymesh, props.mass_per_length), "delta_L_mm": 1000 * result.delta_L,
               "lambda_LB": result.lambda_LB,
               "lambda_NL_perfect": None if result.perfect is None else result.perfect.capacity,
               "lambda_NL_worst": None if worst is None else worst.capacity,
@@ -74,9 +103,15 @@ def _protocol(polymesh: PolyMesh, surface, project: Project, progress, executor=
     return GridRow(values=values, curves=curves, worst=None if worst is None else worst.name)
 
 
-def compare_grids(project: Project, surface, voronoi: PolyMesh, *, progress=None) -> dict[str, tuple[PolyMesh, GridRow]]:
-    """The three grids of equal total length and their protocol results, keyed by grid name."""
+def compare_grids(project: Project, surface, voronoi: PolyMesh, *,
+                  progress=None) -> dict[str, tuple[PolyMesh | None, GridRow]]:
+    """The three grids of equal total length and their protocol results, keyed by grid name
+    (triangular, quad, Voro(...)). A grid that cannot be built is (None, failed row); one whose
+    protocol raises a GridshellError is (grid, failed row with its size); any other exception
+    is a bug and propagates."""
     from engine.grids import quad_grid, triangular_grid
+
+    from .stages.analysis import beam_properties, path_pool
 
     def say(text: str) -> None:
         if progress is not None:
@@ -86,30 +121,42 @@ def compare_grids(project: Project, surface, voronoi: PolyMesh, *, progress=None
     support_vertices[surface.supports.nodes] = True
     length = voronoi.total_length
     name = f"Voro({project.field.max_size_ratio:g},{project.field.max_aspect:g})"
-    say("building the triangular grid")
-    tri = triangular_grid(surface.mesh, total_length=length, support_vertices=support_vertices)
-    say("building the quad grid")
-    quad = quad_grid(surface.mesh, total_length=length, support_vertices=support_vertices)
-    from .stages.analysis import path_pool
-
-    out = {}
+    grids: dict[str, PolyMesh | None] = {}
+    out: dict[str, tuple[PolyMesh | None, GridRow]] = {}
+    for label, make in (("triangular", triangular_grid), ("quad", quad_grid)):
+        say(f"building the {label} grid")
+        try:
+            grids[label] = make(surface.mesh, total_length=length, support_vertices=support_vertices)
+        except GridshellError as error:
+            grids[label] = None
+            out[label] = (None, GridRow(values={}, curves={}, worst=None, status="failed",
+                                        message=failure_message(label, "built", error)))
+    grids[name] = voronoi
+    mass_per_length = beam_properties(project)[0].mass_per_length
     config = project.analysis
     with path_pool(config.workers if config.nonlinear else 1) as pool:  # each grid's paths side by side
-        for label, grid in (("triangular", tri), ("quad", quad), (name, voronoi)):
+        for label, grid in grids.items():
+            if grid is None:
+                continue
             say(f"analysing the {label} grid")
-            out[label] = (grid, _protocol(grid, surface, project, lambda text, fraction=None: say(f"{label}: {text}"),
-                                          executor=pool))
-    return out
+            try:
+                row = _protocol(grid, surface, project, lambda text, fraction=None: say(f"{label}: {text}"),
+                                executor=pool)
+            except GridshellError as error:
+                row = GridRow(values=_grid_values(grid, mass_per_length), curves={}, worst=None, status="failed",
+                              message=failure_message(label, "analysed", error))
+            out[label] = (grid, row)
+    return {label: out[label] for label in grids}
 
 
 def markdown_table(rows: list[dict]) -> str:
     """A GitHub-style Markdown table of the comparison rows."""
     def cell(value) -> str:
-        if value is None:
+        if value is None or value == "":
             return "-"
         if isinstance(value, float):
             return f"{value:.4g}"
-        return str(value)
+        return str(value).replace("|", "\\|")
 
     lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
     lines += ["| " + " | ".join(cell(row.get(c)) for c in COLUMNS) + " |" for row in rows]
@@ -144,23 +191,34 @@ def run_compare(args: argparse.Namespace) -> int:
     rows = []
     curves = {}
     for label, (grid, row) in results.items():
-        rows.append({"grid": label, **row.values})
+        rows.append({"grid": label, **row.values, "status": row.status, "message": row.message})
         for name, path in row.curves.items():
             curves[f"{label}: {name}"] = path
-        write_polymesh_obj(grid, folder / f"{_file_name(label)}.obj", header=f"{project.project.name}: {label} grid")
+        obj = folder / f"{_file_name(label)}.obj"
+        if grid is not None:
+            write_polymesh_obj(grid, obj, header=f"{project.project.name}: {label} grid")
+        else:
+            obj.unlink(missing_ok=True)  # not an older run's grid beside this run's table
     frame = pd.DataFrame(rows, columns=COLUMNS)
     with atomic_path(folder / "compare.csv") as tmp:
         frame.to_csv(tmp, index=False, float_format="%.6g")
+    failed = [row for row in rows if row["status"] != "ok"]
     text = (f"# Same-length comparison: {project.project.name}\n\nTotal beam length of the Voronoi grid: "
-            f"{rows[-1]['L_tot_m']:.3f} m; the other grids match it within 1 %.\n\n" + markdown_table(rows))
+            f"{voronoi.total_length:.3f} m; the other grids {'built ' if failed else ''}match it within 1 %.\n\n"
+            + markdown_table(rows))
+    if failed:
+        text += "\nNot compared:\n\n" + "".join(f"- {row['message']}\n" for row in failed)
     write_text_atomic(folder / "compare.md", text)
-    if curves:
-        from .plots.analysis import plot_response
+    from .plots.analysis import plot_response
 
-        worst_curves = [k for k in curves if "worst" in k]
-        plot_response(curves, folder / "response.png", worst=worst_curves[0] if worst_curves else None,
-                      required=project.analysis.required_load_factor,
-                      title=f"{project.project.name}: grids of equal length")
+    worst_curves = [k for k in curves if "worst" in k]
+    not_analysed = ", ".join(row["grid"] for row in failed)
+    plot_response(curves, folder / "response.png", worst=worst_curves[0] if worst_curves else None,
+                  required=project.analysis.required_load_factor,
+                  title=f"{project.project.name}: grids of equal length"
+                        + (f" ({not_analysed}: failed, see compare.md)" if failed else ""))
+    for row in failed:
+        print(f"compare: {row['message']}", file=sys.stderr)
     progress.stage_done("compare", "ran", 0.0)
     if (out_dir / "report").is_dir():
         # the project's report was made before: make it again so that it shows the comparison

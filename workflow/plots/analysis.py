@@ -136,25 +136,60 @@ def plot_buckling_modes(nodes: np.ndarray, beams: np.ndarray, modes: np.ndarray,
     return save_png(fig, path)
 
 
+#: response points farther out than this (mm, or load factor) are not drawn: matplotlib's transforms
+#: fail on limits near the float range, and no real path gets there
+_LARGEST_DRAWN = 1e12
+
+
+def _drawable(curve) -> tuple[np.ndarray | None, int]:
+    """The drawable points (k, 2) [displacement mm, load factor] of a path (s, 2) [load factor,
+    displacement m]: without its non-finite or absurdly large points, and how many those were;
+    None when nothing of the curve can be drawn."""
+    try:
+        curve = np.asarray(curve, dtype=float)
+    except (TypeError, ValueError):
+        return None, 0
+    if curve.ndim != 2 or curve.shape[1] < 2 or len(curve) == 0:
+        return None, 0
+    with np.errstate(over="ignore", invalid="ignore"):
+        xy = np.column_stack([np.abs(1000 * curve[:, 1]), curve[:, 0]])
+        bad = ~(np.isfinite(xy).all(axis=1) & (np.abs(xy) < _LARGEST_DRAWN).all(axis=1))
+    return (None if bad.all() else xy[~bad]), int(bad.sum())
+
+
 def plot_response(curves: dict[str, np.ndarray], path: Path, *, worst: str | None = None,
                   required: float | None = None, title: str = "") -> Path:
     """Load factor against control-node displacement (mm) per curve; the worst bold; the required
-    load factor as a dashed line."""
+    load factor as a dashed line.
+
+    Curves are (s, 2) arrays [load factor, displacement m]. Points that are NaN, infinite or beyond
+    1e12 are left out (the legend counts them); a curve with nothing left, or empty, is not drawn
+    and the title names it; with no curve at all the PNG says so. The picture is always written."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(9, 6))
+    skipped = []
     for name, curve in curves.items():
-        curve = np.asarray(curve, dtype=float)
-        if len(curve) == 0:
+        xy, dropped = _drawable(curve)
+        if xy is None:
+            skipped.append(name)
             continue
         bold = name == worst
-        ax.plot(np.abs(1000 * curve[:, 1]), curve[:, 0], label=name, linewidth=2.6 if bold else 1.1,
+        label = name if not dropped else f"{name} ({dropped} non-finite point{'s' * (dropped > 1)} left out)"
+        ax.plot(xy[:, 0], xy[:, 1], label=label, linewidth=2.6 if bold else 1.1,
                 color="#c0392b" if bold else None, zorder=3 if bold else 2)
-    if required is not None:
+    if required is not None and np.isfinite(required):
         ax.axhline(required, color="k", linestyle="--", linewidth=1.0, label=f"required factor {required:g}")
+    if len(skipped) == len(curves):
+        ax.text(0.5, 0.65, "no response curve to draw", transform=ax.transAxes, ha="center", va="center",
+                color="0.3", bbox={"facecolor": "white", "edgecolor": "0.7"})
     ax.set_xlabel("control-node displacement (mm)")
     ax.set_ylabel("load factor")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, ncol=2)
-    ax.set_title(title or "load-deflection response")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8, ncol=2)
+    heading = title or "load-deflection response"
+    if skipped and curves:
+        heading += f"\nnot drawn (empty or not finite): {', '.join(skipped)}"
+    ax.set_title(heading, fontsize=11 if skipped else None)
     fig.tight_layout()
     return save_png(fig, path)
