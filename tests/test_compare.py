@@ -163,3 +163,35 @@ def _obj_beam_lengths(path: Path) -> np.ndarray:
     nodes = np.array(nodes)
     pairs = np.array(sorted(edges))
     return np.linalg.norm(nodes[pairs[:, 1]] - nodes[pairs[:, 0]], axis=1)
+
+
+@pytest.mark.slow
+def test_compare_sizes_each_grid_and_the_voronoi_row_weighs_what_run_sizes(tmp_path, capsys):
+    """--size-sections: every grid's tubes pass their checks, and the Voronoi row's sized mass is
+    the mass that gridshell run's sized analysis finds on the same grid."""
+    import json
+
+    import pandas as pd
+
+    from workflow.cli import main
+
+    import templates
+
+    text = (Path(templates.__file__).parent / "cap.toml").read_text(encoding="utf-8")
+    text = text.replace("n_cells = 150", "n_cells = 40")
+    assert "n_cells = 40" in text
+    text += '\n[design]\nsize_sections = true\n'
+    text = text.replace("[analysis]\n", '[analysis]\nimperfection_shapes = ["linear", "mode1"]\nn_modes = 3\n', 1)
+    project = tmp_path / "project.toml"
+    project.write_text(text, encoding="utf-8")
+    out = tmp_path / "out"
+    assert main(["compare", str(project), "--out", str(out), "--quiet"]) == 0
+    table = pd.read_csv(out / "compare" / "compare.csv")
+    assert list(table.columns[:len(FIRST_COLUMNS)]) == FIRST_COLUMNS
+    ok = table[table["status"] == "ok"]
+    assert len(ok) == 3 and ok["all_checks_pass"].all() and (ok["max_utilisation"] <= 1.0).all()
+    assert main(["run", str(project), "--out", str(out), "--until", "analysis", "--quiet"]) == 0
+    design = json.loads((out / "06-analysis" / "analysis.json").read_text())["design"]
+    voronoi = ok[ok["grid"].str.startswith("Voro")].iloc[0]
+    assert voronoi["sized_mass_kg"] == pytest.approx(design["mass_after_kg"], rel=1e-6)
+    capsys.readouterr()

@@ -213,6 +213,8 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("project")
     compare.add_argument("--out", metavar="DIR")
     compare.add_argument("--quiet", action="store_true")
+    compare.add_argument("--size-sections", action="store_true",
+                         help="size each grid's tubes as [design] size_sections does, and compare their masses")
     compare.set_defaults(func=cmd_compare)
 
     sweep = sub.add_parser("sweep", help="run the points of a parameter grid on Dask (see the README)")

@@ -7,6 +7,10 @@ same supports, section and loads; each goes through the structural protocol (LS,
 every imperfection). Writes OUT/compare/: compare.csv, compare.md, response.png and each
 grid as a polygon OBJ.
 
+With ``[design] size_sections = true`` (or ``--size-sections``) each grid's tubes are sized as
+``gridshell run`` sizes them, and the rows also say what each topology weighs when it passes:
+the engineer's same-weight question beside the thesis's same-length one.
+
 A grid that cannot be built on the surface, or whose protocol ends in a user error (a
 ``GridshellError``: a mechanism, a path that does not converge, a surface that is not a height
 field), is a ``failed`` row whose message says why and what to do; the other grids are compared
@@ -33,7 +37,8 @@ from .progress import Progress
 __all__ = ["GridRow", "compare_grids", "failure_message", "run_compare", "markdown_table"]
 
 COLUMNS = ["grid", "nodes", "beams", "L_tot_m", "weight_kg", "delta_L_mm", "lambda_LB", "lambda_NL_perfect",
-           "lambda_NL_worst", "worst_shape", "limit_point", "knock_down", "status", "message"]
+           "lambda_NL_worst", "worst_shape", "limit_point", "knock_down", "status", "message", "sized_mass_kg",
+           "sized_tubes", "max_utilisation", "all_checks_pass"]
 
 #: what to do when an error comes without a hint of its own, by what failed
 _FIXES = {"built": "check the surface in gridshell validate PROJECT, or change remesh.n_cells",
@@ -69,25 +74,38 @@ def _grid_values(polymesh: PolyMesh, mass_per_length: float) -> dict:
             "weight_kg": polymesh.total_length * mass_per_length}
 
 
-def _protocol(polymesh: PolyMesh, surface, project: Project, progress, executor=None) -> GridRow:
-    from engine.protocol import ProtocolSettings, run_protocol
-    from engine.structure import gridshell_loads
+class _Steps:
+    """The ``ctx.step`` the analysis's helpers call, passing on to compare's progress."""
 
-    from .stages.analysis import beam_properties, build_frame, pick_combination
+    def __init__(self, progress) -> None:
+        self._progress = progress
+
+    def step(self, text: str, fraction: float | None = None) -> None:
+        if self._progress is not None:
+            self._progress(text, fraction)
+
+
+def _protocol(polymesh: PolyMesh, surface, project: Project, progress, executor=None) -> GridRow:
+    """The protocol on one grid; with ``[design] size_sections`` its tubes are sized first, as in
+    ``gridshell run``, and the row gains the sized mass, its tubes and the member checks."""
+    from engine.en1993 import EndForces
+    from engine.protocol import ProtocolSettings
+
+    from .stages.analysis import beam_properties, pick_combination, protocol_with_design
+    from .stages.sizing import buckling_lengths, checks_method, project_sections, tube_checks
 
     config = project.analysis
-    props, _, _ = beam_properties(project)
-    model, supports, _ = build_frame(polymesh, surface, props, config.elements_per_beam)
-    loads = {}
-    for state in ("SLS", "ULS"):
-        case = combine(surface.load_cases, pick_combination(project, surface, state))
-        loads[state] = gridshell_loads(polymesh, case, mass_per_length=props.mass_per_length,
-                                       surface_vertices=surface.mesh.vertices)
+    props, _, material = beam_properties(project)
+    sections = project_sections(project, len(polymesh.edges))
+    method = checks_method(project, material) if sections is not None else "simplified"
     span = float(np.ptp(polymesh.nodes[:, :2], axis=0).min())
     settings = ProtocolSettings(n_modes=config.n_modes, amplitude=config.imperfection_amplitude or span / 300.0,
                                 shapes=tuple(config.imperfection_shapes), nonlinear=config.nonlinear,
                                 max_load_factor=config.max_load_factor)
-    result = run_protocol(model, supports, loads["SLS"], loads["ULS"], settings, progress=progress, executor=executor)
+    combos = (pick_combination(project, surface, "ULS"), pick_combination(project, surface, "SLS"))
+    run = protocol_with_design(_Steps(progress), project, polymesh, surface, material, method, sections, combos,
+                               span / config.deflection_limit_ratio, settings, executor=executor)
+    result = run.result
     worst = result.worst
     values = {**_grid_values(polymesh, props.mass_per_length), "delta_L_mm": 1000 * result.delta_L,
               "lambda_LB": result.lambda_LB,
@@ -95,6 +113,21 @@ def _protocol(polymesh: PolyMesh, surface, project: Project, progress, executor=
               "lambda_NL_worst": None if worst is None else worst.capacity,
               "limit_point": None if worst is None else worst.limit_load_factor is not None,
               "worst_shape": None if worst is None else worst.name, "knock_down": result.knock_down}
+    if run.design is not None:
+        lengths = polymesh.beam_lengths
+        checks = tube_checks(method, EndForces.of(result.uls_beam_end_forces), run.sections.diameter,
+                             run.sections.thickness, material, process=run.sections.process,
+                             buckling_length=buckling_lengths(project, lengths, result.uls_beam_end_forces,
+                                                              run.sections.properties["I"], material.E,
+                                                              result.lambda_LB))
+        names, counts = np.unique(run.sections.names, return_counts=True)
+        deflection = float(np.abs(result.sls_displacements[:, 2]).max())
+        passes = (checks.utilisation.max() <= 1.0 and deflection <= span / config.deflection_limit_ratio
+                  and all(v is None or v >= config.required_load_factor
+                          for v in (result.lambda_LB, values["lambda_NL_worst"])))
+        values.update({"sized_mass_kg": float((lengths * run.props.mass_per_length).sum()),
+                       "sized_tubes": " / ".join(f"{n} x{c}" for n, c in zip(names, counts)),
+                       "max_utilisation": float(checks.utilisation.max()), "all_checks_pass": bool(passes)})
     curves = {}
     if result.perfect is not None:
         curves["perfect"] = np.asarray(result.perfect.path)
@@ -173,6 +206,13 @@ def run_compare(args: argparse.Namespace) -> int:
 
     project_path = Path(args.project)
     project = load_project(project_path)
+    if getattr(args, "size_sections", False):
+        if project.section.kind != "circular_hollow":
+            from .config import ConfigError
+
+            raise ConfigError(f"--size-sections sizes tubes, but [section] kind = \"{project.section.kind}\"",
+                              hint='set [section] kind = "circular_hollow", or leave out --size-sections')
+        project = project.model_copy(update={"design": project.design.model_copy(update={"size_sections": True})})
     check_inputs(project)  # what validate checks, before any stage runs
     out_dir = Path(args.out) if args.out else Path("out") / project_path.stem
     progress = Progress(enabled=not args.quiet)

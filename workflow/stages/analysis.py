@@ -121,7 +121,7 @@ def run(ctx):
     config = project.analysis
     surface = ctx.result("surface")
     polymesh = ctx.result("optimize")
-    run_protocol, ProtocolSettings = require("analysis", "engine.protocol", "run_protocol", "ProtocolSettings")
+    ProtocolSettings = require("analysis", "engine.protocol", "ProtocolSettings")
     member_checks = require("analysis", "engine.checks", "member_checks")
     props, section, material = beam_properties(project)
     lengths = polymesh.beam_lengths
@@ -134,38 +134,12 @@ def run(ctx):
     settings = ProtocolSettings(n_modes=config.n_modes, amplitude=amplitude, shapes=tuple(config.imperfection_shapes),
                                 nonlinear=config.nonlinear, max_load_factor=config.max_load_factor)
     mass_before = float(lengths.sum() * props.mass_per_length)
-    design = sizer = None
-    if project.design.size_sections:
-        sizer = _Sizer(ctx, project, polymesh, surface, material, method, (uls_combo, sls_combo), deflection_limit)
-        design = sizer.size(None)
-        sections = sizer.sections(design)
-    rounds = 0
-    while True:
-        if sections is not None:
-            props = sections.frame_properties(material)
-        ctx.step("frame model")
-        model, supports, normals = build_frame(polymesh, surface, props, config.elements_per_beam)
-        uls_loads = gridshell_loads(polymesh, combine(surface.load_cases, uls_combo),
-                                    mass_per_length=props.mass_per_length, surface_vertices=surface.mesh.vertices)
-        sls_loads = gridshell_loads(polymesh, combine(surface.load_cases, sls_combo),
-                                    mass_per_length=props.mass_per_length, surface_vertices=surface.mesh.vertices)
-        with path_pool(config.workers if config.nonlinear else 1) as pool:
-            result = run_protocol(model, supports, sls_loads, uls_loads, settings, progress=ctx.step, executor=pool)
-        worst = result.worst
-        short = worst is not None and worst.capacity < config.required_load_factor
-        if design is None or not short or not design.converged or rounds >= project.design.nonlinear_rounds:
-            break
-        rounds += 1
-        stiffer = 1.05 * config.required_load_factor / max(worst.capacity, 1e-3)
-        ctx.step(f"lambda_NL_worst {worst.capacity:.2f} under {config.required_load_factor:g}: "
-                 f"sections {rounds} of {project.design.nonlinear_rounds} sized for {stiffer:.2f} times lambda_LB")
-        # the knock-down lambda_NL / lambda_LB taken as it is: lambda_LB must grow by the ratio missed,
-        # and the sizing puts the stiffness where the first mode's energy is (uniformly without modes)
-        if result.lambda_LB is not None:
-            design = sizer.size(design, buckling_target=stiffer * result.lambda_LB)
-        else:
-            design = sizer.size(design, stiffness_factor=stiffer)
-        sections = sizer.sections(design)
+    design_run = protocol_with_design(ctx, project, polymesh, surface, material, method, sections,
+                                      (uls_combo, sls_combo), deflection_limit, settings)
+    result, sections, design, sizer, rounds = (design_run.result, design_run.sections, design_run.design,
+                                               design_run.sizer, design_run.rounds)
+    props, model, supports = design_run.props, design_run.model, design_run.supports
+    worst = result.worst
     ctx.step("member checks")
     if sections is not None:
         checks = tube_checks(method, EndForces.of(result.uls_beam_end_forces), sections.diameter, sections.thickness,
@@ -348,6 +322,74 @@ def load(folder: Path, ctx):
                                 thickness=members["thickness_mm"].to_numpy(float) / 1000,
                                 process=figures["design"].get("process"))
     return AnalysisSummary(figures=figures, axial_forces=members["axial_force_kN"].to_numpy() * 1e3, sections=sections)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DesignRun:
+    """The protocol's result on the final sections, with the sizing that chose them (None without
+    ``[design] size_sections``): sections, design (engine.sizing.Design), sizer, rounds (of the
+    non-linear limit), and the frame model, supports and beam properties it ran on."""
+
+    result: object
+    sections: BeamSections | None
+    design: object
+    sizer: object
+    rounds: int
+    model: object
+    supports: Supports
+    props: BeamProperties
+
+
+def protocol_with_design(ctx, project: Project, polymesh, surface, material, method: str,
+                         sections: BeamSections | None, combos, deflection_limit: float, settings, *,
+                         executor=None) -> DesignRun:
+    """The structural protocol on ``polymesh``; with ``[design] size_sections`` on tubes sized first,
+    and sized again for a higher lambda_LB (up to ``nonlinear_rounds`` times) where
+    lambda_NL_worst misses its limit. ``ctx`` needs ``step(text, fraction=None)``; ``executor``
+    runs the paths (default: a pool of ``[analysis] workers``)."""
+    from engine.protocol import run_protocol
+
+    config = project.analysis
+    uls_combo, sls_combo = combos
+    props = beam_properties(project)[0]
+    design = sizer = None
+    if project.design.size_sections:
+        sizer = _Sizer(ctx, project, polymesh, surface, material, method, combos, deflection_limit)
+        design = sizer.size(None)
+        sections = sizer.sections(design)
+    rounds = 0
+    while True:
+        if sections is not None:
+            props = sections.frame_properties(material)
+        ctx.step("frame model")
+        model, supports, _ = build_frame(polymesh, surface, props, config.elements_per_beam)
+        uls_loads = gridshell_loads(polymesh, combine(surface.load_cases, uls_combo),
+                                    mass_per_length=props.mass_per_length, surface_vertices=surface.mesh.vertices)
+        sls_loads = gridshell_loads(polymesh, combine(surface.load_cases, sls_combo),
+                                    mass_per_length=props.mass_per_length, surface_vertices=surface.mesh.vertices)
+        if executor is not None:
+            result = run_protocol(model, supports, sls_loads, uls_loads, settings, progress=ctx.step,
+                                  executor=executor)
+        else:
+            with path_pool(config.workers if config.nonlinear else 1) as pool:
+                result = run_protocol(model, supports, sls_loads, uls_loads, settings, progress=ctx.step,
+                                      executor=pool)
+        worst = result.worst
+        short = worst is not None and worst.capacity < config.required_load_factor
+        if design is None or not short or not design.converged or rounds >= project.design.nonlinear_rounds:
+            return DesignRun(result=result, sections=sections, design=design, sizer=sizer, rounds=rounds,
+                             model=model, supports=supports, props=props)
+        rounds += 1
+        stiffer = 1.05 * config.required_load_factor / max(worst.capacity, 1e-3)
+        ctx.step(f"lambda_NL_worst {worst.capacity:.2f} under {config.required_load_factor:g}: "
+                 f"sections {rounds} of {project.design.nonlinear_rounds} sized for {stiffer:.2f} times lambda_LB")
+        # the knock-down lambda_NL / lambda_LB taken as it is: lambda_LB must grow by the ratio missed,
+        # and the sizing puts the stiffness where the first mode's energy is (uniformly without modes)
+        if result.lambda_LB is not None:
+            design = sizer.size(design, buckling_target=stiffer * result.lambda_LB)
+        else:
+            design = sizer.size(design, stiffness_factor=stiffer)
+        sections = sizer.sections(design)
 
 
 def _checks_note(method: str, checks) -> dict:
