@@ -318,3 +318,29 @@ def test_a_project_catalogue_file_is_read_from_the_project_folder(capsys, tmp_pa
     path = tmp_path / "p.toml"
     path.write_text('[surface]\ntemplate = "cap"\n[design]\nsize_sections = true\ncatalogue = "tubes.csv"\n')
     assert main(["validate", str(path)]) == 0
+
+
+def test_a_catalogue_too_small_for_the_roof_is_a_finding_naming_the_beam(tmp_path):
+    """Only CHS 21.3 x 2.6 on the 20 m cap: the analysis still finishes, with a ``sizing`` finding
+    that names a beam, its utilisation over 1, and the keys to change."""
+    from workflow.config import load_project
+    from workflow.progress import Progress
+    from workflow.runner import run_project
+    from workflow.stages import STAGES
+
+    (tmp_path / "tiny.csv").write_text("diameter_mm,thickness_mm\n21.3,2.6\n")
+    project = load_project(resources.files("templates") / "cap.toml")
+    project = project.model_copy(update={
+        "remesh": project.remesh.model_copy(update={"n_cells": 40}),
+        "analysis": project.analysis.model_copy(update={"nonlinear": False, "n_modes": 3}),
+        "design": project.design.model_copy(update={"size_sections": True, "catalogue": str(tmp_path / "tiny.csv")}),
+    })
+    summary = run_project(project, tmp_path / "out", STAGES, until="analysis", progress=Progress(enabled=False))
+    assert summary.message is None
+    figures = json.loads((tmp_path / "out" / "06-analysis" / "analysis.json").read_text())
+    assert not figures["design"]["converged"]
+    sizing = [f for f in figures["findings"] if f["kind"] == "sizing"]
+    assert len(sizing) == 1 and sizing[0]["parts"][0].startswith("B") and sizing[0]["measure"] > 1.0
+    assert sizing[0]["parts"][0] in sizing[0]["message"] and "[design] catalogue" in sizing[0]["fix"]
+    members = pd.read_csv(tmp_path / "out" / "06-analysis" / "members.csv")
+    assert set(members["profile"]) == {"CHS 21.3x2.6"}

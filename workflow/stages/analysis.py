@@ -209,7 +209,7 @@ def run(ctx):
     if design is not None:
         figures["design"] = sizer.summary(design, sections, checks, lengths, mass_before, rounds)
         if not design.converged:
-            figures["findings"].append(sizer.finding(design))
+            figures["findings"].append(sizer.finding(design, utilisation))
     ctx.report_findings(figures["findings"])
     ctx.step("writing")
     write_text_atomic(ctx.folder / "analysis.json", json.dumps(figures, indent=1, default=float))
@@ -479,9 +479,15 @@ class _Sizer:
                 "mass_before_kg": mass_before, "mass_after_kg": float(mass.sum()), "groups": groups,
                 "governing_checks": {str(n): int(c) for n, c in zip(names, counts)}}
 
-    def finding(self, design) -> dict:
-        part = beam_id(design.failing_beam) if design.failing_beam is not None else "design"
-        return Finding(kind="sizing", parts=[part], measure=None, limit=None, unit="", stage="analysis",
+    def finding(self, design, utilisation: np.ndarray) -> dict:
+        """The sizing's finding: the beam no tube passes with its utilisation, or why it stopped."""
+        beam = design.failing_beam
+        part = beam_id(beam) if beam is not None else "design"
+        reason = design.reason.replace("this beam", part) if beam is not None else design.reason
+        measure = None if beam is None else float(utilisation[beam])
+        return Finding(kind="sizing", parts=[part], measure=measure, limit=None if beam is None else 1.0,
+                       unit="", stage="analysis",
                        fix="a catalogue with larger tubes ([design] catalogue), more supports ([[supports]]) or a "
-                           "stronger [material]; the analysis used the heaviest tube where none passed",
-                       message=f"section sizing: {design.reason}").to_dict()
+                           "stronger [material]; the analysis used the least utilised tube where none passed",
+                       message=f"section sizing: {reason}"
+                               + ("" if measure is None else f" (utilisation {measure:.2f} with its tube)")).to_dict()
