@@ -238,6 +238,17 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
         table = cut_list(polymesh, normals, beam_settings, joint_settings, profiles=sections.names,
                          areas_m2=sections.properties["A"], outer_sizes_mm=sizes_mm)
     write_cut_list(table, folder / "beams")
+    if project.section.kind == "circular_hollow":
+        clock.start("beams: NC1 files")
+        from fabrication.nc1 import nc1_pieces, write_nc1_files
+
+        walls_mm = (np.full(len(sizes_mm), MM * project.section.thickness) if sections is None
+                    else MM * sections.thickness)
+        areas = np.full(len(sizes_mm), section.A) if sections is None else sections.properties["A"]
+        pieces = nc1_pieces(table, sizes_mm, walls_mm, areas * _density(project), joint_settings,
+                            project.material.name)
+        summary["nc1_files"] = len(write_nc1_files(pieces, folder / "beams" / "nc1", order=project.project.name,
+                                                   drawing=f"{project.project.name} plan"))
     cut = table["cut_length_mm"].to_numpy()
     # the shortest cut each beam's own tube needs (the setting where given)
     min_cut = np.full(len(cut), limits.min_cut_length_mm)
