@@ -21,7 +21,7 @@ import pandas as pd
 from .files import write_text_atomic
 from .joints import JointSettings, joint_sleeve_mm
 
-__all__ = ["Nc1Piece", "nc1_pieces", "nc1_text", "write_nc1_files"]
+__all__ = ["Nc1Piece", "nc1_pieces", "nc1_text", "write_nc1_files", "grade_name"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -65,7 +65,8 @@ def nc1_text(piece: Nc1Piece, *, order: str, drawing: str, phase: str = "1", qua
     return "\n".join(lines) + "\n"
 
 
-def _grade(material_name: str) -> str:
+def grade_name(material_name: str) -> str:
+    """The grade as a fabricator writes it: S355, EN AW-6063, or the material name."""
     kind, _, grade = material_name.partition("_")
     if kind == "steel":
         return grade.upper()
@@ -88,7 +89,7 @@ def nc1_pieces(table: pd.DataFrame, diameters_mm: np.ndarray, walls_mm: np.ndarr
             continue
         reach = (0.5 if steel else 0.6) * joint_sleeve_mm(joint_settings, float(D))
         holes = tuple((x, hole) for x in (reach, length - reach)) if length > 2 * reach else ()
-        pieces.append(Nc1Piece(piece=row.id, profile=str(row.profile), grade=_grade(material_name), length_mm=length,
+        pieces.append(Nc1Piece(piece=row.id, profile=str(row.profile), grade=grade_name(material_name), length_mm=length,
                                diameter_mm=float(D), wall_mm=float(t), mass_per_m=float(kg),
                                paint_m2_per_m=float(np.pi * D / 1000.0),
                                start_cut_deg=float(row.end_angle_start_deg), end_cut_deg=float(row.end_angle_end_deg),

@@ -163,7 +163,8 @@ def _sigkill_when(command: list[str], ready, *, poll_s: float = 0.2, seconds: fl
 #: that carry a date carry the day: fabrication.files.file_date); pictures are compared by their
 #: pixels. Not yet: 3DM (rhino3dm writes its own clock and the path it wrote to) and gridshell.step
 #: (the CAD kernel's assembly writer numbers its styles in an order of its own).
-DETERMINISTIC = (".csv", ".json", ".obj", ".ply", ".npz", ".stl", ".dxf", ".nc1", ".html", ".step", ".pdf", ".xlsx")
+DETERMINISTIC = (".csv", ".json", ".obj", ".ply", ".npz", ".stl", ".dxf", ".nc1", ".html", ".step", ".pdf", ".xlsx",
+                 ".ifc")
 NOT_YET = ("07-fabrication/gridshell.step",)
 
 

@@ -102,8 +102,8 @@ def run(ctx):
     clock.start("joints: start")
     with JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
                             workers=config.workers) as joints:
-        _beams_panels_drawings_assembly(ctx, clock, polymesh, normals, joint_settings, limits, summary, findings,
-                                        sections)
+        kept = _beams_panels_drawings_assembly(ctx, clock, polymesh, normals, joint_settings, limits, summary,
+                                               findings, sections)
         clock.start("joints: waiting")
         joints.wait(ctx.step)
     clock.stop()
@@ -113,6 +113,10 @@ def run(ctx):
     summary["joint_problems"] = [{k: v for k, v in r.items() if k != "seconds"} for r in joint_reports
                                  if not r.get("ok", True)]
     findings += _joint_findings(joint_reports, limits)
+    if project.section.kind == "circular_hollow":
+        clock.start("model: gridshell.ifc")
+        _write_ifc(ctx, folder, polymesh, normals, kept, joint_settings)
+        summary["ifc"] = "gridshell.ifc"
     clock.start("joints: clearance between neighbours")
     summary["joint_clashes"] = _joint_clashes(folder / "joints", [r["id"] for r in joint_reports
                                                                   if r.get("built", True)], config.workers)
@@ -213,9 +217,10 @@ def sheet_stock(project: Project):
 
 
 def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: np.ndarray, joint_settings, limits,
-                                    summary: dict, findings: list[Finding], sections=None) -> None:
+                                    summary: dict, findings: list[Finding], sections=None) -> dict:
     """Every step but the joints (they run meanwhile); fills ``summary`` and ``findings``.
-    ``sections``: the analysis's per-beam tubes where it sized them (workflow.stages.sizing)."""
+    ``sections``: the analysis's per-beam tubes where it sized them (workflow.stages.sizing).
+    Returns what the IFC model needs of it: the cut list, the panels, sizes and walls."""
     project: Project = ctx.project
     config = project.fabrication
     folder: Path = ctx.folder
@@ -366,6 +371,69 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     # the stage folder is a temporary one until the stage succeeds: name the file from the stage's folder
     written["csv"] = Path(written["csv"]).relative_to(folder).as_posix()
     summary["assembly"] = written
+    walls_mm = (np.full(len(sizes_mm), MM * (project.section.thickness or 0.0)) if sections is None
+                else MM * sections.thickness)
+    return {"table": table, "panels": panels, "sizes_mm": sizes_mm, "walls_mm": walls_mm}
+
+
+def _write_ifc(ctx, folder: Path, polymesh, normals: np.ndarray, kept: dict, joint_settings) -> None:
+    """gridshell.ifc (fabrication.ifc) from the stage's cut list, panels, panels.csv, sequence.csv
+    and the joints' geometry as the joint solids are built from it."""
+    import pandas as pd
+
+    from engine.parts import joint_id
+    from fabrication.ifc import IfcBeam, IfcJoint, IfcPanel, write_gridshell_ifc
+    from fabrication.joints import (joint_geometry, joint_hub_radius_mm, joint_setback_mm, joint_sleeve_mm,
+                                    smallest_angle)
+    from fabrication.nc1 import grade_name
+
+    project: Project = ctx.project
+    step_of: dict[str, int] = {}
+    sequence = folder / "assembly" / "sequence.csv"
+    if sequence.is_file():
+        for row in pd.read_csv(sequence).itertuples():
+            for part in str(row.parts).split():
+                step_of.setdefault(part, int(row.step))
+    table, sizes, walls = kept["table"], kept["sizes_mm"], kept["walls_mm"]
+    beams = []
+    for k, row in enumerate(table.itertuples(index=False)):
+        if row.cut_length_mm <= 0:
+            continue
+        a, b = polymesh.edges[k]
+        start, end = MM * polymesh.nodes[a], MM * polymesh.nodes[b]
+        direction = (end - start) / np.linalg.norm(end - start)
+        beams.append(IfcBeam(id=row.id, start_mm=start + direction * row.setback_start_mm, direction=direction,
+                             cut_length_mm=float(row.cut_length_mm), diameter_mm=float(sizes[k]),
+                             wall_mm=float(walls[k]), profile=str(row.profile), mass_kg=float(row.mass_kg),
+                             step=step_of.get(row.id)))
+    sheets, masses = {}, {}
+    panels_csv = folder / "panels" / "panels.csv"
+    if panels_csv.is_file():
+        frame = pd.read_csv(panels_csv)
+        sheets = dict(zip(frame["id"], frame["sheet"].fillna("")))
+        masses = dict(zip(frame["id"], frame["mass_kg"]))
+    p = project.fabrication.panels
+    panels = [IfcPanel(id=panel.id, outline_mm=MM * np.asarray(panel.outline_3d_m), axes=np.asarray(panel.axes),
+                       thickness_mm=MM * p.thickness, material=p.material, mass_kg=float(masses.get(panel.id, 0.0)),
+                       sheet=str(sheets.get(panel.id, "")), step=step_of.get(panel.id)) for panel in kept["panels"]]
+    joints = []
+    settings = joint_settings
+    for g in joint_geometry(polymesh, normals, sizes):
+        own = g.sizes_mm
+        size = g.beam_size_mm
+        setback = float(joint_setback_mm(settings, size, smallest_angle(g.directions)))
+        reach = setback + np.array([joint_sleeve_mm(settings, s) for s in own])
+        bore = 0.5 * own + settings.clearance_mm
+        steel = settings.kind == "steel"
+        joints.append(IfcJoint(id=joint_id(g.node), position_mm=g.position_mm, axis=g.axis, directions=g.directions,
+                               hub_radius_mm=joint_hub_radius_mm(settings, size),
+                               hub_height_mm=2.5 * size if steel else 2.0 * (0.5 * size + settings.clearance_mm
+                                                                             + settings.wall_mm) + 1.0,
+                               setback_mm=setback, reach_mm=reach, outer_mm=bore + settings.wall_mm, bore_mm=bore,
+                               plate_mm=(settings.plate_thickness_mm, 0.8 * 2.5 * size) if steel else None,
+                               part_file=f"joints/{joint_id(g.node)}.step"))
+    write_gridshell_ifc(folder / "gridshell.ifc", project_name=project.project.name, beams=beams, panels=panels,
+                        joints=joints, beam_material=grade_name(project.material.name))
 
 
 def _jsonable(value):

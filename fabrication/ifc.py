@@ -1,0 +1,226 @@
+"""The grid-shell as an IFC4 model for the BIM tools (``07-fabrication/gridshell.ifc``, mm).
+
+Through ifcopenshell: a project, site and building ("grid-shell roof") holding an IfcMember per
+beam (a circular hollow profile swept along the beam's cut length, between its joints), an IfcPlate
+per panel (its outline extruded by the panel's thickness) and an IfcMechanicalFastener per joint (its
+hub and its sleeves or fin plates as swept solids: what a clash check needs; the exact solid with its
+holes and engraving is the part's STEP file, named in its properties). Each is Named by its id and carries a property set ``Pset_Gridshell``:
+profile, material, cut length, mass and assembly step for beams; material, thickness, mass, sheet
+and assembly step for panels; node, beams and part file for joints.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .files import atomic_path
+
+__all__ = ["IfcBeam", "IfcPanel", "IfcJoint", "write_gridshell_ifc"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class IfcBeam:
+    """A beam between its joints: start point and unit direction (mm), cut length, tube (mm)."""
+
+    id: str
+    start_mm: np.ndarray
+    direction: np.ndarray
+    cut_length_mm: float
+    diameter_mm: float
+    wall_mm: float
+    profile: str
+    mass_kg: float
+    step: int | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class IfcPanel:
+    """A panel: its outline (k,3) mm on its plane, in-plane axes (2,3), thickness (mm), sheet."""
+
+    id: str
+    outline_mm: np.ndarray
+    axes: np.ndarray
+    thickness_mm: float
+    material: str
+    mass_kg: float
+    sheet: str = ""
+    step: int | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class IfcJoint:
+    """A joint as swept solids in its own axes (mm): the hub (a cylinder of ``hub_radius_mm`` and
+    ``hub_height_mm`` about ``axis``, centred on the node), and per beam either a socket's sleeve
+    (solid up to the set-back, then a tube of the beam's bore to the sleeve's end) or a steel fin
+    plate (``plate_mm``: thickness, height) reaching ``reach_mm`` along the beam."""
+
+    id: str
+    position_mm: np.ndarray
+    axis: np.ndarray
+    directions: np.ndarray
+    hub_radius_mm: float
+    hub_height_mm: float
+    setback_mm: float
+    reach_mm: np.ndarray
+    outer_mm: np.ndarray
+    bore_mm: np.ndarray
+    plate_mm: tuple[float, float] | None = None
+    part_file: str = ""
+
+def _frame(origin_mm: np.ndarray, z: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
+    """A 4 x 4 placement in metres with its local z along ``z`` (and x along ``x`` where given)."""
+    z = np.asarray(z, float) / np.linalg.norm(z)
+    if x is None:
+        trial = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        x = trial - (trial @ z) * z
+    x = np.asarray(x, float) - (np.asarray(x, float) @ z) * z
+    x /= np.linalg.norm(x)
+    matrix = np.eye(4)
+    matrix[:3, 0], matrix[:3, 1], matrix[:3, 2] = x, np.cross(z, x), z
+    matrix[:3, 3] = np.asarray(origin_mm, float) / 1000.0
+    return matrix
+
+
+def write_gridshell_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: list[IfcPanel],
+                        joints: list[IfcJoint], beam_material: str) -> Path:
+    """Write the IFC4 model (atomically); see the module docstring."""
+    import ifcopenshell
+    import ifcopenshell.api.aggregate as aggregate
+    import ifcopenshell.api.context as context
+    import ifcopenshell.api.geometry as geometry
+    import ifcopenshell.api.material as material
+    import ifcopenshell.api.pset as pset
+    import ifcopenshell.api.root as root
+    import ifcopenshell.guid
+    import ifcopenshell.api.unit as unit
+
+    model = ifcopenshell.file(schema="IFC4")
+    project = root.create_entity(model, ifc_class="IfcProject", name=project_name)
+    unit.assign_unit(model, units=[unit.add_si_unit(model, unit_type="LENGTHUNIT", prefix="MILLI"),
+                                   unit.add_si_unit(model, unit_type="AREAUNIT"),
+                                   unit.add_si_unit(model, unit_type="VOLUMEUNIT"),
+                                   unit.add_si_unit(model, unit_type="MASSUNIT", prefix="KILO")])
+    model_context = context.add_context(model, context_type="Model")
+    body = context.add_context(model, context_type="Model", context_identifier="Body", target_view="MODEL_VIEW",
+                               parent=model_context)
+    site = root.create_entity(model, ifc_class="IfcSite", name="site")
+    building = root.create_entity(model, ifc_class="IfcBuilding", name="grid-shell roof")
+    aggregate.assign_object(model, products=[site], relating_object=project)
+    aggregate.assign_object(model, products=[building], relating_object=site)
+
+    def axes(frame: np.ndarray):
+        """IfcAxis2Placement3D of a 4 x 4 frame in metres, written in mm."""
+        return model.create_entity(
+            "IfcAxis2Placement3D", Location=model.create_entity("IfcCartesianPoint", Coordinates=tuple(
+                float(c) for c in 1000.0 * frame[:3, 3])),
+            Axis=model.create_entity("IfcDirection", DirectionRatios=tuple(float(c) for c in frame[:3, 2])),
+            RefDirection=model.create_entity("IfcDirection", DirectionRatios=tuple(float(c) for c in frame[:3, 0])))
+
+    def place(product, frame: np.ndarray) -> None:
+        # made here rather than by the placement API, whose entity order varied from run to run
+        product.ObjectPlacement = model.create_entity("IfcLocalPlacement", RelativePlacement=axes(frame))
+
+    def properties(product, values: dict) -> None:
+        props = pset.add_pset(model, product=product, name="Pset_Gridshell")
+        pset.edit_pset(model, pset=props, properties={k: v for k, v in values.items() if v is not None})
+
+    products = []
+    profiles: dict[str, object] = {}
+    steel = material.add_material(model, name=beam_material, category="steel")
+    members = []
+    for beam in beams:
+        member = root.create_entity(model, ifc_class="IfcMember", name=beam.id, predefined_type="MEMBER")
+        if beam.profile not in profiles:
+            profiles[beam.profile] = model.create_entity(
+                "IfcCircleHollowProfileDef", ProfileType="AREA", ProfileName=beam.profile,
+                Radius=0.5 * beam.diameter_mm, WallThickness=beam.wall_mm)
+        representation = geometry.add_profile_representation(model, context=body, profile=profiles[beam.profile],
+                                                              depth=beam.cut_length_mm / 1000.0)
+        geometry.assign_representation(model, product=member, representation=representation)
+        place(member, _frame(beam.start_mm, beam.direction))
+        properties(member, {"Profile": beam.profile, "Material": beam_material, "CutLength_mm": beam.cut_length_mm,
+                            "Mass_kg": beam.mass_kg, "AssemblyStep": beam.step})
+        members.append(member)
+    if members:
+        material.assign_material(model, products=members, material=steel)
+    products += members
+    materials: dict[str, object] = {}
+    for panel in panels:
+        plate = root.create_entity(model, ifc_class="IfcPlate", name=panel.id, predefined_type="CURTAIN_PANEL")
+        outline = np.asarray(panel.outline_mm, float)
+        x, y = np.asarray(panel.axes[0], float), np.asarray(panel.axes[1], float)
+        local = np.c_[(outline - outline[0]) @ x, (outline - outline[0]) @ y]
+        points = [model.create_entity("IfcCartesianPoint", Coordinates=(float(u), float(v))) for u, v in local]
+        curve = model.create_entity("IfcPolyline", Points=points + points[:1])
+        profile = model.create_entity("IfcArbitraryClosedProfileDef", ProfileType="AREA", OuterCurve=curve)
+        representation = geometry.add_profile_representation(model, context=body, profile=profile,
+                                                              depth=panel.thickness_mm / 1000.0, cardinal_point=None)
+        geometry.assign_representation(model, product=plate, representation=representation)
+        place(plate, _frame(outline[0], np.cross(x, y), x))
+        if panel.material not in materials:
+            materials[panel.material] = material.add_material(model, name=panel.material, category="glass")
+        material.assign_material(model, products=[plate], material=materials[panel.material])
+        properties(plate, {"Material": panel.material, "Thickness_mm": panel.thickness_mm, "Mass_kg": panel.mass_kg,
+                           "Sheet": panel.sheet or None, "AssemblyStep": panel.step})
+        products.append(plate)
+    def swept(profile, origin, z, depth: float, x=None):
+        """An extruded solid of ``profile`` from ``origin`` along ``z`` (joint axes, mm)."""
+        return model.create_entity("IfcExtrudedAreaSolid", SweptArea=profile, Position=axes(_frame(origin, z, x)),
+                                   ExtrudedDirection=model.create_entity("IfcDirection", DirectionRatios=(0.0, 0.0, 1.0)),
+                                   Depth=float(depth))
+
+    for joint in joints:
+        fastener = root.create_entity(model, ifc_class="IfcMechanicalFastener", name=joint.id)
+        axis = np.asarray(joint.axis, float) / np.linalg.norm(joint.axis)
+        circle = lambda r: model.create_entity("IfcCircleProfileDef", ProfileType="AREA", Radius=float(r))  # noqa: E731
+        items = [swept(circle(joint.hub_radius_mm), -0.5 * joint.hub_height_mm * axis, axis, joint.hub_height_mm)]
+        for d, reach, outer, bore in zip(joint.directions, joint.reach_mm, joint.outer_mm, joint.bore_mm):
+            if joint.plate_mm is not None:
+                thickness, height = joint.plate_mm
+                plate = model.create_entity("IfcRectangleProfileDef", ProfileType="AREA", XDim=float(thickness),
+                                            YDim=float(height))
+                side = np.cross(d, axis)
+                items.append(swept(plate, np.zeros(3), d, reach, x=side if np.linalg.norm(side) > 1e-9 else None))
+            else:
+                items.append(swept(circle(outer), np.zeros(3), d, joint.setback_mm))
+                tube = model.create_entity("IfcCircleHollowProfileDef", ProfileType="AREA", Radius=float(outer),
+                                           WallThickness=float(outer - bore))
+                items.append(swept(tube, d * joint.setback_mm, d, reach - joint.setback_mm))
+        representation = model.create_entity("IfcShapeRepresentation", ContextOfItems=body,
+                                             RepresentationIdentifier="Body", RepresentationType="SweptSolid",
+                                             Items=items)
+        geometry.assign_representation(model, product=fastener, representation=representation)
+        place(fastener, _frame(joint.position_mm, np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])))
+        properties(fastener, {"Beams": int(len(joint.directions)), "PartFile": joint.part_file or None,
+                              "Geometry": "hub and sleeves or fin plates as swept solids; the joint's solid, with "
+                                          "its holes and engraving, is the part file"})
+        products.append(fastener)
+    if products:
+        # made here rather than by the spatial API, which re-made every placement in an order of its own
+        model.create_entity("IfcRelContainedInSpatialStructure", GlobalId=ifcopenshell.guid.new(),
+                            Name="grid-shell parts", RelatingStructure=building, RelatedElements=products)
+    _make_reproducible(model)
+    with atomic_path(path) as tmp:
+        model.write(str(tmp))
+    return Path(path)
+
+
+def _make_reproducible(model) -> None:
+    """The same model, the same bytes: every GlobalId from its class, name and order (uuid5, instead
+    of the random ones), and file_date() as the header's time stamp."""
+    import uuid
+
+    import ifcopenshell.guid
+
+    from .files import file_date
+
+    seen: dict[tuple[str, str], int] = {}
+    for entity in model.by_type("IfcRoot"):
+        key = (entity.is_a(), str(entity.Name or ""))
+        seen[key] = seen.get(key, 0) + 1
+        entity.GlobalId = ifcopenshell.guid.compress(
+            uuid.uuid5(uuid.NAMESPACE_URL, f"gridshell:{key[0]}:{key[1]}:{seen[key]}").hex)
+    model.header.file_name.time_stamp = file_date().strftime("%Y-%m-%dT%H:%M:%S")

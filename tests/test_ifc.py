@@ -1,0 +1,55 @@
+"""gridshell.ifc re-read with ifcopenshell (its geometry engine and placement utilities, not the
+writer's code): one named element per beam, panel and joint, the cut list's quantities, the tubes
+where the beams are."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+ifcopenshell = pytest.importorskip("ifcopenshell")
+
+
+def test_the_ifc_model_has_every_part_with_the_cut_lists_quantities(small_run):
+    import ifcopenshell.geom
+    import ifcopenshell.util.element as element
+    import ifcopenshell.util.placement as placement
+    import ifcopenshell.util.shape as shape
+
+    from workflow.stages.polymesh_io import read_polymesh_obj
+
+    project, out = small_run
+    folder = out / "07-fabrication"
+    model = ifcopenshell.open(str(folder / "gridshell.ifc"))
+    assert model.schema == "IFC4"
+    cut = pd.read_csv(folder / "beams" / "cutlist.csv")
+    cut = cut[cut["cut_length_mm"] > 0].set_index("id")
+    panels = pd.read_csv(folder / "panels" / "panels.csv").set_index("id")
+    polymesh = read_polymesh_obj(out / "05-optimize" / "gridshell.obj")
+    members = {m.Name: m for m in model.by_type("IfcMember")}
+    assert sorted(members) == sorted(cut.index)
+    assert sorted(p.Name for p in model.by_type("IfcPlate")) == sorted(panels.index)
+    assert len(model.by_type("IfcMechanicalFastener")) == polymesh.n_nodes
+    assert not model.by_type("IfcBuildingElementProxy")
+    settings = ifcopenshell.geom.settings()
+    D, t = 1000 * project.section.diameter, 1000 * project.section.thickness
+    area_mm2 = np.pi * t * (D - t)
+    nodes_mm = 1000 * polymesh.nodes
+    for name in list(members)[:25]:
+        member, row = members[name], cut.loc[name]
+        props = element.get_psets(member)["Pset_Gridshell"]
+        assert props["CutLength_mm"] == pytest.approx(row.cut_length_mm) and props["Profile"] == row.profile
+        assert props["Mass_kg"] == pytest.approx(row.mass_kg)
+        volume_mm3 = shape.get_volume(ifcopenshell.geom.create_shape(settings, member).geometry) * 1e9
+        assert volume_mm3 == pytest.approx(area_mm2 * row.cut_length_mm, rel=0.02)  # a polygon of the circle
+        matrix = placement.get_local_placement(member.ObjectPlacement)  # mm
+        a, b = int(row.start_node[1:]) - 1, int(row.end_node[1:]) - 1
+        direction = (nodes_mm[b] - nodes_mm[a]) / np.linalg.norm(nodes_mm[b] - nodes_mm[a])
+        assert matrix[:3, 2] == pytest.approx(direction, abs=1e-6)
+        assert matrix[:3, 3] == pytest.approx(nodes_mm[a] + row.setback_start_mm * direction, abs=0.06)
+    plate = model.by_type("IfcPlate")[0]
+    assert element.get_psets(plate)["Pset_Gridshell"]["Sheet"] == panels.loc[plate.Name, "sheet"]
+    joint = model.by_type("IfcMechanicalFastener")[0]
+    assert element.get_psets(joint)["Pset_Gridshell"]["PartFile"] == f"joints/{joint.Name}.step"
+    assert shape.get_volume(ifcopenshell.geom.create_shape(settings, joint).geometry) > 0
