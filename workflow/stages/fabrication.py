@@ -102,8 +102,8 @@ def run(ctx):
     clock.start("joints: start")
     with JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
                             workers=config.workers) as joints:
-        kept = _beams_panels_drawings_assembly(ctx, clock, polymesh, normals, joint_settings, limits, summary,
-                                               findings, sections)
+        _beams_panels_drawings_assembly(ctx, clock, polymesh, normals, joint_settings, limits, summary, findings,
+                                        sections)
         clock.start("joints: waiting")
         joints.wait(ctx.step)
     clock.stop()
@@ -113,10 +113,6 @@ def run(ctx):
     summary["joint_problems"] = [{k: v for k, v in r.items() if k != "seconds"} for r in joint_reports
                                  if not r.get("ok", True)]
     findings += _joint_findings(joint_reports, limits)
-    if project.section.kind == "circular_hollow":
-        clock.start("model: gridshell.ifc")
-        _write_ifc(ctx, folder, polymesh, normals, kept, joint_settings)
-        summary["ifc"] = "gridshell.ifc"
     clock.start("joints: clearance between neighbours")
     summary["joint_clashes"] = _joint_clashes(folder / "joints", [r["id"] for r in joint_reports
                                                                   if r.get("built", True)], config.workers)
@@ -217,10 +213,9 @@ def sheet_stock(project: Project):
 
 
 def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: np.ndarray, joint_settings, limits,
-                                    summary: dict, findings: list[Finding], sections=None) -> dict:
+                                    summary: dict, findings: list[Finding], sections=None) -> None:
     """Every step but the joints (they run meanwhile); fills ``summary`` and ``findings``.
-    ``sections``: the analysis's per-beam tubes where it sized them (workflow.stages.sizing).
-    Returns what the IFC model needs of it: the cut list, the panels, sizes and walls."""
+    ``sections``: the analysis's per-beam tubes where it sized them (workflow.stages.sizing)."""
     project: Project = ctx.project
     config = project.fabrication
     folder: Path = ctx.folder
@@ -373,7 +368,11 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     summary["assembly"] = written
     walls_mm = (np.full(len(sizes_mm), MM * (project.section.thickness or 0.0)) if sections is None
                 else MM * sections.thickness)
-    return {"table": table, "panels": panels, "sizes_mm": sizes_mm, "walls_mm": walls_mm}
+    if project.section.kind == "circular_hollow":  # while the joints build: it needs their geometry only
+        clock.start("model: gridshell.ifc")
+        _write_ifc(ctx, folder, polymesh, normals, {"table": table, "panels": panels, "sizes_mm": sizes_mm,
+                                                    "walls_mm": walls_mm}, joint_settings)
+        summary["ifc"] = "gridshell.ifc"
 
 
 def _write_ifc(ctx, folder: Path, polymesh, normals: np.ndarray, kept: dict, joint_settings) -> None:
