@@ -107,21 +107,31 @@ def write_cut_list(table: pd.DataFrame, folder: Path) -> tuple[Path, Path]:
     return folder / "cutlist.csv", folder / "cutlist.xlsx"
 
 
-def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, outer_size_mm: float | np.ndarray) -> Path:
-    """Every beam as a named cylinder of its cut length, placed between its joints (mm); a beam of
-    zero cut length (shorter than its joints take, reported by the caller) has no solid."""
-    from build123d import Align, Compound, Cylinder, Location, Plane, export_step
+def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, outer_size_mm: float | np.ndarray,
+                     wall_mm: float | np.ndarray | None = None) -> Path:
+    """Every beam as a named solid of its cut length, placed between its joints (mm): a tube of
+    outer size and ``wall_mm`` (an annulus extruded, no boolean), or a rod where no wall is given;
+    a beam of zero cut length (shorter than its joints take, reported by the caller) has no solid."""
+    from build123d import Align, Circle, Compound, Cylinder, Location, Plane, Solid, Vector, export_step
 
     e = polymesh.edges
     solids = []
     sizes = np.broadcast_to(np.asarray(outer_size_mm, dtype=float), (len(e),))
-    for row, (a, b), size in zip(table.itertuples(index=False), e, sizes):
+    walls = None if wall_mm is None else np.broadcast_to(np.asarray(wall_mm, dtype=float), (len(e),))
+    annuli: dict[tuple[float, float], object] = {}
+    for k, (row, (a, b), size) in enumerate(zip(table.itertuples(index=False), e, sizes)):
         if row.cut_length_mm <= 0:
             continue
         start, end = 1000 * polymesh.nodes[a], 1000 * polymesh.nodes[b]
         direction = (end - start) / np.linalg.norm(end - start)
         origin = start + direction * row.setback_start_mm
-        solid = Cylinder(0.5 * size, row.cut_length_mm, align=(Align.CENTER, Align.CENTER, Align.MIN))
+        if walls is None or not 0 < walls[k] < 0.5 * size:
+            solid = Cylinder(0.5 * size, row.cut_length_mm, align=(Align.CENTER, Align.CENTER, Align.MIN))
+        else:
+            key = (float(size), float(walls[k]))
+            if key not in annuli:
+                annuli[key] = (Circle(0.5 * size) - Circle(0.5 * size - walls[k])).faces()[0]
+            solid = Solid.extrude(annuli[key], Vector(0, 0, float(row.cut_length_mm)))
         solid = solid.moved(Location(Plane(origin=tuple(map(float, origin)), z_dir=tuple(map(float, direction)))))
         solid.label = row.id
         solids.append(solid)

@@ -399,3 +399,19 @@ def test_files_that_carry_a_date_carry_the_day_and_are_the_same_bytes_a_second_l
     assert {info.date_time[:3] for info in zipfile.ZipFile(tmp_path / "run0" / "cutlist.xlsx").infolist()} == {(2023, 11, 14)}
     assert "'2023-11-14T00:00:00'" in written[0][1][:2000].decode()
     assert import_step(str(tmp_path / "run0" / "J0001.step")).volume == pytest.approx(6000.0)
+
+
+def test_beams_step_holds_each_tube_as_cut(small_run):
+    """beams.step read back with OCCT's XCAF reader: a solid per beam with a cut length, named by its
+    id, whose volume is the tube's area A = pi t (D - t) times its cut length (within 1 %), not a rod's."""
+    import pandas as pd
+
+    project, out = small_run
+    cut = pd.read_csv(out / "07-fabrication" / "beams" / "cutlist.csv")
+    cut = cut[cut["cut_length_mm"] > 0].set_index("id")
+    _, parts = _read_assembly(out / "07-fabrication" / "beams" / "beams.step")
+    assert sorted(name for name, _ in parts) == sorted(cut.index)
+    D, t = 1000 * project.section.diameter, 1000 * project.section.thickness
+    area = np.pi * t * (D - t)
+    for name, shape in parts:
+        assert _volume(shape) == pytest.approx(area * cut.loc[name, "cut_length_mm"], rel=0.01), name

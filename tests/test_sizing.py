@@ -229,7 +229,7 @@ def test_a_socket_fits_each_of_its_tubes():
 def test_fabrication_builds_the_sized_tubes(tmp_path):
     """The sized cap through fabrication: the cut list's profiles are members.csv's, every stock bar
     is cut into pieces of one profile, and beams.step's cylinders (read back with OCCT) have the
-    radius of each beam's tube."""
+    outer and inner radii of each beam's tube."""
     from workflow.progress import Progress
     from workflow.runner import run_project
     from workflow.stages import STAGES
@@ -256,7 +256,8 @@ def test_fabrication_builds_the_sized_tubes(tmp_path):
     assert reader.ReadFile(str(out / "07-fabrication" / "beams" / "beams.step")) == IFSelect_RetDone
     reader.TransferRoots()
     radii = set(_cylinder_radii(reader.OneShape()))
-    assert radii == {round(d / 2, 4) for d in members["diameter_mm"]}
+    tubes = set(zip(members["diameter_mm"], members["thickness_mm"]))
+    assert radii == {round(d / 2, 4) for d, _ in tubes} | {round(d / 2 - t, 4) for d, t in tubes}
 
 
 def test_strain_energy_shares_follow_clapeyron():

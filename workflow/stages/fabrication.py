@@ -282,7 +282,10 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
         nestings.append((profile, nest_bars(cut[members], [ids[i] for i in members], stock, MM * b.kerf)))
     _write_bars_by_profile(nestings, folder / "beams" / "bars.csv")
     clock.start("beams: beams.step")
-    write_beams_step(polymesh, table, folder / "beams" / "beams.step", outer_size_mm=sizes_mm)
+    tube_walls = None
+    if project.section.kind == "circular_hollow":
+        tube_walls = MM * (np.full(len(sizes_mm), project.section.thickness) if sections is None else sections.thickness)
+    write_beams_step(polymesh, table, folder / "beams" / "beams.step", outer_size_mm=sizes_mm, wall_mm=tube_walls)
     summary.update({"bars_used": sum(int(n.bars_used) for _, n in nestings),
                     "bars_lower_bound": sum(int(n.lower_bound) for _, n in nestings),
                     "bar_nesting_method": ", ".join(sorted({getattr(n, "method", "") for _, n in nestings})),
