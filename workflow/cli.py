@@ -76,6 +76,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     out_dir = Path(args.out) if args.out else default_out
     progress = Progress(enabled=not args.quiet)
     progress.message(f"gridshell: {project.project.name} -> {out_dir}")
+    names = [s.name for s in STAGES]
+    if (project.design.choose == "best" and not args.only
+            and (args.until is None or names.index(args.until) >= names.index("analysis"))):
+        from .choose import choose_best
+
+        project, _ = choose_best(project, out_dir, project_file=project_file, say=progress.message)
     summary = run_project(project, out_dir, STAGES, until=args.until, only=args.only, force=args.force,
                           progress=progress, project_file=project_file)
     if summary.message:

@@ -329,13 +329,26 @@ class DesignConfig(_Section):
     with diameter_mm and thickness_mm columns, relative to the project file), in at most
     ``groups`` distinct sections, that pass the member checks, the deflection limit and the
     buckling limits of [analysis]. nonlinear_rounds: how often the sections are stiffened and
-    re-sized where lambda_NL_worst misses its limit."""
+    re-sized where lambda_NL_worst misses its limit. choose = "best": ``gridshell run`` first runs
+    the sweep of ``choose_from`` (dotted keys -> values, their product) up to the analysis and keeps
+    the point with the highest lambda_NL_worst per kg among those that pass every check
+    (workflow.choose)."""
 
     size_sections: bool = False
     catalogue: str = "EN 10210-2 CHS"
     groups: int = Field(3, ge=1, le=30)
     max_iterations: int = Field(25, ge=1, le=200)
     nonlinear_rounds: int = Field(2, ge=0, le=10)
+    choose: Literal["as_given", "best"] = "as_given"
+    choose_from: dict[str, list[Any]] = Field(default_factory=lambda: {
+        "field.max_size_ratio": [1.0, 2.0, 3.0], "field.max_aspect": [1.0, 2.0]})
+
+    @field_validator("choose_from")
+    @classmethod
+    def _candidates(cls, value: dict) -> dict:
+        if not value or any(not isinstance(v, list) or not v for v in value.values()):
+            raise ValueError("choose_from needs dotted project keys with non-empty lists of values")
+        return value
 
 
 class JointsConfig(_Section):
