@@ -7,6 +7,7 @@ from __future__ import annotations
 import itertools
 import json
 from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -345,3 +346,33 @@ def test_a_catalogue_too_small_for_the_roof_is_a_finding_naming_the_beam(tmp_pat
     assert sizing[0]["parts"][0] in sizing[0]["message"] and "[design] catalogue" in sizing[0]["fix"]
     members = pd.read_csv(tmp_path / "out" / "06-analysis" / "members.csv")
     assert set(members["profile"]) == {"CHS 21.3x2.6"}
+
+
+@pytest.mark.slow
+def test_the_grid_is_made_again_for_tubes_larger_than_the_section(tmp_path, capsys):
+    """The cap with CHS 48.3 x 3.2 sizes to far larger tubes: gridshell run makes the grid again for
+    the largest (fitted_grid.json), the optimised grid's limits are those of its joints, and no
+    sized tube is larger than the section the grid was made for."""
+    from workflow.cli import main
+
+    import templates
+
+    text = (Path(templates.__file__).parent / "cap.toml").read_text(encoding="utf-8")
+    text = text.replace('diameter = "114.3 mm"', 'diameter = "48.3 mm"').replace('thickness = "6.3 mm"',
+                                                                                  'thickness = "3.2 mm"')
+    text = text.replace("n_cells = 150", "n_cells = 40").replace("[analysis]\n", "[analysis]\nnonlinear = false\n", 1)
+    text += "\n[design]\nsize_sections = true\n"
+    project = tmp_path / "project.toml"
+    project.write_text(text, encoding="utf-8")
+    out = tmp_path / "out"
+    assert main(["run", str(project), "--out", str(out), "--until", "analysis", "--quiet"]) == 0
+    fitted = json.loads((out / "fitted_grid.json").read_text())
+    assert fitted["rounds"] and fitted["rounds"][0]["section_before"] == "CHS 48.3x3.2"
+    assert fitted["fits"]
+    manifest = json.loads((out / "manifest.json").read_text())
+    diameter_mm = 1000 * manifest["config"]["section"]["diameter"]
+    members = pd.read_csv(out / "06-analysis" / "members.csv")
+    assert members["diameter_mm"].max() <= diameter_mm + 0.01
+    limits = json.loads((out / "05-optimize" / "optimize.json").read_text())["buildable"]
+    assert limits["beam_size_mm"] == pytest.approx(diameter_mm)
+    capsys.readouterr()

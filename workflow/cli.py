@@ -51,7 +51,6 @@ def _write_json(data: dict, path: str) -> None:
 def cmd_run(args: argparse.Namespace) -> int:
     from .config import check_inputs, load_project, project_from_surface
     from .progress import Progress
-    from .runner import run_project
     from .stages import STAGES
 
     if args.project and args.surface:
@@ -82,8 +81,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         from .choose import choose_best
 
         project, _ = choose_best(project, out_dir, project_file=project_file, say=progress.message)
-    summary = run_project(project, out_dir, STAGES, until=args.until, only=args.only, force=args.force,
-                          progress=progress, project_file=project_file)
+    from .design_loop import run_with_fitted_grid
+
+    project, summary = run_with_fitted_grid(project, out_dir, STAGES, say=progress.message, until=args.until,
+                                            only=args.only, force=args.force, progress=progress,
+                                            project_file=project_file)
     if summary.message:
         print(f"stopped: {summary.message}", file=sys.stderr)
     findings = summary.findings

@@ -329,7 +329,9 @@ class DesignConfig(_Section):
     with diameter_mm and thickness_mm columns, relative to the project file), in at most
     ``groups`` distinct sections, that pass the member checks, the deflection limit and the
     buckling limits of [analysis]. nonlinear_rounds: how often the sections are stiffened and
-    re-sized where lambda_NL_worst misses its limit. choose = "best": ``gridshell run`` first runs
+    re-sized where lambda_NL_worst misses its limit. fit_grid_to_tubes: where the sized tubes are
+    larger than [section], ``gridshell run`` makes the grid again for the largest of them (its
+    joints need longer beams; workflow.design_loop). choose = "best": ``gridshell run`` first runs
     the sweep of ``choose_from`` (dotted keys -> values, their product) up to the analysis and keeps
     the point with the highest lambda_NL_worst per kg among those that pass every check
     (workflow.choose)."""
@@ -339,6 +341,7 @@ class DesignConfig(_Section):
     groups: int = Field(3, ge=1, le=30)
     max_iterations: int = Field(25, ge=1, le=200)
     nonlinear_rounds: int = Field(2, ge=0, le=10)
+    fit_grid_to_tubes: bool = True
     choose: Literal["as_given", "best"] = "as_given"
     choose_from: dict[str, list[Any]] = Field(default_factory=lambda: {
         "field.max_size_ratio": [1.0, 2.0, 3.0], "field.max_aspect": [1.0, 2.0]})

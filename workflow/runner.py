@@ -155,7 +155,7 @@ def _section_value(project: Project, path: str):
 
 
 #: Settings that change how a stage runs, not what it makes: left out of the cache keys.
-NOT_IN_KEYS = ("workers", "choose", "choose_from")
+NOT_IN_KEYS = ("workers", "choose", "choose_from", "fit_grid_to_tubes")
 
 
 def _stage_key(stage: Stage, project: Project, keys: dict[str, str], version: str) -> str:

@@ -1,0 +1,67 @@
+"""The grid made again for the tubes that were sized (``[design] fit_grid_to_tubes``).
+
+The remesh and optimize stages fit the grid to the joints of the project's ``[section]``: the
+shortest beam two joints leave room for, the smallest angle between beams. Sizing may then choose
+larger tubes, whose larger joints need longer beams (a 219 mm node where the grid was made for
+114 mm ones clashes with its neighbours). So where the largest sized tube is larger than
+``[section]``, the run goes on with ``[section]`` = that tube: the remesh, the optimisation and the
+sizing run again (the sizing from there may choose smaller tubes for most beams, never needing
+larger joints than the grid now allows for) - at most ``MAX_REFITS`` times. ``OUT/fitted_grid.json``
+records each round.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+from fabrication.files import write_text_atomic
+
+from .config import Project
+
+__all__ = ["run_with_fitted_grid", "MAX_REFITS"]
+
+#: Rounds of remeshing for larger sized tubes, at most.
+MAX_REFITS = 2
+
+
+def _largest_sized(out_dir: Path) -> dict | None:
+    try:
+        design = json.loads((out_dir / "06-analysis" / "analysis.json").read_text(encoding="utf-8")).get("design")
+    except (OSError, ValueError):
+        return None
+    if not design or not design.get("groups"):
+        return None
+    return max(design["groups"], key=lambda g: (g["diameter_mm"], g["thickness_mm"]))
+
+
+def run_with_fitted_grid(project: Project, out_dir: Path, stages, *, say: Callable[[str], None], **run) -> tuple:
+    """run_project, then the refits where the sized tubes outgrow [section]; (project, summary)."""
+    from .runner import run_project
+
+    out_dir = Path(out_dir)
+    summary = run_project(project, out_dir, stages, **run)
+    if not (project.design.size_sections and project.design.fit_grid_to_tubes) or run.get("only"):
+        return project, summary
+    rounds = []
+    for number in range(1, MAX_REFITS + 1):
+        largest = _largest_sized(out_dir)
+        if summary.message or largest is None or largest["diameter_mm"] <= 1000 * project.section.diameter + 0.01:
+            break
+        before = f"CHS {1000 * project.section.diameter:g}x{1000 * project.section.thickness:g}"
+        say(f"the sized tubes (largest {largest['profile']}) are larger than the grid's joints were made for "
+            f"([section] {before}): the grid is made again for {largest['profile']} ({number} of {MAX_REFITS}; "
+            f"[design] fit_grid_to_tubes = false keeps it)")
+        rounds.append({"round": number, "section_before": before, "largest_sized": largest["profile"]})
+        section = project.section.model_copy(update={"diameter": largest["diameter_mm"] / 1000.0,
+                                                     "thickness": largest["thickness_mm"] / 1000.0})
+        project = project.model_copy(update={"section": section})
+        summary = run_project(project, out_dir, stages, **{**run, "force": False})
+    if rounds:
+        final = _largest_sized(out_dir)
+        write_text_atomic(out_dir / "fitted_grid.json", json.dumps({
+            "rounds": rounds, "section": f"CHS {1000 * project.section.diameter:g}x{1000 * project.section.thickness:g}",
+            "largest_sized": None if final is None else final["profile"],
+            "fits": final is None or final["diameter_mm"] <= 1000 * project.section.diameter + 0.01}, indent=1))
+    return project, summary
