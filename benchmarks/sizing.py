@@ -9,7 +9,9 @@ at --large-cells: about 3000 nodes)
 gets the cap template's loads, material and section (CHS 114.3 x 6.3, S355) and runs
 ``gridshell run --until analysis`` twice in one output folder: first as a check run (the peer:
 the project's one section, EN 1993-1-1 checks), then with ``[design] size_sections = true`` (3
-groups from EN 10210-2), reusing the check run's surface..optimize stages. Per roof it prints the
+groups from EN 10210-2), reusing the check run's surface..optimize stages; where the sized tubes
+outgrow CHS 114.3, the run makes the grid again for the largest (``[design] fit_grid_to_tubes``,
+``refits`` and ``grid_section``; ``sized_run_s`` is the whole run then). Per roof it prints the
 check run's verdict (largest utilisation, deflection over its limit, lambda_NL_worst), the mass
 before and after, the sized groups, the analyses the sizing took, the governing checks, whether
 every check passes, and the seconds of the analysis stage of both runs (manifest.json). The table
@@ -100,6 +102,15 @@ def _analysis(out: Path) -> dict:
         return {}
 
 
+def _fitted(out: Path) -> dict:
+    """The grid's refits for the sized tubes (fitted_grid.json): rounds and the section it was made for."""
+    try:
+        fitted = json.loads((out / "fitted_grid.json").read_text())
+    except (OSError, ValueError):
+        return {"refits": 0, "grid_section": "as given"}
+    return {"refits": len(fitted["rounds"]), "grid_section": fitted["section"], "fits": fitted["fits"]}
+
+
 def _verdict(a: dict) -> str:
     if not a:
         return "-"
@@ -131,6 +142,7 @@ def bench(name: str, surface: Path, supports: str, cells: int, out: Path, *, che
         "converged": d.get("converged"), "governing": ", ".join(f"{k} {v}" for k, v in d.get("governing_checks", {}).items()),
         "all_pass": all(v["pass"] for v in a.get("verdicts", [])) if a else None,
         "sized_verdict": _verdict(a), "sized_analysis_s": _stage_seconds(folder / "run", "analysis"),
+        **_fitted(folder / "run"),
         "sized_run_s": round(seconds, 1), "status": "ok" if code == 0 else last})
     return row
 
