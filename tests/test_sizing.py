@@ -375,4 +375,9 @@ def test_the_grid_is_made_again_for_tubes_larger_than_the_section(tmp_path, caps
     assert members["diameter_mm"].max() <= diameter_mm + 0.01
     limits = json.loads((out / "05-optimize" / "optimize.json").read_text())["buildable"]
     assert limits["beam_size_mm"] == pytest.approx(diameter_mm)
+    # a rerun starts from the section the grid was made for: nothing is computed again
+    assert main(["run", str(project), "--out", str(out), "--until", "analysis", "--quiet"]) == 0
+    statuses = {s["name"]: s["status"] for s in json.loads((out / "manifest.json").read_text())["stages"]}
+    assert {statuses[n] for n in ("remesh", "optimize", "analysis")} == {"cached"}
+    assert json.loads((out / "fitted_grid.json").read_text())["rounds"] == fitted["rounds"]
     capsys.readouterr()

@@ -7,7 +7,8 @@ larger tubes, whose larger joints need longer beams (a 219 mm node where the gri
 ``[section]``, the run goes on with ``[section]`` = that tube: the remesh, the optimisation and the
 sizing run again (the sizing from there may choose smaller tubes for most beams, never needing
 larger joints than the grid now allows for) - at most ``MAX_REFITS`` times. ``OUT/fitted_grid.json``
-records each round.
+records each round; a rerun starts from the section recorded there, so that it finds its stages
+cached. The stages after the analysis run once, for the grid that fits.
 """
 
 from __future__ import annotations
@@ -41,27 +42,59 @@ def run_with_fitted_grid(project: Project, out_dir: Path, stages, *, say: Callab
     from .runner import run_project
 
     out_dir = Path(out_dir)
-    summary = run_project(project, out_dir, stages, **run)
-    if not (project.design.size_sections and project.design.fit_grid_to_tubes) or run.get("only"):
-        return project, summary
+    names = [s.name for s in stages]
+    until = run.get("until")
+    if (not (project.design.size_sections and project.design.fit_grid_to_tubes) or run.get("only")
+            or (until is not None and names.index(until) < names.index("analysis"))):
+        return project, run_project(project, out_dir, stages, **run)
+    record = out_dir / "fitted_grid.json"
     rounds = []
-    for number in range(1, MAX_REFITS + 1):
+    earlier = _earlier_fit(record, project)
+    if earlier is not None:  # a rerun: start from the section the grid was made for last time
+        rounds = earlier["rounds"]
+        project = _with_tube(project, *earlier["section_mm"])
+    # up to the analysis first: the later stages are made once, for the grid that fits
+    summary = run_project(project, out_dir, stages, **{**run, "until": "analysis"})
+    for number in range(len(rounds) + 1, MAX_REFITS + 1):
         largest = _largest_sized(out_dir)
         if summary.message or largest is None or largest["diameter_mm"] <= 1000 * project.section.diameter + 0.01:
             break
-        before = f"CHS {1000 * project.section.diameter:g}x{1000 * project.section.thickness:g}"
+        before = _profile(project)
         say(f"the sized tubes (largest {largest['profile']}) are larger than the grid's joints were made for "
             f"([section] {before}): the grid is made again for {largest['profile']} ({number} of {MAX_REFITS}; "
             f"[design] fit_grid_to_tubes = false keeps it)")
         rounds.append({"round": number, "section_before": before, "largest_sized": largest["profile"]})
-        section = project.section.model_copy(update={"diameter": largest["diameter_mm"] / 1000.0,
-                                                     "thickness": largest["thickness_mm"] / 1000.0})
-        project = project.model_copy(update={"section": section})
-        summary = run_project(project, out_dir, stages, **{**run, "force": False})
+        project = _with_tube(project, largest["diameter_mm"], largest["thickness_mm"])
+        summary = run_project(project, out_dir, stages, **{**run, "until": "analysis", "force": False})
     if rounds:
         final = _largest_sized(out_dir)
-        write_text_atomic(out_dir / "fitted_grid.json", json.dumps({
-            "rounds": rounds, "section": f"CHS {1000 * project.section.diameter:g}x{1000 * project.section.thickness:g}",
+        write_text_atomic(record, json.dumps({
+            "rounds": rounds, "section": _profile(project),
+            "section_mm": [1000 * project.section.diameter, 1000 * project.section.thickness],
             "largest_sized": None if final is None else final["profile"],
             "fits": final is None or final["diameter_mm"] <= 1000 * project.section.diameter + 0.01}, indent=1))
+    else:
+        record.unlink(missing_ok=True)  # an earlier run's record, of a grid this run did not make
+    if not summary.message and until != "analysis":
+        summary = run_project(project, out_dir, stages, **{**run, "force": False})
     return project, summary
+
+
+def _profile(project: Project) -> str:
+    return f"CHS {1000 * project.section.diameter:g}x{1000 * project.section.thickness:g}"
+
+
+def _with_tube(project: Project, diameter_mm: float, thickness_mm: float) -> Project:
+    section = project.section.model_copy(update={"diameter": diameter_mm / 1000.0, "thickness": thickness_mm / 1000.0})
+    return project.model_copy(update={"section": section})
+
+
+def _earlier_fit(record: Path, project: Project) -> dict | None:
+    """An earlier run's record that began from this project's section (None otherwise)."""
+    try:
+        fitted = json.loads(record.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not fitted.get("rounds") or fitted["rounds"][0]["section_before"] != _profile(project):
+        return None
+    return fitted
