@@ -412,7 +412,7 @@ def _write_ifc(ctx, folder: Path, polymesh, normals: np.ndarray, kept: dict, joi
     panels_csv = folder / "panels" / "panels.csv"
     if panels_csv.is_file():
         frame = pd.read_csv(panels_csv)
-        sheets = dict(zip(frame["id"], frame["sheet"].fillna("")))
+        sheets = dict(zip(frame["id"], frame["sheet"].astype("string").fillna("")))
         masses = dict(zip(frame["id"], frame["mass_kg"]))
     p = project.fabrication.panels
     panels = [IfcPanel(id=panel.id, outline_mm=MM * np.asarray(panel.outline_3d_m), axes=np.asarray(panel.axes),
