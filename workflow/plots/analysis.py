@@ -57,7 +57,7 @@ def plot_sections(nodes: np.ndarray, beams: np.ndarray, profiles: list[str], dia
     plt = pyplot()
     from matplotlib.collections import LineCollection
 
-    fig, ax = plt.subplots(figsize=(9, 8))
+    fig, ax = plt.subplots(figsize=(11, 8))
     diameters = np.asarray(diameters_m, dtype=float)
     names = np.asarray(profiles)
     order = sorted(set(names.tolist()), key=lambda n: -diameters[names == n].max())
@@ -68,7 +68,7 @@ def plot_sections(nodes: np.ndarray, beams: np.ndarray, profiles: list[str], dia
         mine = names == name
         ax.add_collection(LineCollection(segments[mine], colors=[colour], linewidths=1.0 + 4.0 * diameters[mine] / scale,
                                          label=f"{name} ({int(mine.sum())} beams)"))
-    ax.legend(loc="upper right", fontsize=9, framealpha=0.9)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)  # beside, not over the grid
     _frame(ax, nodes)
     ax.set_title(title or "sized sections")
     fig.tight_layout()
