@@ -68,6 +68,10 @@ def run_with_fitted_grid(project: Project, out_dir: Path, stages, *, say: Callab
         summary = run_project(project, out_dir, stages, **{**run, "until": "analysis", "force": False})
     if rounds:
         final = _largest_sized(out_dir)
+        if final is not None and final["diameter_mm"] > 1000 * project.section.diameter + 0.01:
+            say(f"after {len(rounds)} rounds the grid is made for {_profile(project)}, and the sizing chose "
+                f"{final['profile']} for some beams: their joints may not fit (the fabrication's findings name "
+                f"them); fewer [remesh] n_cells or smaller joints ([fabrication.joints]) leave more room")
         write_text_atomic(record, json.dumps({
             "rounds": rounds, "section": _profile(project),
             "section_mm": [1000 * project.section.diameter, 1000 * project.section.thickness],
