@@ -64,6 +64,18 @@ class Catalogue:
         """kg/m of every tube of a material of ``density`` (kg/m^3)."""
         return self.A * density
 
+    def up_to(self, max_diameter: float | None) -> "Catalogue":
+        """The tubes of outer diameter at most ``max_diameter`` (m; all for None); InputError when none."""
+        if max_diameter is None:
+            return self
+        keep = self.diameter <= max_diameter + 1e-9
+        if not keep.any():
+            raise InputError(f"section catalogue {self.name}: no tube of {1000 * max_diameter:g} mm or less",
+                             hint=f"[design] max_diameter: at least {1000 * self.diameter.min():g} mm for this catalogue")
+        return Catalogue(name=self.name, names=[n for n, k in zip(self.names, keep) if k],
+                         diameter=self.diameter[keep], thickness=self.thickness[keep], process=self.process,
+                         source=self.source)
+
     def index(self, diameter: float, thickness: float) -> int | None:
         """The tube of these dimensions (m, to 0.01 mm), or None."""
         hit = np.flatnonzero((np.abs(self.diameter - diameter) < 1e-5) & (np.abs(self.thickness - thickness) < 1e-5))

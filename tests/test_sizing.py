@@ -361,7 +361,7 @@ def test_the_grid_is_made_again_for_tubes_larger_than_the_section(tmp_path, caps
     text = text.replace('diameter = "114.3 mm"', 'diameter = "48.3 mm"').replace('thickness = "6.3 mm"',
                                                                                   'thickness = "3.2 mm"')
     text = text.replace("n_cells = 150", "n_cells = 40").replace("[analysis]\n", "[analysis]\nnonlinear = false\n", 1)
-    text += "\n[design]\nsize_sections = true\n"
+    text += "\n[design]\nsize_sections = true\nfit_grid_to_tubes = true\n"
     project = tmp_path / "project.toml"
     project.write_text(text, encoding="utf-8")
     out = tmp_path / "out"
@@ -381,3 +381,37 @@ def test_the_grid_is_made_again_for_tubes_larger_than_the_section(tmp_path, caps
     assert {statuses[n] for n in ("remesh", "optimize", "analysis")} == {"cached"}
     assert json.loads((out / "fitted_grid.json").read_text())["rounds"] == fitted["rounds"]
     capsys.readouterr()
+
+
+def test_tubes_larger_than_the_grid_was_made_for_are_a_finding_or_capped(tmp_path):
+    """By default the grid is kept and the beams sized larger than [section] are a
+    ``tubes_outgrow_grid`` finding naming the keys; [design] max_diameter keeps every tube within
+    the section's diameter (walls thicken instead)."""
+    from workflow.config import load_project
+    from workflow.progress import Progress
+    from workflow.runner import run_project
+    from workflow.stages import STAGES
+
+    base = load_project(resources.files("templates") / "cap.toml")
+    project = base.model_copy(update={
+        "remesh": base.remesh.model_copy(update={"n_cells": 40}),
+        "section": base.section.model_copy(update={"diameter": 0.0889, "thickness": 0.004}),
+        "analysis": base.analysis.model_copy(update={"nonlinear": False, "n_modes": 3}),
+        "design": base.design.model_copy(update={"size_sections": True}),
+    })
+    out = tmp_path / "free"
+    assert run_project(project, out, STAGES, until="analysis", progress=Progress(enabled=False)).message is None
+    figures = json.loads((out / "06-analysis" / "analysis.json").read_text())
+    members = pd.read_csv(out / "06-analysis" / "members.csv")
+    larger = members.loc[members["diameter_mm"] > 88.9 + 0.01, "beam"].tolist()
+    assert larger  # this roof needs more than CHS 88.9
+    outgrown = [f for f in figures["findings"] if f["kind"] == "tubes_outgrow_grid"]
+    assert len(outgrown) == 1 and outgrown[0]["parts"] == larger[:20]
+    assert "[design] max_diameter" in outgrown[0]["fix"] and "fit_grid_to_tubes" in outgrown[0]["fix"]
+    capped = project.model_copy(update={"design": project.design.model_copy(update={"max_diameter": 0.0889})})
+    out = tmp_path / "capped"
+    assert run_project(capped, out, STAGES, until="analysis", progress=Progress(enabled=False)).message is None
+    members = pd.read_csv(out / "06-analysis" / "members.csv")
+    assert members["diameter_mm"].max() <= 88.9 + 0.01
+    figures = json.loads((out / "06-analysis" / "analysis.json").read_text())
+    assert not [f for f in figures["findings"] if f["kind"] == "tubes_outgrow_grid"]

@@ -329,9 +329,11 @@ class DesignConfig(_Section):
     with diameter_mm and thickness_mm columns, relative to the project file), in at most
     ``groups`` distinct sections, that pass the member checks, the deflection limit and the
     buckling limits of [analysis]. nonlinear_rounds: how often the sections are stiffened and
-    re-sized where lambda_NL_worst misses its limit. fit_grid_to_tubes: where the sized tubes are
-    larger than [section], ``gridshell run`` makes the grid again for the largest of them (its
-    joints need longer beams; workflow.design_loop). choose = "best": ``gridshell run`` first runs
+    re-sized where lambda_NL_worst misses its limit. max_diameter: only tubes up to this outer
+    diameter (e.g. the [section]'s, so that the joints the grid was made for fit: the walls grow
+    instead). fit_grid_to_tubes: where the sized tubes are larger than [section], ``gridshell run``
+    makes the grid again for the largest of them (its joints need longer beams, so it has fewer
+    cells; workflow.design_loop); off, a ``tubes_outgrow_grid`` finding says so. choose = "best": ``gridshell run`` first runs
     the sweep of ``choose_from`` (dotted keys -> values, their product) up to the analysis and keeps
     the point with the highest lambda_NL_worst per kg among those that pass every check
     (workflow.choose)."""
@@ -341,7 +343,8 @@ class DesignConfig(_Section):
     groups: int = Field(3, ge=1, le=30)
     max_iterations: int = Field(25, ge=1, le=200)
     nonlinear_rounds: int = Field(2, ge=0, le=10)
-    fit_grid_to_tubes: bool = True
+    max_diameter: Length | None = None
+    fit_grid_to_tubes: bool = False
     choose: Literal["as_given", "best"] = "as_given"
     choose_from: dict[str, list[Any]] = Field(default_factory=lambda: {
         "field.max_size_ratio": [1.0, 2.0, 3.0], "field.max_aspect": [1.0, 2.0]})
@@ -720,9 +723,10 @@ def check_inputs(project: Project, *, quick_start: bool = False) -> float | None
         from engine.errors import InputError
 
         try:
-            catalogue(project.design.catalogue)
+            catalogue(project.design.catalogue).up_to(project.design.max_diameter)
         except InputError as error:
-            raise ConfigError(f"[design] catalogue: {error.args[0]}", hint=error.hint) from None
+            key = "max_diameter" if "max_diameter" in (error.hint or "") else "catalogue"
+            raise ConfigError(f"[design] {key}: {error.args[0]}", hint=error.hint) from None
     config = project.surface
     if config.file is None:
         return None

@@ -1,4 +1,4 @@
-"""The grid made again for the tubes that were sized (``[design] fit_grid_to_tubes``).
+"""The grid made again for the tubes that were sized (``[design] fit_grid_to_tubes = true``).
 
 The remesh and optimize stages fit the grid to the joints of the project's ``[section]``: the
 shortest beam two joints leave room for, the smallest angle between beams. Sizing may then choose

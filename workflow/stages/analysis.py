@@ -210,6 +210,9 @@ def run(ctx):
         figures["design"] = sizer.summary(design, sections, checks, lengths, mass_before, rounds)
         if not design.converged:
             figures["findings"].append(sizer.finding(design, utilisation))
+        outgrown = sizer.outgrown(sections, project)
+        if outgrown is not None:
+            figures["findings"].append(outgrown)
     ctx.report_findings(figures["findings"])
     ctx.step("writing")
     write_text_atomic(ctx.folder / "analysis.json", json.dumps(figures, indent=1, default=float))
@@ -478,6 +481,24 @@ class _Sizer:
                 "iterations": len(self.history), "history": self.history, "nonlinear_rounds": rounds,
                 "mass_before_kg": mass_before, "mass_after_kg": float(mass.sum()), "groups": groups,
                 "governing_checks": {str(n): int(c) for n, c in zip(names, counts)}}
+
+    def outgrown(self, sections: BeamSections, project: Project) -> dict | None:
+        """A finding where sized tubes are larger than the [section] the grid was made for (their
+        joints need longer beams), unless the run makes the grid again for them."""
+        larger = sections.diameter > project.section.diameter + 1e-6
+        if not larger.any() or project.design.fit_grid_to_tubes:
+            return None
+        k = int(np.argmax(sections.diameter))
+        section = f"CHS {1000 * project.section.diameter:g}x{1000 * project.section.thickness:g}"
+        return Finding(kind="tubes_outgrow_grid", parts=[beam_id(i) for i in np.flatnonzero(larger)[:20]],
+                       measure=float(1000 * sections.diameter[k]), limit=float(1000 * project.section.diameter),
+                       unit="mm", stage="analysis",
+                       message=f"{int(larger.sum())} beams were sized larger than the [section] {section} the grid "
+                               f"was made for (largest {sections.names[k]}): their joints may clash or leave short "
+                               "cuts (the fabrication's findings name them)",
+                       fix=f"[design] max_diameter = \"{1000 * project.section.diameter:g} mm\" (thicker walls "
+                           "instead), or [design] fit_grid_to_tubes = true (the grid made again for them, with "
+                           "fewer cells), or [section] the larger tube").to_dict()
 
     def finding(self, design, utilisation: np.ndarray) -> dict:
         """The sizing's finding: the beam no tube passes with its utilisation, or why it stopped."""

@@ -72,7 +72,8 @@ def project_sections(project: Project, n_beams: int) -> BeamSections | None:
 
 
 def project_catalogue(project: Project) -> Catalogue:
-    return catalogue(project.design.catalogue)
+    """The [design] catalogue, up to its max_diameter."""
+    return catalogue(project.design.catalogue).up_to(project.design.max_diameter)
 
 
 def checks_method(project: Project, material: Material) -> str:
