@@ -10,8 +10,8 @@ gets the cap template's loads, material and section (CHS 114.3 x 6.3, S355) and 
 ``gridshell run --until analysis`` twice in one output folder: first as a check run (the peer:
 the project's one section, EN 1993-1-1 checks), then with ``[design] size_sections = true`` (3
 groups from EN 10210-2), reusing the check run's surface..optimize stages; where the sized tubes
-outgrow CHS 114.3, the run makes the grid again for the largest (``[design] fit_grid_to_tubes``,
-``refits`` and ``grid_section``; ``sized_run_s`` is the whole run then). Per roof it prints the
+outgrow CHS 114.3, ``--fit-grid`` has the run make the grid again for the largest (``[design]
+fit_grid_to_tubes = true``: ``refits`` and ``grid_section``; ``sized_run_s`` is the whole run then). Per roof it prints the
 check run's verdict (largest utilisation, deflection over its limit, lambda_NL_worst), the mass
 before and after, the sized groups, the analyses the sizing took, the governing checks, whether
 every check passes, and the seconds of the analysis stage of both runs (manifest.json). The table
@@ -72,8 +72,9 @@ def _supports(path: Path) -> str:
     return "flagged" if read_surface(path)[2].any() else "boundary"
 
 
-def _project(name: str, surface: Path, supports: str, cells: int, sized: bool) -> str:
-    design = "\n[design]\nsize_sections = true\ncatalogue = \"EN 10210-2 CHS\"\ngroups = 3\n" if sized else ""
+def _project(name: str, surface: Path, supports: str, cells: int, sized: bool, fit_grid: bool = False) -> str:
+    design = ("\n[design]\nsize_sections = true\ncatalogue = \"EN 10210-2 CHS\"\ngroups = 3\n"
+              f"fit_grid_to_tubes = {'true' if fit_grid else 'false'}\n") if sized else ""
     return (f'[project]\nname = "{name}"\n\n[surface]\nfile = "{surface.resolve()}"\n\n'
             f'[[supports]]\nselect = "{supports}"\nrestraint = "pinned"\n{LOADS}\n[remesh]\nn_cells = {cells}\n{design}')
 
@@ -119,7 +120,8 @@ def _verdict(a: dict) -> str:
     return f"u {a.get('max_utilisation', 0):.2f}, defl {defl:.2f} x limit, NL {nl if nl is None else round(nl, 2)}"
 
 
-def bench(name: str, surface: Path, supports: str, cells: int, out: Path, *, check_run: bool) -> dict:
+def bench(name: str, surface: Path, supports: str, cells: int, out: Path, *, check_run: bool,
+          fit_grid: bool = False) -> dict:
     folder = out / name
     folder.mkdir(parents=True, exist_ok=True)
     row: dict = {"roof": name, "cells": cells}
@@ -129,7 +131,7 @@ def bench(name: str, surface: Path, supports: str, cells: int, out: Path, *, che
         check = _analysis(folder / "run")
         row.update({"check_verdict": _verdict(check), "check_analysis_s": _stage_seconds(folder / "run", "analysis"),
                     "check_status": "ok" if code == 0 else last})
-    (folder / "sized.toml").write_text(_project(name, surface, supports, cells, sized=True))
+    (folder / "sized.toml").write_text(_project(name, surface, supports, cells, sized=True, fit_grid=fit_grid))
     code, seconds, last = _run(folder / "sized.toml", folder / "run")
     a = _analysis(folder / "run")
     d = a.get("design", {})
@@ -156,6 +158,7 @@ def main() -> None:
     parser.add_argument("--no-large", action="store_true")
     parser.add_argument("--large-scale", type=float, default=3.5, help="scale of the generated dome (24 x 15 m)")
     parser.add_argument("--no-check-run", action="store_true")
+    parser.add_argument("--fit-grid", action="store_true", help="[design] fit_grid_to_tubes = true")
     args = parser.parse_args()
     wanted = {m for m in args.match.split(",") if m}
     cases = []
@@ -178,7 +181,7 @@ def main() -> None:
     cases = [c for c in cases if not wanted or c[0] in wanted]
     rows = []
     for name, path, supports, cells in cases:
-        row = bench(name, path, supports, cells, args.out, check_run=not args.no_check_run)
+        row = bench(name, path, supports, cells, args.out, check_run=not args.no_check_run, fit_grid=args.fit_grid)
         rows.append(row)
         print(" | ".join(f"{k}={v}" for k, v in row.items()), flush=True)
         args.out.mkdir(parents=True, exist_ok=True)
