@@ -46,22 +46,12 @@ def buckling_reduction(slenderness: np.ndarray, alpha: float) -> np.ndarray:
 def member_checks(beam_end_forces: np.ndarray, lengths: np.ndarray, section: Section, material: Material, *,
                   buckling_length_factor: float = 1.0) -> MemberChecks:
     """Utilisations of every member; beam_end_forces (b,2,6) section forces [N, Vy, Vz, T, My, Mz]."""
-    forces = np.asarray(beam_end_forces, dtype=float)
-    N = forces[:, :, 0].mean(axis=1)
-    My = np.abs(forces[:, :, 4]).max(axis=1)
-    Mz = np.abs(forces[:, :, 5]).max(axis=1)
-    N_Rd = section.A * material.fy / material.gamma_M0
-    My_Rd = section.Wy_el * material.fy / material.gamma_M0
-    Mz_Rd = section.Wz_el * material.fy / material.gamma_M0
-    bending = My / My_Rd + Mz / Mz_Rd
-    cross_section = np.abs(N) / N_Rd + bending
-    effective = buckling_length_factor * np.asarray(lengths, dtype=float)
-    N_cr = np.pi**2 * material.E * min(section.Iy, section.Iz) / effective**2
-    slenderness = np.sqrt(section.A * material.fy / N_cr)
-    chi = buckling_reduction(slenderness, material.buckling_alpha)
-    compression = np.maximum(-N, 0.0)
-    buckling = np.where(N < 0, compression / (chi * section.A * material.fy / material.gamma_M1) + bending, 0.0)
-    utilisation = np.maximum(cross_section, buckling)
-    governing = np.where(buckling > cross_section, "flexural buckling", "cross-section").tolist()
-    return MemberChecks(utilisation=utilisation, governing=governing, cross_section=cross_section, buckling=buckling,
-                        axial_force=N, slenderness=slenderness)
+    from .en1993 import EndForces, simplified_checks  # it imports buckling_reduction from here
+
+    checks = simplified_checks(EndForces.of(beam_end_forces), section.A, min(section.Iy, section.Iz),
+                               section.Wy_el, material, alpha=material.buckling_alpha,
+                               buckling_length=buckling_length_factor * np.asarray(lengths, dtype=float),
+                               Wz_el=section.Wz_el)
+    return MemberChecks(utilisation=checks.utilisation, governing=checks.governing,
+                        cross_section=checks.cross_section, buckling=checks.buckling,
+                        axial_force=checks.axial_force, slenderness=checks.slenderness)

@@ -123,11 +123,15 @@ _NAMES = ("cross-section N+M (6.2.9)", "shear (6.2.6)", "torsion (6.2.7)", "buck
           "section class 4 (not covered)")
 
 
-def _governing(parts: list[np.ndarray]) -> list[str] | None:
+#: the same checks' names in the simplified method, which follows no clause
+_SIMPLIFIED_NAMES = ("cross-section", "shear", "torsion", "flexural buckling", "section class 4 (not covered)")
+
+
+def _governing(parts: list[np.ndarray], names: tuple[str, ...] = _NAMES) -> list[str] | None:
     stacked = np.stack(np.broadcast_arrays(*parts))
     if stacked.ndim != 2:
         return None
-    return [_NAMES[k] for k in stacked.argmax(axis=0)]
+    return [names[k] for k in stacked.argmax(axis=0)]
 
 
 def _cross_section_load_factor(n: np.ndarray, m: np.ndarray, v: np.ndarray, tau: np.ndarray,
@@ -208,12 +212,15 @@ def chs_checks(forces: EndForces, diameter: np.ndarray, thickness: np.ndarray, m
 
 
 def simplified_checks(forces: EndForces, A: np.ndarray, I: np.ndarray, W_el: np.ndarray, material: Material, *,
-                      alpha: float, buckling_length: np.ndarray) -> TubeChecks:
-    """The stated simplification of engine.checks (linear interaction with elastic moduli,
-    interaction factors 1) over arrays of sections (A, I, W_el in SI, broadcasting)."""
+                      alpha: float, buckling_length: np.ndarray, Wz_el: np.ndarray | None = None) -> TubeChecks:
+    """The stated simplification (engine.checks: linear interaction with elastic moduli, interaction
+    factors 1) over arrays of sections (A, the weaker I, W_el about y and ``Wz_el`` about z, default
+    the same; SI, broadcasting)."""
     fy, g0, g1 = material.fy, material.gamma_M0, material.gamma_M1
     N = forces.N.mean(axis=-1)
-    bending = (np.abs(forces.My).max(axis=-1) + np.abs(forces.Mz).max(axis=-1)) / (W_el * fy / g0)
+    My_Rd = W_el * fy / g0
+    Mz_Rd = My_Rd if Wz_el is None else Wz_el * fy / g0
+    bending = np.abs(forces.My).max(axis=-1) / My_Rd + np.abs(forces.Mz).max(axis=-1) / Mz_Rd
     cross_section = np.abs(N) / (A * fy / g0) + bending
     L = np.asarray(buckling_length, float)
     slenderness = np.sqrt(A * fy / (np.pi**2 * material.E * I / L**2))
@@ -224,4 +231,4 @@ def simplified_checks(forces: EndForces, A: np.ndarray, I: np.ndarray, W_el: np.
     return TubeChecks(utilisation=np.maximum(cross_section, buckling), cross_section=cross_section, shear=zero,
                       torsion=zero, buckling=buckling, section_class=np.zeros(zero.shape, int),
                       slenderness=slenderness, chi=chi, buckling_length=np.broadcast_to(L, zero.shape),
-                      class_4=zero, axial_force=N, governing=_governing(parts))
+                      class_4=zero, axial_force=N, governing=_governing(parts, _SIMPLIFIED_NAMES))
