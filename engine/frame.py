@@ -95,7 +95,7 @@ class LinearResult:
     tension (at the end: the element's end forces; at the start: their negatives, so a beam
     carrying a constant N, T or M shows the same value at both ends); equilibrium_error:
     |loads + reactions| (forces, and moments about the origin over the model size) / |loads|;
-    beam_energy (b,): each beam's share of the strain energy (sums to 1)."""
+    beam_energy (b,): each beam's share of the strain energy (sums to 1), where asked for."""
 
     displacements: np.ndarray
     reactions: np.ndarray
@@ -479,9 +479,10 @@ def _section_forces(el: _Elements, local_forces: np.ndarray) -> np.ndarray:
 
 
 def linear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *,
-                  stiffness: FrameStiffness | None = None) -> LinearResult:
+                  stiffness: FrameStiffness | None = None, with_energy: bool = False) -> LinearResult:
     """Linear static analysis under nodal loads (n,6) on the original nodes; ``stiffness``: the
-    model's factored stiffness on these supports (factor_stiffness), else factored here."""
+    model's factored stiffness on these supports (factor_stiffness), else factored here;
+    ``with_energy``: also each beam's share of the strain energy (``beam_energy``; the sizing's)."""
     state = _solve_linear(model, supports, loads, stiffness)
     n = state.el.n_original
     reactions_all = (state.K @ state.u - state.F).reshape(-1, 6)
@@ -491,7 +492,7 @@ def linear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *,
     return LinearResult(displacements=displacements, reactions=reactions,
                         beam_end_forces=_section_forces(state.el, state.local_forces),
                         equilibrium_error=_equilibrium_error(model.nodes, np.asarray(loads, float), reactions),
-                        beam_energy=_beam_energy_shares(state.stiffness, state.u))
+                        beam_energy=_beam_energy_shares(state.stiffness, state.u) if with_energy else None)
 
 
 def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_modes: int = 6, *,

@@ -88,11 +88,10 @@ class _Steps:
 def _protocol(polymesh: PolyMesh, surface, project: Project, progress, executor=None) -> GridRow:
     """The protocol on one grid; with ``[design] size_sections`` its tubes are sized first, as in
     ``gridshell run``, and the row gains the sized mass, its tubes and the member checks."""
-    from engine.en1993 import EndForces
     from engine.protocol import ProtocolSettings
 
     from .stages.analysis import beam_properties, pick_combination, protocol_with_design
-    from .stages.sizing import buckling_lengths, checks_method, project_sections, tube_checks
+    from .stages.sizing import checks_method, project_sections, sized_checks
 
     config = project.analysis
     props, _, material = beam_properties(project)
@@ -115,11 +114,7 @@ def _protocol(polymesh: PolyMesh, surface, project: Project, progress, executor=
               "worst_shape": None if worst is None else worst.name, "knock_down": result.knock_down}
     if run.design is not None:
         lengths = polymesh.beam_lengths
-        checks = tube_checks(method, EndForces.of(result.uls_beam_end_forces), run.sections.diameter,
-                             run.sections.thickness, material, process=run.sections.process,
-                             buckling_length=buckling_lengths(project, lengths, result.uls_beam_end_forces,
-                                                              run.sections.properties["I"], material.E,
-                                                              result.lambda_LB))
+        checks = sized_checks(project, method, run.sections, material, result, lengths)
         names, counts = np.unique(run.sections.names, return_counts=True)
         deflection = float(np.abs(result.sls_displacements[:, 2]).max())
         passes = (checks.utilisation.max() <= 1.0 and deflection <= span / config.deflection_limit_ratio

@@ -20,6 +20,7 @@ from pathlib import Path
 from fabrication.files import write_text_atomic
 
 from .config import Project
+from .stages.sizing import profile_name
 
 __all__ = ["run_with_fitted_grid", "MAX_REFITS"]
 
@@ -59,7 +60,7 @@ def run_with_fitted_grid(project: Project, out_dir: Path, stages, *, say: Callab
         largest = _largest_sized(out_dir)
         if summary.message or largest is None or largest["diameter_mm"] <= 1000 * project.section.diameter + 0.01:
             break
-        before = _profile(project)
+        before = profile_name(project)
         say(f"the sized tubes (largest {largest['profile']}) are larger than the grid's joints were made for "
             f"([section] {before}): the grid is made again for {largest['profile']} ({number} of {MAX_REFITS}; "
             f"[design] fit_grid_to_tubes = false keeps it)")
@@ -69,11 +70,11 @@ def run_with_fitted_grid(project: Project, out_dir: Path, stages, *, say: Callab
     if rounds:
         final = _largest_sized(out_dir)
         if final is not None and final["diameter_mm"] > 1000 * project.section.diameter + 0.01:
-            say(f"after {len(rounds)} rounds the grid is made for {_profile(project)}, and the sizing chose "
+            say(f"after {len(rounds)} rounds the grid is made for {profile_name(project)}, and the sizing chose "
                 f"{final['profile']} for some beams: their joints may not fit (the fabrication's findings name "
                 f"them); fewer [remesh] n_cells or smaller joints ([fabrication.joints]) leave more room")
         write_text_atomic(record, json.dumps({
-            "rounds": rounds, "section": _profile(project),
+            "rounds": rounds, "section": profile_name(project),
             "section_mm": [1000 * project.section.diameter, 1000 * project.section.thickness],
             "largest_sized": None if final is None else final["profile"],
             "fits": final is None or final["diameter_mm"] <= 1000 * project.section.diameter + 0.01}, indent=1))
@@ -82,10 +83,6 @@ def run_with_fitted_grid(project: Project, out_dir: Path, stages, *, say: Callab
     if not summary.message and until != "analysis":
         summary = run_project(project, out_dir, stages, **{**run, "force": False})
     return project, summary
-
-
-def _profile(project: Project) -> str:
-    return f"CHS {1000 * project.section.diameter:g}x{1000 * project.section.thickness:g}"
 
 
 def _with_tube(project: Project, diameter_mm: float, thickness_mm: float) -> Project:
@@ -99,6 +96,6 @@ def _earlier_fit(record: Path, project: Project) -> dict | None:
         fitted = json.loads(record.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-    if not fitted.get("rounds") or fitted["rounds"][0]["section_before"] != _profile(project):
+    if not fitted.get("rounds") or fitted["rounds"][0]["section_before"] != profile_name(project):
         return None
     return fitted

@@ -25,12 +25,12 @@ from engine.supports import Supports
 from engine.parts import beam_id, node_id
 from fabrication.files import atomic_path, write_text_atomic
 
-from engine.en1993 import CHECKED, NOT_CHECKED, EndForces
+from engine.en1993 import CHECKED, NOT_CHECKED
 
 from ..config import Project
 from ._require import require
-from .sizing import (BeamSections, buckling_lengths, checks_method, make_analyse, project_catalogue,
-                     project_sections, start_tubes, tube_checks)
+from .sizing import (BeamSections, checks_method, make_analyse, profile_name, project_catalogue,
+                     project_sections, sized_checks, start_tubes)
 
 __all__ = ["run", "load", "beam_properties", "build_frame", "pick_combination", "AnalysisSummary"]
 
@@ -142,10 +142,7 @@ def run(ctx):
     worst = result.worst
     ctx.step("member checks")
     if sections is not None:
-        checks = tube_checks(method, EndForces.of(result.uls_beam_end_forces), sections.diameter, sections.thickness,
-                             material, process=sections.process,
-                             buckling_length=buckling_lengths(project, lengths, result.uls_beam_end_forces,
-                                                              sections.properties["I"], material.E, result.lambda_LB))
+        checks = sized_checks(project, method, sections, material, result, lengths)
     else:
         checks = member_checks(result.uls_beam_end_forces, lengths, section, material,
                                buckling_length_factor=config.buckling_length_factor)
@@ -327,6 +324,15 @@ def load(folder: Path, ctx):
     return AnalysisSummary(figures=figures, axial_forces=members["axial_force_kN"].to_numpy() * 1e3, sections=sections)
 
 
+def frame_and_loads(polymesh, surface, props: BeamProperties, cases, elements_per_beam: int):
+    """(FrameModel, Supports, [nodal loads (n,6) per load case]) of the grid-shell with ``props``
+    (whose mass per length the self-weight takes)."""
+    model, supports, _ = build_frame(polymesh, surface, props, elements_per_beam)
+    loads = [gridshell_loads(polymesh, case, mass_per_length=props.mass_per_length,
+                             surface_vertices=surface.mesh.vertices) for case in cases]
+    return model, supports, loads
+
+
 @dataclass(frozen=True, kw_only=True)
 class DesignRun:
     """The protocol's result on the final sections, with the sizing that chose them (None without
@@ -353,11 +359,11 @@ def protocol_with_design(ctx, project: Project, polymesh, surface, material, met
     from engine.protocol import run_protocol
 
     config = project.analysis
-    uls_combo, sls_combo = combos
+    cases = [combine(surface.load_cases, c) for c in combos]
     props = beam_properties(project)[0]
     design = sizer = None
     if project.design.size_sections:
-        sizer = _Sizer(ctx, project, polymesh, surface, material, method, combos, deflection_limit)
+        sizer = _Sizer(ctx, project, polymesh, surface, material, method, cases, deflection_limit)
         design = sizer.size(None)
         sections = sizer.sections(design)
     rounds = 0
@@ -365,11 +371,8 @@ def protocol_with_design(ctx, project: Project, polymesh, surface, material, met
         if sections is not None:
             props = sections.frame_properties(material)
         ctx.step("frame model")
-        model, supports, _ = build_frame(polymesh, surface, props, config.elements_per_beam)
-        uls_loads = gridshell_loads(polymesh, combine(surface.load_cases, uls_combo),
-                                    mass_per_length=props.mass_per_length, surface_vertices=surface.mesh.vertices)
-        sls_loads = gridshell_loads(polymesh, combine(surface.load_cases, sls_combo),
-                                    mass_per_length=props.mass_per_length, surface_vertices=surface.mesh.vertices)
+        model, supports, (uls_loads, sls_loads) = frame_and_loads(polymesh, surface, props, cases,
+                                                                 config.elements_per_beam)
         if executor is not None:
             result = run_protocol(model, supports, sls_loads, uls_loads, settings, progress=ctx.step,
                                   executor=executor)
@@ -409,12 +412,13 @@ class _Sizer:
     """The stage's use of engine.sizing: a design's linear response (ULS forces, SLS deflection,
     lambda_LB) and what analysis.json says of the sizing."""
 
-    def __init__(self, ctx, project: Project, polymesh, surface, material, method: str, combos, deflection_limit):
+    def __init__(self, ctx, project: Project, polymesh, surface, material, method: str, cases, deflection_limit):
+        """``cases``: the ULS and SLS load cases (engine.loads.combine of the combinations)."""
         self.ctx, self.project, self.polymesh, self.surface = ctx, project, polymesh, surface
         self.material, self.method, self.deflection_limit = material, method, deflection_limit
         self.catalogue = project_catalogue(project)
         self.lengths = polymesh.beam_lengths
-        self.cases = [combine(surface.load_cases, c) for c in combos]
+        self.cases = cases
         self.history: list[dict] = []
         self.required = project.analysis.required_load_factor  # lambda_LB asked of the design
 
@@ -422,14 +426,12 @@ class _Sizer:
         from engine.errors import ConvergenceError
         from engine.frame import factor_stiffness, linear_buckling, linear_static
 
-        props = sections.frame_properties(self.material)
-        model, supports, _ = build_frame(self.polymesh, self.surface, props,
-                                         self.project.analysis.elements_per_beam)
-        uls, sls = (gridshell_loads(self.polymesh, case, mass_per_length=props.mass_per_length,
-                                    surface_vertices=self.surface.mesh.vertices) for case in self.cases)
+        model, supports, (uls, sls) = frame_and_loads(self.polymesh, self.surface,
+                                                      sections.frame_properties(self.material), self.cases,
+                                                      self.project.analysis.elements_per_beam)
         stiffness = factor_stiffness(model, supports)
         uls_result = linear_static(model, supports, uls, stiffness=stiffness)
-        sls_result = linear_static(model, supports, sls, stiffness=stiffness)
+        sls_result = linear_static(model, supports, sls, stiffness=stiffness, with_energy=True)
         deflection = float(np.abs(sls_result.displacements[:, 2]).max())
         try:
             buckling = linear_buckling(model, supports, uls, n_modes=1, stiffness=stiffness)
@@ -489,7 +491,7 @@ class _Sizer:
         if not larger.any() or project.design.fit_grid_to_tubes:
             return None
         k = int(np.argmax(sections.diameter))
-        section = f"CHS {1000 * project.section.diameter:g}x{1000 * project.section.thickness:g}"
+        section = profile_name(project)
         return Finding(kind="tubes_outgrow_grid", parts=[beam_id(i) for i in np.flatnonzero(larger)[:20]],
                        measure=float(1000 * sections.diameter[k]), limit=float(1000 * project.section.diameter),
                        unit="mm", stage="analysis",

@@ -22,6 +22,7 @@ from fabrication.files import write_text_atomic
 
 from ..config import Project
 from ._require import require
+from .sizing import profile_name
 
 __all__ = ["run", "load", "beam_outer_size_mm", "joint_settings_of", "build_limits_of", "sheet_stock"]
 
@@ -229,7 +230,7 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     from .analysis import beam_properties
 
     props, section, _ = beam_properties(project)
-    beam_settings = BeamSettings(profile_name=_profile_name(project), material_name=project.material.name,
+    beam_settings = BeamSettings(profile_name=profile_name(project), material_name=project.material.name,
                                  density=_density(project), stock_length_mm=MM * b.stock_length, kerf_mm=MM * b.kerf,
                                  area_m2=section.A, outer_size_mm=size_mm)
     if sections is None:
@@ -444,15 +445,6 @@ def _jsonable(value):
     if isinstance(value, np.ndarray):
         return value.tolist()
     return str(value)
-
-
-def _profile_name(project: Project) -> str:
-    s = project.section
-    mm = {k: round(MM * v, 2) for k, v in s.dimensions().items()}
-    return {"circular_hollow": f"CHS {mm.get('diameter')}x{mm.get('thickness')}",
-            "rectangular_hollow": f"RHS {mm.get('height')}x{mm.get('width')}x{mm.get('thickness')}",
-            "solid_round": f"RD {mm.get('diameter')}",
-            "solid_rectangle": f"{mm.get('height')}x{mm.get('width')}"}[s.kind]
 
 
 def _density(project: Project) -> float:

@@ -7,15 +7,15 @@ from collections.abc import Callable
 from dataclasses import dataclass
 import numpy as np
 
-from engine.catalogue import Catalogue, catalogue, chs_properties
+from engine.catalogue import CATALOGUES, Catalogue, catalogue, chs_properties
 from engine.en1993 import EndForces, TubeChecks, buckling_alpha, chs_checks, simplified_checks
 from engine.sections import Material
 from engine.structure import BeamProperties
 
 from ..config import Project
 
-__all__ = ["BeamSections", "project_sections", "checks_method", "tube_checks", "buckling_lengths",
-           "project_catalogue", "MM"]
+__all__ = ["BeamSections", "project_sections", "checks_method", "tube_checks", "sized_checks", "buckling_lengths",
+           "project_catalogue", "profile_name", "MM"]
 
 MM = 1000.0
 
@@ -59,14 +59,8 @@ def project_sections(project: Project, n_beams: int) -> BeamSections | None:
     s = project.section
     if s.kind != "circular_hollow":
         return None
-    process = None
-    if project.design.catalogue is not None:
-        from engine.errors import InputError
-
-        try:
-            process = project_catalogue(project).process
-        except InputError:  # a bad catalogue is reported by the sizing that needs it
-            process = None
+    # the shipped catalogue's manufacturing process (a project's own list has none): its buckling curve
+    process = CATALOGUES.get(project.design.catalogue, (None, None))[1]
     return BeamSections(names=[profile_name(project)] * n_beams, diameter=np.full(n_beams, s.diameter),
                         thickness=np.full(n_beams, s.thickness), process=process)
 
@@ -108,6 +102,17 @@ def tube_checks(method: str, forces: EndForces, diameter: np.ndarray, thickness:
                              buckling_length=buckling_length)
 
 
+def sized_checks(project: Project, method: str, sections: BeamSections, material: Material, result,
+                 lengths: np.ndarray) -> TubeChecks:
+    """The member checks of every beam's own tube under a protocol result's ULS forces
+    (engine.protocol.ProtocolResult), with the project's buckling lengths."""
+    forces = result.uls_beam_end_forces
+    return tube_checks(method, EndForces.of(forces), sections.diameter, sections.thickness, material,
+                       process=sections.process,
+                       buckling_length=buckling_lengths(project, lengths, forces, sections.properties["I"],
+                                                        material.E, result.lambda_LB))
+
+
 def candidate_utilisation(method: str, end_forces: np.ndarray, cat: Catalogue, material: Material,
                           buckling_length: np.ndarray) -> np.ndarray:
     """(b, s) utilisation of every beam with every catalogue tube under these forces."""
@@ -124,7 +129,7 @@ def start_tubes(project: Project, cat: Catalogue, n_beams: int) -> np.ndarray:
 
 
 def make_analyse(method: str, cat: Catalogue, material: Material, lengths: np.ndarray,
-                 solve: Callable[[BeamSections], tuple[np.ndarray, float, float | None]],
+                 solve: Callable[[BeamSections], tuple[np.ndarray, float, float | None, tuple]],
                  project: Project):
     """analyse(tube indices) for engine.sizing: ``solve`` gives (ULS end forces, SLS deflection,
     lambda_LB, (SLS and buckling strain energy shares per beam)) of a design."""
