@@ -35,7 +35,7 @@ def choose_best(project: Project, out_dir: Path, *, project_file: str | None, wo
     """The project with the chosen values and the choice (also in OUT/choose/choice.json)."""
     from .config import parse_project
     from .stages import STAGES
-    from .sweep import SweepSpec, run_sweep, seed, sweep_points
+    from .sweep import SweepSpec, _with, run_sweep, seed, sweep_points
 
     say = say or (lambda text: None)
     out_dir = Path(out_dir)
@@ -48,9 +48,9 @@ def choose_best(project: Project, out_dir: Path, *, project_file: str | None, wo
     data.setdefault("design", {})["choose"] = "as_given"
     spec = SweepSpec(file=folder / "choose.toml", project_file=base / "project.toml", project_data=data,
                      until="analysis", parameters={k: list(v) for k, v in project.design.choose_from.items()})
-    say(f"[design] choose = \"best\": {len(sweep_points(spec, folder))} candidates in {folder}")
-    rows = run_sweep(spec, folder, workers=workers, say=say)
     points = {p.number: p for p in sweep_points(spec, folder)}
+    say(f"[design] choose = \"best\": {len(points)} candidates in {folder}")
+    rows = run_sweep(spec, folder, workers=workers, say=say)
     candidates = []
     for row in rows:
         point = points[row["point"]]
@@ -78,11 +78,7 @@ def choose_best(project: Project, out_dir: Path, *, project_file: str | None, wo
         + f" (lambda_NL_worst {best['lambda_NL_worst']:.3g}, {best['beam_mass_kg']:.0f} kg)")
     merged = json.loads(json.dumps(data))
     for key, value in chosen.values.items():
-        table = merged
-        *tables, last = key.split(".")
-        for name in tables:
-            table = table.setdefault(name, {})
-        table[last] = value
+        _with(merged, key, value)
     merged["design"]["choose"] = "best"  # as the user asked: the choose keys are left out of the stages' keys
     chosen_project = parse_project(merged, source=f"{folder / 'choice.json'}", base_dir=base)
     names = [s.name for s in STAGES]

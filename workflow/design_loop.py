@@ -58,7 +58,7 @@ def run_with_fitted_grid(project: Project, out_dir: Path, stages, *, say: Callab
     summary = run_project(project, out_dir, stages, **{**run, "until": "analysis"})
     for number in range(len(rounds) + 1, MAX_REFITS + 1):
         largest = _largest_sized(out_dir)
-        if summary.message or largest is None or largest["diameter_mm"] <= 1000 * project.section.diameter + 0.01:
+        if summary.message or largest is None or _fits(largest, project):
             break
         before = profile_name(project)
         say(f"the sized tubes (largest {largest['profile']}) are larger than the grid's joints were made for "
@@ -69,7 +69,7 @@ def run_with_fitted_grid(project: Project, out_dir: Path, stages, *, say: Callab
         summary = run_project(project, out_dir, stages, **{**run, "until": "analysis", "force": False})
     if rounds:
         final = _largest_sized(out_dir)
-        if final is not None and final["diameter_mm"] > 1000 * project.section.diameter + 0.01:
+        if final is not None and not _fits(final, project):
             say(f"after {len(rounds)} rounds the grid is made for {profile_name(project)}, and the sizing chose "
                 f"{final['profile']} for some beams: their joints may not fit (the fabrication's findings name "
                 f"them); fewer [remesh] n_cells or smaller joints ([fabrication.joints]) leave more room")
@@ -77,12 +77,17 @@ def run_with_fitted_grid(project: Project, out_dir: Path, stages, *, say: Callab
             "rounds": rounds, "section": profile_name(project),
             "section_mm": [1000 * project.section.diameter, 1000 * project.section.thickness],
             "largest_sized": None if final is None else final["profile"],
-            "fits": final is None or final["diameter_mm"] <= 1000 * project.section.diameter + 0.01}, indent=1))
+            "fits": final is None or _fits(final, project)}, indent=1))
     else:
         record.unlink(missing_ok=True)  # an earlier run's record, of a grid this run did not make
     if not summary.message and until != "analysis":
         summary = run_project(project, out_dir, stages, **{**run, "force": False})
     return project, summary
+
+
+def _fits(group: dict, project: Project) -> bool:
+    """Whether a sized group's tube (analysis.json design group) is no larger than [section]'s."""
+    return group["diameter_mm"] <= 1000 * project.section.diameter + 0.01
 
 
 def _with_tube(project: Project, diameter_mm: float, thickness_mm: float) -> Project:

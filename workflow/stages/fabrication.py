@@ -22,7 +22,7 @@ from fabrication.files import write_text_atomic
 
 from ..config import Project
 from ._require import require
-from .sizing import profile_name
+from .sizing import profile_name, project_sections
 
 __all__ = ["run", "load", "beam_outer_size_mm", "joint_settings_of", "build_limits_of", "sheet_stock"]
 
@@ -221,7 +221,10 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     config = project.fabrication
     folder: Path = ctx.folder
     size_mm = beam_outer_size_mm(project)
-    sizes_mm = np.full(len(polymesh.edges), size_mm) if sections is None else MM * sections.diameter
+    # each beam's tube: the sized ones, else the project's one tube (None for other sections)
+    tubes = sections if sections is not None else project_sections(project, len(polymesh.edges))
+    sizes_mm = np.full(len(polymesh.edges), size_mm) if tubes is None else MM * tubes.diameter
+    walls_mm = None if tubes is None else MM * tubes.thickness
     clock.start("beams: cut list")
     beams = require("fabrication", "fabrication.beams", "BeamSettings", "cut_list", "write_cut_list", "write_beams_step")
     BeamSettings, cut_list, write_cut_list, write_beams_step = beams
@@ -233,20 +236,15 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     beam_settings = BeamSettings(profile_name=profile_name(project), material_name=project.material.name,
                                  density=_density(project), stock_length_mm=MM * b.stock_length, kerf_mm=MM * b.kerf,
                                  area_m2=section.A, outer_size_mm=size_mm)
-    if sections is None:
-        table = cut_list(polymesh, normals, beam_settings, joint_settings)
-    else:
-        table = cut_list(polymesh, normals, beam_settings, joint_settings, profiles=sections.names,
-                         areas_m2=sections.properties["A"], outer_sizes_mm=sizes_mm)
+    areas_m2 = np.full(len(sizes_mm), section.A) if tubes is None else tubes.properties["A"]
+    table = cut_list(polymesh, normals, beam_settings, joint_settings, profiles=None if tubes is None else tubes.names,
+                     areas_m2=areas_m2, outer_sizes_mm=sizes_mm)
     write_cut_list(table, folder / "beams")
-    if project.section.kind == "circular_hollow":
+    if tubes is not None:
         clock.start("beams: NC1 files")
         from fabrication.nc1 import nc1_pieces, write_nc1_files
 
-        walls_mm = (np.full(len(sizes_mm), MM * project.section.thickness) if sections is None
-                    else MM * sections.thickness)
-        areas = np.full(len(sizes_mm), section.A) if sections is None else sections.properties["A"]
-        pieces = nc1_pieces(table, sizes_mm, walls_mm, areas * _density(project), joint_settings,
+        pieces = nc1_pieces(table, sizes_mm, walls_mm, areas_m2 * _density(project), joint_settings,
                             project.material.name)
         summary["nc1_files"] = len(write_nc1_files(pieces, folder / "beams" / "nc1", order=project.project.name,
                                                    drawing=f"{project.project.name} plan"))
@@ -283,10 +281,7 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
         nestings.append((profile, nest_bars(cut[members], [ids[i] for i in members], stock, MM * b.kerf)))
     _write_bars_by_profile(nestings, folder / "beams" / "bars.csv")
     clock.start("beams: beams.step")
-    tube_walls = None
-    if project.section.kind == "circular_hollow":
-        tube_walls = MM * (np.full(len(sizes_mm), project.section.thickness) if sections is None else sections.thickness)
-    write_beams_step(polymesh, table, folder / "beams" / "beams.step", outer_size_mm=sizes_mm, wall_mm=tube_walls)
+    write_beams_step(polymesh, table, folder / "beams" / "beams.step", outer_size_mm=sizes_mm, wall_mm=walls_mm)
     summary.update({"bars_used": sum(int(n.bars_used) for _, n in nestings),
                     "bars_lower_bound": sum(int(n.lower_bound) for _, n in nestings),
                     "bar_nesting_method": ", ".join(sorted({getattr(n, "method", "") for _, n in nestings})),
@@ -370,16 +365,14 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     # the stage folder is a temporary one until the stage succeeds: name the file from the stage's folder
     written["csv"] = Path(written["csv"]).relative_to(folder).as_posix()
     summary["assembly"] = written
-    walls_mm = (np.full(len(sizes_mm), MM * (project.section.thickness or 0.0)) if sections is None
-                else MM * sections.thickness)
-    if project.section.kind == "circular_hollow":  # while the joints build: it needs their geometry only
+    if tubes is not None:  # while the joints build: it needs their geometry only
         clock.start("model: gridshell.ifc")
-        _write_ifc(ctx, folder, polymesh, normals, {"table": table, "panels": panels, "sizes_mm": sizes_mm,
-                                                    "walls_mm": walls_mm}, joint_settings)
+        _write_ifc(ctx, folder, polymesh, normals, table, panels, sizes_mm, walls_mm, joint_settings)
         summary["ifc"] = "gridshell.ifc"
 
 
-def _write_ifc(ctx, folder: Path, polymesh, normals: np.ndarray, kept: dict, joint_settings) -> None:
+def _write_ifc(ctx, folder: Path, polymesh, normals: np.ndarray, table, panels: list, sizes: np.ndarray,
+               walls: np.ndarray, joint_settings) -> None:
     """gridshell.ifc (fabrication.ifc) from the stage's cut list, panels, panels.csv, sequence.csv
     and the joints' geometry as the joint solids are built from it."""
     import pandas as pd
@@ -397,7 +390,6 @@ def _write_ifc(ctx, folder: Path, polymesh, normals: np.ndarray, kept: dict, joi
         for row in pd.read_csv(sequence).itertuples():
             for part in str(row.parts).split():
                 step_of.setdefault(part, int(row.step))
-    table, sizes, walls = kept["table"], kept["sizes_mm"], kept["walls_mm"]
     beams = []
     for k, row in enumerate(table.itertuples(index=False)):
         if row.cut_length_mm <= 0:
@@ -416,9 +408,9 @@ def _write_ifc(ctx, folder: Path, polymesh, normals: np.ndarray, kept: dict, joi
         sheets = dict(zip(frame["id"], frame["sheet"].astype("string").fillna("")))
         masses = dict(zip(frame["id"], frame["mass_kg"]))
     p = project.fabrication.panels
-    panels = [IfcPanel(id=panel.id, outline_mm=MM * np.asarray(panel.outline_3d_m), axes=np.asarray(panel.axes),
+    plates = [IfcPanel(id=panel.id, outline_mm=MM * np.asarray(panel.outline_3d_m), axes=np.asarray(panel.axes),
                        thickness_mm=MM * p.thickness, material=p.material, mass_kg=float(masses.get(panel.id, 0.0)),
-                       sheet=str(sheets.get(panel.id, "")), step=step_of.get(panel.id)) for panel in kept["panels"]]
+                       sheet=str(sheets.get(panel.id, "")), step=step_of.get(panel.id)) for panel in panels]
     joints = []
     settings = joint_settings
     for g in joint_geometry(polymesh, normals, sizes):
@@ -435,7 +427,7 @@ def _write_ifc(ctx, folder: Path, polymesh, normals: np.ndarray, kept: dict, joi
                                setback_mm=setback, reach_mm=reach, outer_mm=bore + settings.wall_mm, bore_mm=bore,
                                plate_mm=(settings.plate_thickness_mm, 0.8 * 2.5 * size) if steel else None,
                                part_file=f"joints/{joint_id(g.node)}.step"))
-    write_gridshell_ifc(folder / "gridshell.ifc", project_name=project.project.name, beams=beams, panels=panels,
+    write_gridshell_ifc(folder / "gridshell.ifc", project_name=project.project.name, beams=beams, panels=plates,
                         joints=joints, beam_material=grade_name(project.material.name))
 
 
