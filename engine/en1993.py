@@ -128,10 +128,11 @@ _SIMPLIFIED_NAMES = ("cross-section", "shear", "torsion", "flexural buckling", "
 
 
 def _governing(parts: list[np.ndarray], names: tuple[str, ...] = _NAMES) -> list[str] | None:
-    stacked = np.stack(np.broadcast_arrays(*parts))
-    if stacked.ndim != 2:
+    """The name of the largest part per member; None for candidate matrices (b, s), which the
+    sizing checks by the thousand and never names."""
+    if np.broadcast(*parts).ndim != 1:
         return None
-    return [names[k] for k in stacked.argmax(axis=0)]
+    return [names[k] for k in np.stack(np.broadcast_arrays(*parts)).argmax(axis=0)]
 
 
 def _cross_section_load_factor(n: np.ndarray, m: np.ndarray, v: np.ndarray, tau: np.ndarray,
