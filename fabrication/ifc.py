@@ -11,6 +11,7 @@ and assembly step for panels; node, beams and part file for joints.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -86,7 +87,22 @@ def _frame(origin_mm: np.ndarray, z: np.ndarray, x: np.ndarray | None = None) ->
 
 def write_gridshell_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: list[IfcPanel],
                         joints: list[IfcJoint], beam_material: str) -> Path:
-    """Write the IFC4 model (atomically); see the module docstring."""
+    """Write the IFC4 model (atomically); see the module docstring.
+
+    ifcopenshell appends its ``express`` folder to ``sys.path`` as it works, and that folder's
+    ``templates.py`` then shadows the project's own ``templates`` package for every later import
+    (the report stage failed with "'templates' is not a package" after a run's fabrication):
+    ``sys.path`` is put back as it was when the model is written."""
+    saved = list(sys.path)
+    try:
+        return _write_ifc(path, project_name=project_name, beams=beams, panels=panels, joints=joints,
+                          beam_material=beam_material)
+    finally:
+        sys.path[:] = saved
+
+
+def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: list[IfcPanel],
+               joints: list[IfcJoint], beam_material: str) -> Path:
     import ifcopenshell
     import ifcopenshell.api.aggregate as aggregate
     import ifcopenshell.api.context as context

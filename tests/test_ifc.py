@@ -53,3 +53,23 @@ def test_the_ifc_model_has_every_part_with_the_cut_lists_quantities(small_run):
     joint = model.by_type("IfcMechanicalFastener")[0]
     assert element.get_psets(joint)["Pset_Gridshell"]["PartFile"] == f"joints/{joint.Name}.step"
     assert shape.get_volume(ifcopenshell.geom.create_shape(settings, joint).geometry) > 0
+
+
+def test_writing_the_ifc_leaves_the_project_templates_importable(tmp_path):
+    """ifcopenshell puts its own templates.py on sys.path while it works: after the model is written,
+    a fresh process still finds the project's templates package (the report reads it)."""
+    import subprocess
+    import sys
+
+    code = ("import numpy as np, importlib.resources as r\n"
+            "from pathlib import Path\n"
+            "from fabrication.ifc import IfcBeam, write_gridshell_ifc\n"
+            "beam = IfcBeam(id='B0001', start_mm=np.zeros(3), direction=np.array([1.0, 0, 0]), cut_length_mm=100.0,\n"
+            "               diameter_mm=10.0, wall_mm=1.0, profile='CHS 10x1', mass_kg=1.0)\n"
+            f"write_gridshell_ifc(Path({str(tmp_path / 'a.ifc')!r}), project_name='t', beams=[beam], panels=[],\n"
+            "                    joints=[], beam_material='S355')\n"
+            "print(r.files('templates').joinpath('report.html').is_file())\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
+                          env={**__import__("os").environ, "PYTHONPATH": str(__import__("pathlib").Path(__file__).parents[1])})
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "True"
