@@ -20,7 +20,40 @@ from scipy.spatial import cKDTree
 from .errors import MeshError
 from .mesh import TriMesh, boundary_loops
 
-__all__ = ["CleanReport", "clean_mesh"]
+__all__ = ["CleanReport", "clean_mesh", "UP_AXES", "to_z_up", "normal_shares"]
+
+UP_AXES = ("z", "y", "x", "-z", "-y", "-x")
+"""The axes a mesh file may have modelled as up (Rhino: z; Blender, SketchUp and glTF exports: y)."""
+
+# proper rotations taking each axis to +z: new (x, y, z) = old coordinates picked and signed
+_TO_Z_UP = {"z": ((0, 1), (1, 1), (2, 1)), "y": ((0, 1), (2, -1), (1, 1)), "x": ((2, -1), (1, 1), (0, 1)),
+            "-z": ((0, 1), (1, -1), (2, -1)), "-y": ((0, 1), (2, 1), (1, -1)), "-x": ((2, 1), (1, 1), (0, -1))}
+
+
+def to_z_up(vertices: np.ndarray, up: str) -> np.ndarray:
+    """The vertices (n, 3) of a mesh modelled with ``up`` (one of UP_AXES) as up, rotated so that it
+    points along +z (a rotation: lengths, areas and handedness are kept)."""
+    try:
+        picks = _TO_Z_UP[up]
+    except KeyError:
+        raise ValueError(f"up axis {up!r}: allowed are {', '.join(UP_AXES)}") from None
+    vertices = np.asarray(vertices, dtype=float)
+    return np.stack([sign * vertices[:, axis] for axis, sign in picks], axis=1)
+
+
+def normal_shares(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted mean of |n . e_x|, |n . e_y|, |n . e_z| over the triangles: (3,), each in [0, 1].
+    A roof modelled with z up has its largest share on z; a hemisphere has 0.5 on z and 0.25 on x
+    and y; a mesh exported with y up has it on y."""
+    vertices = np.asarray(vertices, dtype=float)
+    faces = np.asarray(faces, dtype=np.int64)
+    cross = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    cross = cross[np.isfinite(cross).all(axis=1)]
+    total = np.linalg.norm(cross, axis=1).sum()
+    if not total > 0:
+        return np.zeros(3)
+    return np.abs(cross).sum(axis=0) / total
+
 
 
 @dataclass(kw_only=True)

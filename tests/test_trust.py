@@ -225,6 +225,66 @@ def test_surface_units_need_a_surface(capsys, tmp_path):
     assert "--surface-units" in err and "file_units" in err and "Traceback" not in err
 
 
+# --- a mesh exported with y up (Blender, SketchUp, glTF) stands on its side ------------------------
+
+def _dome_y_up(path):
+    """A generated dome (tests/generated_surfaces.py) written with y up: (x, y, z) -> (x, z, -y)."""
+    import numpy as np
+    import trimesh
+
+    from tests.generated_surfaces import generate_surface
+
+    surface = generate_surface(0)
+    v = surface.vertices
+    trimesh.Trimesh(np.stack([v[:, 0], v[:, 2], -v[:, 1]], axis=1), surface.faces, process=False).export(path)
+    return surface
+
+
+def test_a_mesh_with_y_up_is_refused_naming_up_axis(capsys, tmp_path):
+    _dome_y_up(tmp_path / "roof.obj")
+    err = _validate_and_run(capsys, tmp_path, _project(tmp_path, '[surface]\nfile = "roof.obj"\n'))
+    assert "[surface] up_axis" in err and "stands on its side" in err and 'up_axis = "y"' in err
+    err = _quick_start(capsys, tmp_path, "--surface", str(tmp_path / "roof.obj"))
+    assert "--surface-up y" in err and "up_axis" not in err
+
+
+def test_up_axis_turns_the_mesh_back_to_the_roof_it_was(capsys, tmp_path):
+    """With up_axis = "y" the surface stage's mesh is the generated roof itself (a rotation keeps
+    every vertex's distance; z is the height again)."""
+    import numpy as np
+
+    surface = _dome_y_up(tmp_path / "roof.obj")
+    project = _project(tmp_path, '[surface]\nfile = "roof.obj"\nup_axis = "y"\n')
+    code, out, err = _cli(capsys, "validate", str(project))
+    assert code == 0, err
+    from workflow.config import load_project
+    from workflow.stages.surface import build_surface
+
+    mesh, _ = build_surface(load_project(project))
+    got = mesh.vertices[np.lexsort(mesh.vertices.T)]
+    want = surface.vertices[np.lexsort(surface.vertices.T)]
+    np.testing.assert_allclose(got, want, atol=1e-6)          # the OBJ keeps 8 digits
+
+
+@pytest.mark.parametrize("up", ["z", "y", "x", "-z", "-y", "-x"])
+def test_to_z_up_is_a_rotation_taking_the_axis_to_z(up):
+    import numpy as np
+
+    from engine.surfaces import to_z_up
+
+    axis = {"x": [1, 0, 0], "y": [0, 1, 0], "z": [0, 0, 1]}[up[-1]]
+    sign = -1.0 if up.startswith("-") else 1.0
+    rotation = to_z_up(np.eye(3), up).T                     # columns: the images of e_x, e_y, e_z
+    np.testing.assert_allclose(rotation @ (sign * np.array(axis, float)), [0, 0, 1])
+    np.testing.assert_allclose(rotation.T @ rotation, np.eye(3))
+    assert np.linalg.det(rotation) == pytest.approx(1.0)
+
+
+def test_up_axis_is_for_files_only():
+    lines = _config_error({"surface": {"template": "cap", "up_axis": "y"}})
+    assert any("up_axis" in line for line in lines), lines
+
+
 # --- 5. through a pipe, a long stage prints a line at least every 10 s ----------------------------
 
 class _FakeClock:

@@ -60,10 +60,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.surface_units and not args.surface:
         raise InputError("--surface-units applies to --surface MESH only",
                          hint="a project file gives the unit as [surface] file_units")
+    if args.surface_up and not args.surface:
+        raise InputError("--surface-up applies to --surface MESH only",
+                         hint="a project file gives it as [surface] up_axis")
     if args.only and args.until:
         raise InputError("--only and --until cannot be combined")
     if args.surface:
-        project = project_from_surface(args.surface, args.supports or "boundary", args.surface_units or "m")
+        project = project_from_surface(args.surface, args.supports or "boundary", args.surface_units or "m",
+                                       args.surface_up)
         default_out = Path("out") / Path(args.surface).stem
         project_file = None
     else:
@@ -184,6 +188,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--supports", choices=("boundary", "flagged"), help="supports for --surface (default boundary)")
     run.add_argument("--surface-units", choices=("m", "cm", "mm", "in", "ft"),
                      help="the unit the --surface mesh was modelled in (default m)")
+    run.add_argument("--surface-up", choices=("z", "y", "x", "-z", "-y", "-x"),
+                     help="the --surface mesh's up axis (default z; Blender, SketchUp and glTF exports: y)")
     run.add_argument("--out", metavar="DIR", help="output folder (default out/NAME)")
     run.add_argument("--until", metavar="STAGE", help="stop after this stage")
     run.add_argument("--only", metavar="STAGE", help="run only this stage (earlier results must exist)")

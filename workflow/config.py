@@ -54,6 +54,9 @@ class SurfaceConfig(_Section):
 
     file: str | None = None
     file_units: Literal["m", "cm", "mm", "in", "ft"] = "m"
+    up_axis: Literal["z", "y", "x", "-z", "-y", "-x"] | None = None
+    """The file's up axis, turned to +z before anything else (supports' boxes and planes are then in
+    z-up coordinates). Unset: z, and a file that stands on its side is refused with a hint."""
     template: SurfaceTemplate | None = None
     parameters: dict[str, float | int | str] = Field(default_factory=dict)
     merge_tolerance: Length | None = None
@@ -65,6 +68,8 @@ class SurfaceConfig(_Section):
                              "(mockup, cap, vault, hypar, courtyard)")
         if self.file is not None and self.parameters:
             raise ValueError("'parameters' apply to templates only, not to a surface file")
+        if self.template is not None and self.up_axis is not None:
+            raise ValueError("'up_axis' applies to a surface file only; templates are made with z up")
         return self
 
 
@@ -685,15 +690,21 @@ def read_toml(path: Path, what: str, *, hint: str | None = None) -> dict:
         raise ConfigError(f"{path}: not a text file") from None
 
 
-def project_from_surface(surface: str | Path, supports: str = "boundary", units: str = "m") -> Project:
-    """The quick-start project: a mesh file in ``units`` (m, cm, mm, in, ft), supports 'boundary'
-    or 'flagged', defaults elsewhere."""
+def project_from_surface(surface: str | Path, supports: str = "boundary", units: str = "m",
+                         up: str | None = None) -> Project:
+    """The quick-start project: a mesh file in ``units`` (m, cm, mm, in, ft) with ``up`` as its up
+    axis (None: z, checked), supports 'boundary' or 'flagged', defaults elsewhere."""
+    from engine.surfaces import UP_AXES
+
     if supports not in ("boundary", "flagged"):
         raise ConfigError(f"--supports {supports!r}: allowed are boundary, flagged")
     if units not in _FILE_UNITS:
         raise ConfigError(f"--surface-units {units!r}: allowed are {', '.join(_FILE_UNITS)}")
+    if up is not None and up not in UP_AXES:
+        raise ConfigError(f"--surface-up {up!r}: allowed are {', '.join(UP_AXES)}")
     return parse_project({"project": {"name": Path(surface).stem},
-                          "surface": {"file": str(Path(surface).resolve()), "file_units": units},
+                          "surface": {"file": str(Path(surface).resolve()), "file_units": units,
+                                      **({} if up is None else {"up_axis": up})},
                           "supports": [{"select": supports, "restraint": "pinned"}]},
                          source=f"--surface {surface}")
 
@@ -707,6 +718,32 @@ def _distance(metres: float) -> str:
     if metres >= 1000:
         return f"{metres / 1000:.3g} km"
     return f"{metres:.3g} m" if metres >= 1 else f"{metres * 1000:.3g} mm"
+
+
+SIDEWAYS_SHARE = 0.45
+"""A file read with z up stands on its side when its normals' share on x or y (area-weighted mean
+|n_x| or |n_y|) is over this and over twice their share on z: a roof exported with y up. Real roofs
+have z at least 0.69 times the largest (a saddle on its corners), generated ones over 1.7 times."""
+
+
+def _check_upright(vertices: np.ndarray, faces: np.ndarray, path: Path, quick_start: bool) -> None:
+    from engine.surfaces import normal_shares
+
+    shares = normal_shares(vertices, faces)
+    axis = int(np.argmax(shares[:2]))
+    if not (shares[axis] > SIDEWAYS_SHARE and shares[2] < 0.5 * shares[axis]):
+        return
+    name = "xy"[axis]
+    what = (f"{path.name} stands on its side: its faces face along {name} (mean |n_{name}| = "
+            f"{shares[axis]:.2f}), hardly up (mean |n_z| = {shares[2]:.2f}), so it was likely modelled with "
+            f"{name} up (Blender, SketchUp and glTF exports are)")
+    if quick_start:
+        raise ConfigError(f"--surface {path}: {what}",
+                          hint=f"add --surface-up {name} (or -{name} if the roof then hangs downwards); "
+                               "--surface-up z takes it as it is")
+    raise ConfigError(f"[surface] up_axis: {what}",
+                      hint=f'set [surface] up_axis = "{name}" (or "-{name}" if the roof then hangs downwards); '
+                           'up_axis = "z" takes it as it is')
 
 
 def check_inputs(project: Project, *, quick_start: bool = False) -> float | None:
@@ -737,7 +774,9 @@ def check_inputs(project: Project, *, quick_start: bool = False) -> float | None
                               hint="give the path of a mesh file (OBJ, PLY, STL, OFF or 3DM)")
         raise ConfigError(f"[surface] file: {path} does not exist",
                           hint="a relative path is read from the project file's folder; correct [surface] file")
-    vertices, _, flagged = read_surface(path)
+    vertices, faces, flagged = read_surface(path)
+    if config.up_axis is None:
+        _check_upright(vertices, faces, path, quick_start)
     finite = vertices[np.isfinite(vertices).all(axis=1)]
     raw = float(np.ptp(finite, axis=0).max()) if len(finite) else 0.0
     unit = config.file_units

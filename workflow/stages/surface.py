@@ -21,7 +21,7 @@ from engine.loads import LimitState, LoadCase, LoadCombination
 from engine.mesh import TriMesh
 from engine.supports import (Supports, restraint_flags, select_box, select_boundary, select_flagged, select_ids,
                              select_loop, select_nearest, select_plane)
-from engine.surfaces import clean_mesh
+from engine.surfaces import clean_mesh, to_z_up
 from fabrication.files import write_text_atomic
 
 from ..config import Project, SupportSpec
@@ -82,7 +82,7 @@ def build_surface(project: Project) -> tuple[TriMesh, dict]:
         mesh = getattr(parametric, config.template)(**parameters)
         return mesh, {"source": f"template {config.template}", "parameters": parameters}
     vertices, faces, flagged = read_surface(config.file)
-    vertices = vertices * _UNIT_SCALE[config.file_units]
+    vertices = to_z_up(vertices * _UNIT_SCALE[config.file_units], config.up_axis or "z")
     mesh, report = clean_mesh(vertices, faces, flagged, name=Path(config.file).stem,
                               merge_tolerance=config.merge_tolerance)
     return mesh, {"source": str(config.file), "cleaning": report.to_json()}
