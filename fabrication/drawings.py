@@ -149,6 +149,65 @@ def _write_dxf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.nd
     return target
 
 
+def _text_box_mm(texts: list[str], points: float) -> np.ndarray:
+    """Width and height (len, 2) on paper (mm) of labels set in matplotlib's font at ``points``: the
+    ink width of each text's shape (its digits as 8s: the widest) plus a fifth of an em, and 1.2 em
+    of height (ascent and descent)."""
+    import re
+
+    from matplotlib.textpath import TextPath
+
+    shapes = [re.sub(r"[0-9]", "8", t) for t in texts]
+    widths = {shape: TextPath((0, 0), shape, size=points).get_extents().width + 0.2 * points
+              for shape in set(shapes)}
+    pt = 25.4 / 72.0
+    return np.array([[widths[s] * pt, 1.2 * points * pt] for s in shapes]).reshape(-1, 2)
+
+
+MIN_LABEL_POINTS = 3.0
+"""The smallest type the plan's ids are set in (pt); ids that find no room at it are left out."""
+
+
+def _label_places(plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, font: float, scale: int,
+                  bounds: tuple[float, float, float, float], obstacles: np.ndarray):
+    """Node, beam and panel ids placed without overlap (model mm), nodes choosing first, then beams,
+    then panels: at ``font`` pt (beams at 0.8 of it), or smaller by steps of 0.8 down to
+    MIN_LABEL_POINTS until every id has room. Returns texts, point sizes, anchors and the placement
+    (fabrication.label_placement)."""
+    from .label_placement import place_labels, ring_offsets
+
+    nn, nb = len(plan), len(beams)
+    texts = ([node_id(i) for i in range(nn)] + [beam_id(k) for k in range(nb)]
+             + [panel_id(f) for f in range(len(centres))])
+    mid = 0.5 * (plan[beams[:, 0]] + plan[beams[:, 1]]) if nb else np.zeros((0, 2))
+    anchor = np.concatenate([plan, mid, centres.reshape(-1, 2)])
+    along = plan[beams[:, 1]] - plan[beams[:, 0]] if nb else np.zeros((0, 2))
+    normal = np.column_stack([-along[:, 1], along[:, 0]])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    node_unit = np.array([[1, 1], [-1, 1], [1, -1], [-1, -1], [1, 0], [-1, 0], [0, 1], [0, -1], [1, 1]], float)
+    k = len(node_unit)
+    while True:
+        points = np.repeat([font, 0.8 * font, font], [nn, nb, len(centres)])
+        size = np.concatenate([_text_box_mm(texts[:nn], font), _text_box_mm(texts[nn:nn + nb], 0.8 * font),
+                               _text_box_mm(texts[nn + nb:], font)]) * scale
+        w, h = size[:, :1], size[:, 1:]
+        near = np.zeros((len(anchor), k, 2))
+        # nodes: the eight places round the node, touching it
+        reach = np.concatenate([0.5 * w[:nn] + 0.2 * h[:nn], 0.6 * h[:nn]], axis=1)
+        near[:nn] = node_unit[None, :, :] * reach[:, None, :]
+        # beams: at 0.5, 0.35 and 0.65 of the beam, on it or beside it
+        for j, (t, side) in enumerate([(t, s) for t in (0.0, -0.15, 0.15) for s in (0.0, 0.8, -0.8)]):
+            near[nn:nn + nb, j] = t * along + side * h[nn:nn + nb] * normal
+        # panels: the centre, then round it
+        near[nn + nb:, 1:] = ring_offsets(1.0, k - 1)[None, :, :] * h[nn + nb:, None, :]
+        typical = float(np.median(w)) if len(w) else 1.0
+        far = np.concatenate([ring_offsets(r * typical, 12, phase=0.26) for r in (1.2, 1.8, 2.6)])
+        placement = place_labels(anchor, size, near, far, bounds=bounds, obstacles=obstacles, gap=0.3 * scale)
+        if not placement.left_out or font <= MIN_LABEL_POINTS:
+            return texts, points, anchor, placement
+        font = max(0.8 * font, MIN_LABEL_POINTS)
+
+
 def _write_pdf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, supports: np.ndarray,
                title: list[str]) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -160,31 +219,47 @@ def _write_pdf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.nd
     box = (0.04, 0.12, 0.92, 0.84)  # the plan's frame on the sheet, as fractions of A3
     ax = fig.add_axes(box)
     ax.axis("off")
-    ax.add_collection(LineCollection(plan[beams], colors="k", linewidths=0.6))
-    font = float(np.clip(240 / np.sqrt(max(len(plan), 1)), 1.0, 7.0))
-    for i, p in enumerate(plan):
-        ax.text(p[0], p[1], " " + node_id(i), fontsize=font, color="tab:green", ha="left", va="bottom")
-    for k, p in enumerate(0.5 * (plan[beams[:, 0]] + plan[beams[:, 1]])):
-        ax.text(p[0], p[1], beam_id(k), fontsize=0.8 * font, color="tab:blue", ha="center", va="center")
-    for f, p in enumerate(centres):
-        ax.text(p[0], p[1], panel_id(f), fontsize=font, color="tab:purple", ha="center", va="center")
-    if len(supports):
-        ax.plot(plan[supports, 0], plan[supports, 1], "^", color="tab:red", markersize=6, linestyle="none")
     lo, hi = plan.min(axis=0), plan.max(axis=0)
     span = hi - lo
     gap = 0.06 * span.max()
-    ax.annotate("", xy=(lo[0], lo[1] - gap), xytext=(hi[0], lo[1] - gap), arrowprops={"arrowstyle": "<->", "lw": 0.8})
-    ax.text(0.5 * (lo[0] + hi[0]), lo[1] - gap, f"{span[0]:.0f}", ha="center", va="bottom", fontsize=8)
-    ax.annotate("", xy=(lo[0] - gap, lo[1]), xytext=(lo[0] - gap, hi[1]), arrowprops={"arrowstyle": "<->", "lw": 0.8})
-    ax.text(lo[0] - gap, 0.5 * (lo[1] + hi[1]), f"{span[1]:.0f}", ha="right", va="center", rotation=90, fontsize=8)
     # a true scale: the frame shows scale x its paper size of the plan, centred
     paper = np.array([_A3_MM[0] * box[2], _A3_MM[1] * box[3]])
     scale = drawing_scale(span + 3 * gap, paper)
     centre = 0.5 * (lo + hi) - 0.5 * gap  # the dimensions take 2 gaps left of and under the plan, 1 beyond
-    ax.set_xlim(centre[0] - 0.5 * scale * paper[0], centre[0] + 0.5 * scale * paper[0])
-    ax.set_ylim(centre[1] - 0.5 * scale * paper[1], centre[1] + 0.5 * scale * paper[1])
+    x_lim = (centre[0] - 0.5 * scale * paper[0], centre[0] + 0.5 * scale * paper[0])
+    y_lim = (centre[1] - 0.5 * scale * paper[1], centre[1] + 0.5 * scale * paper[1])
+    ax.set_xlim(*x_lim)
+    ax.set_ylim(*y_lim)
+    ax.add_collection(LineCollection(plan[beams], colors="k", linewidths=0.6))
+    font = float(np.clip(240 / np.sqrt(max(len(plan), 1)), 1.0, 7.0))
+    # no label outside the frame, on the dimensions or on the scale bar
+    text = 12.0 * scale      # 8 pt dimension text with room
+    obstacles = np.array([
+        [lo[0], lo[1] - gap - 0.2 * text, hi[0], lo[1] - gap + text],
+        [lo[0] - gap - text, lo[1], lo[0] - gap + 0.2 * text, hi[1]],
+        [x_lim[0], y_lim[0], x_lim[0] + 90.0 * scale, y_lim[0] + 16.0 * scale]])
+    texts, points, anchor, placement = _label_places(plan, beams, centres, font, scale,
+                                                     (x_lim[0], y_lim[0], x_lim[1], y_lim[1]), obstacles)
+    colours = np.repeat(["tab:green", "tab:blue", "tab:purple"], [len(plan), len(beams), len(centres)])
+    leaders = np.flatnonzero(placement.leader)
+    if len(leaders):
+        ax.add_collection(LineCollection(np.stack([anchor[leaders], placement.centre[leaders]], axis=1),
+                                         colors="0.55", linewidths=0.3))
+    for i in np.flatnonzero(placement.placed):
+        ax.text(*placement.centre[i], texts[i], fontsize=points[i], color=colours[i], ha="center",
+                va="center_baseline")
+    if len(supports):
+        ax.plot(plan[supports, 0], plan[supports, 1], "^", color="tab:red", markersize=6, linestyle="none")
+    ax.annotate("", xy=(lo[0], lo[1] - gap), xytext=(hi[0], lo[1] - gap), arrowprops={"arrowstyle": "<->", "lw": 0.8})
+    ax.text(0.5 * (lo[0] + hi[0]), lo[1] - gap, f"{span[0]:.0f}", ha="center", va="bottom", fontsize=8)
+    ax.annotate("", xy=(lo[0] - gap, lo[1]), xytext=(lo[0] - gap, hi[1]), arrowprops={"arrowstyle": "<->", "lw": 0.8})
+    ax.text(lo[0] - gap, 0.5 * (lo[1] + hi[1]), f"{span[1]:.0f}", ha="right", va="center", rotation=90, fontsize=8)
     _scale_bar(ax, scale)
-    fig.text(0.96, 0.03, "\n".join([*title, f"Scale 1:{scale} on A3 ({_A3_MM[0]} x {_A3_MM[1]} mm)"]),
+    notes = [f"Scale 1:{scale} on A3 ({_A3_MM[0]} x {_A3_MM[1]} mm)"]
+    if placement.left_out:
+        notes.append(f"{placement.left_out} of {len(texts)} ids left out for space (plan.dxf and the lists "
+                     "have every part)")
+    fig.text(0.96, 0.03, "\n".join([*title, *notes]),
              ha="right", va="bottom", fontsize=9, bbox={"boxstyle": "square", "facecolor": "white", "edgecolor": "black"})
     with atomic_path(target) as tmp:
         fig.savefig(tmp, format="pdf", metadata={"CreationDate": file_date()})

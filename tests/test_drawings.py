@@ -78,3 +78,73 @@ def test_plans_are_drawn_at_the_smallest_standard_scale_that_fits(extent, paper,
     scale = drawing_scale(extent, paper)
     assert scale == expected and scale in STANDARD_SCALES
     assert all(e / scale <= p for e, p in zip(extent, paper))
+
+
+def _pdf_glyphs(path) -> list[tuple[str, tuple[float, float, float, float]]]:
+    """Every character drawn in a PDF with its box (pt), read by pdfminer.six (not by matplotlib)."""
+    from pdfminer.high_level import extract_pages
+    from pdfminer.layout import LTChar, LTComponent
+
+    glyphs = []
+
+    def walk(item):
+        if isinstance(item, LTChar):
+            if item.get_text().strip():
+                glyphs.append((item.get_text(), item.bbox))
+        elif hasattr(item, "__iter__") and isinstance(item, LTComponent) or hasattr(item, "_objs"):
+            for child in item:
+                walk(child)
+
+    for page in extract_pages(str(path), laparams=None):   # the characters as drawn, not grouped
+        walk(page)
+    return glyphs
+
+
+def _pdf_words(glyphs) -> list[str]:
+    """The words of a PDF from its glyphs: characters on one baseline whose boxes touch."""
+    words = []
+    rows: dict[float, list] = {}
+    for text, (x0, y0, x1, y1) in glyphs:
+        rows.setdefault(round(y0, 1), []).append((x0, x1, text))
+    for row in rows.values():
+        row.sort()
+        word, end = "", None
+        for x0, x1, text in row:
+            if end is not None and x0 - end > 0.25 * (x1 - x0):
+                words.append(word)
+                word = ""
+            word, end = word + text, x1
+        words.append(word)
+    return words
+
+
+@pytest.mark.parametrize("rows, cols", [(3, 4), (8, 10), pytest.param(16, 20, marks=pytest.mark.slow)])
+def test_plan_pdf_labels_do_not_overlap(tmp_path, rows, cols):
+    """No two characters of the plan PDF overlap (so no two ids, dimensions or title lines do), every
+    id that is drawn is drawn once, and an id left out for space is counted in the title block."""
+    pytest.importorskip("pdfminer")
+    mesh = hex_polymesh(rows, cols)
+    _, pdf_path = write_plan_drawings(mesh, tmp_path, project_name="Labels")
+    glyphs = _pdf_glyphs(pdf_path)
+    boxes = np.array([b for _, b in glyphs])
+    assert len(boxes) > 100
+    shrink = 0.15 * np.minimum(boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1])[:, None]
+    inner = np.concatenate([boxes[:, :2] + shrink, boxes[:, 2:] - shrink], axis=1)
+    from scipy.spatial import cKDTree
+
+    centre, half = 0.5 * (inner[:, :2] + inner[:, 2:]), 0.5 * (inner[:, 2:] - inner[:, :2])
+    near = np.array(sorted(cKDTree(centre).query_pairs(2.0 * float(np.linalg.norm(half, axis=1).max()))),
+                    dtype=np.int64).reshape(-1, 2)
+    a, b = near[:, 0], near[:, 1]
+    apart = (np.abs(centre[a] - centre[b]) >= half[a] + half[b]).any(axis=1)
+    pairs = near[~apart]
+    assert len(pairs) == 0, [(glyphs[i], glyphs[j]) for i, j in pairs[:5]]
+    words = _pdf_words(glyphs)
+    ids = [w for w in words if len(w) == 5 and w[0] in "NBP" and w[1:].isdigit()]
+    assert len(ids) == len(set(ids)), "an id drawn twice"
+    total = mesh.n_nodes + len(mesh.edges) + mesh.n_faces
+    text = " ".join(words)
+    if len(ids) < total:
+        assert f"of {total} ids left out for space" in text
+    else:
+        assert "left out" not in text
