@@ -796,14 +796,81 @@ def _grid_score(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField) -> tuple
     return valence3, shaped, float(np.mean(polymesh.face_degrees[interior] == 6)) if interior.any() else 0.0
 
 
+#: Cells a boundary loop that lies inside one cell (a small courtyard among large cells) is split into.
+RING_SPLIT = 3
+
+
+def _split_ring_cells(fine: _Fine, labels: np.ndarray, centroids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Labels and centroids where every boundary loop meets its cells at three nodes or more, so
+    that every cell is a disc and every hole stays a polygon: a cell that wraps a whole loop (a hole
+    smaller than the cells round it, or a tiny roof) is cut into RING_SPLIT wedges round the loop's
+    centre, and where two cells share a loop without a corner on it, the one with the longer arc
+    of it is cut in two through its arc's middle (cuts in the plane of the cell, from the centre)."""
+    is_corner = np.zeros(len(fine.vertices), dtype=bool)
+    is_corner[fine.corners] = True
+    labels, centroids = labels.copy(), [c for c in centroids]
+
+    def cut(owner: int, centre: np.ndarray, start: np.ndarray, pieces: int) -> None:
+        members = np.flatnonzero(labels == owner)
+        points = fine.vertices[members]
+        _, _, axes = np.linalg.svd(points - points.mean(axis=0), full_matrices=False)
+        local = (points - centre) @ axes[:2].T
+        zero = np.arctan2(*((start - centre) @ axes[:2].T)[::-1])
+        piece = (np.floor(((np.arctan2(local[:, 1], local[:, 0]) - zero) % (2 * np.pi)) / (2 * np.pi / pieces))
+                 .astype(np.int64) % pieces)
+        for k in range(pieces):
+            part = members[piece == k]
+            if len(part) == 0:
+                continue
+            centroid = np.average(fine.vertices[part], axis=0, weights=fine.areas[part])
+            if k == 0:
+                centroids[owner] = centroid
+            else:
+                labels[part] = len(centroids)
+                centroids.append(centroid)
+
+    for loop in fine.loops:
+        around = labels[loop]
+        change = np.flatnonzero(around != np.roll(around, 1))
+        centre = fine.vertices[loop].mean(axis=0)
+        if len(change) == 0:
+            cut(int(around[0]), centre, fine.vertices[loop[0]], RING_SPLIT)
+        elif len(change) == 2 and not is_corner[loop].any():
+            runs = np.diff(np.r_[change, change[0] + len(loop)])
+            longest = int(np.argmax(runs))
+            middle = loop[(change[longest] + runs[longest] // 2) % len(loop)]
+            # the arc's middle is the cut: a piece each side of it (half-turns from the opposite ray)
+            cut(int(around[change[longest]]), centre, 2 * centre - fine.vertices[middle], 2)
+    return labels, np.asarray(centroids)
+
+
+def _within_loop_size(nodes: np.ndarray, flat: np.ndarray, offsets: np.ndarray, local_size: np.ndarray) -> None:
+    """Lower the size of the nodes of each boundary loop of the polygons to a RING_SPLIT-th of its
+    length (in place), so that no collapse of short beams closes a small hole."""
+    a, b = flat, flat[_following(offsets)]
+    key = np.minimum(a, b) * len(nodes) + np.maximum(a, b)
+    unique, count = np.unique(key, return_counts=True)
+    once = np.isin(key, unique[count == 1])
+    a, b = a[once], b[once]
+    if not len(a):
+        return
+    graph = sp.csr_matrix((np.ones(len(a)), (a, b)), shape=(len(nodes), len(nodes)))
+    _, loop = connected_components(graph, directed=False)
+    perimeter = np.bincount(loop[a], weights=np.linalg.norm(nodes[a] - nodes[b], axis=1), minlength=loop.max() + 1)
+    on_loop = np.unique(np.concatenate([a, b]))
+    local_size[on_loop] = np.minimum(local_size[on_loop], perimeter[loop[on_loop]] / RING_SPLIT)
+
+
 def _polygons(mesh: TriMesh, fine: _Fine, clusters: _Clusters, support_vertices: np.ndarray | None) -> PolyMesh:
     """The polygon grid-shell of a clustering: extraction, orientation, short beams collapsed, supports."""
-    nodes, flat, offsets, cell_labels, boundary, corners = _extract(fine, clusters.labels, clusters.centroids)
-    flat = _orient(nodes, flat, offsets, fine, clusters.labels, cell_labels)
-    region_area = np.bincount(clusters.labels, weights=fine.areas, minlength=len(clusters.centroids))
+    labels, centroids = _split_ring_cells(fine, clusters.labels, clusters.centroids)
+    nodes, flat, offsets, cell_labels, boundary, corners = _extract(fine, labels, centroids)
+    flat = _orient(nodes, flat, offsets, fine, labels, cell_labels)
+    region_area = np.bincount(labels, weights=fine.areas, minlength=len(centroids))
     # a node's size: its largest cell's (cut cells at corners are small, their neighbours are not)
     local_size = np.zeros(len(nodes))
     np.maximum.at(local_size, flat, np.sqrt(region_area)[np.repeat(cell_labels, np.diff(offsets))])
+    _within_loop_size(nodes, flat, offsets, local_size)
     nodes, flat, offsets, boundary, corners, _ = _collapse_short_beams(nodes, flat, offsets, boundary, corners,
                                                                        local_size)
     boundary_ids = np.unique(np.concatenate(fine.loops)) if fine.loops else np.zeros(0, dtype=np.int64)
@@ -889,8 +956,7 @@ def remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
     if settings.total_length is not None:
         quality["total_length_target_m"] = settings.total_length
         quality["total_length_error"] = polymesh.total_length / settings.total_length - 1.0
-    interior_faces = ~polymesh.face_boundary
-    if quality["n_faces"] < 3 or not np.any(interior_faces) and quality["n_faces"] > 12:
+    if quality["n_faces"] < 3:
         raise InputError("remesh: the tessellation degenerated", hint="lower D or A, or ask for more cells")
     return RemeshResult(polymesh=polymesh, quality=quality)
 

@@ -323,3 +323,19 @@ def test_default_cell_count_on_a_real_roof_meets_the_targets(wave_roof, seed):
     assert q["valence3_share_interior"] == 1.0
     assert abs(q["achieved_size_ratio"] / q["field_size_ratio"] - 1) <= 0.25
     assert abs(q["achieved_max_aspect"] / q["field_max_aspect"] - 1) <= 0.25
+
+
+@pytest.mark.parametrize("seed, n_cells", [(4, 6), (4, 14), (14, 12), (39, 14)])
+def test_a_hole_smaller_than_the_cells_round_it_is_met_by_several_cells(seed, n_cells):
+    """A courtyard that one cell would wrap (a round hole among large cells) is cut into wedges, so
+    the grid is still a valid polygon mesh with the surface's topology: V - E + F = 1 - holes."""
+    from tests.generated_surfaces import generate_surface
+
+    surface = generate_surface(seed)
+    assert surface.kind == "hole" and surface.n_holes >= 1
+    mesh = TriMesh(vertices=surface.vertices, faces=surface.faces)
+    result = remesh(mesh, _field(mesh), RemeshSettings(n_cells=n_cells, lloyd_iterations=20))
+    polymesh = result.polymesh
+    _check_valid(polymesh)
+    V, E, F = polymesh.n_nodes, len(polymesh.edges), polymesh.n_faces
+    assert V - E + F == 1 - surface.n_holes
