@@ -41,3 +41,7 @@ def frame_3d(ax, points: np.ndarray) -> None:
     ax.set_ylim(lo[1], lo[1] + max(span[1], 1e-9))
     ax.set_zlim(middle - 0.5 * height, middle + 0.5 * height)
     ax.set_box_aspect((max(span[0], 1e-9), max(span[1], 1e-9), height))
+    # as many height ticks as the box is tall can hold without their labels running together
+    from matplotlib.ticker import MaxNLocator
+
+    ax.zaxis.set_major_locator(MaxNLocator(nbins=int(np.clip(round(8 * height / max(span.max(), 1e-9)), 1, 6))))
