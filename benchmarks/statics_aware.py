@@ -15,8 +15,16 @@ its template, the others with the quick start's defaults and flagged supports). 
 | non-convex panels (a corner over 185 deg in the panel's plane) | <= 5 %, none over 200 deg |
 | planarity of every panel (largest node distance from its best-fit plane) | <= 0.5 % of the mean beam |
 | closeness (largest node distance to the surface) | <= 0.5 % of the bounding-box diagonal |
-| size correlation with the field (Spearman) | >= 0.7 and within 0.1 of the remeshed grid's, where the field's sizes span >= 1.3 |
+| size correlation with the field (Spearman) | >= 0.7 where the field's sizes span >= 1.3 at the cells measured; within 0.1 of the remeshed grid's where the field's do |
 | optimize seconds | <= 3 x the remesh's |
+
+The span at the cells measured is the 95th over the 5th percentile of the field's size at the
+interior cells (of the remeshed or the optimised grid, the larger; ``field_size_span_cells``). The
+field's own max/min (``field_span``, D on every roof) also counts the cut boundary cells, where the
+real roofs' fields vary most (next to their supports): at 60 cells the interior cells of hangar,
+Envelope and stadium see a span of 1.00-1.04, and their correlation, or none where the span is 1,
+measures the cells' noise, not their grading. The optimiser's loss is judged wherever the field is
+graded, as before.
 
 Printed: one row per roof and size with each figure and a mark per target missed, then per target
 how many rows meet it; written to OUT/statics_aware.csv. Peak memory is the run's (its max RSS).
@@ -43,8 +51,8 @@ REAL_SURFACES = Path(os.environ.get("GRIDSHELL_SURFACES", ROOT.parent / "shared"
 TARGETS = {"hexagons": 0.70, "valence3": 0.95, "nonconvex": 0.05, "worst_corner": 200.0, "planarity": 0.005,
            "closeness": 0.005, "correlation": 0.7, "correlation_drop": 0.1, "span": 1.3, "speed": 3.0}
 COLUMNS = ("name", "cells", "hexagons", "valence3", "nonconvex", "worst_corner_deg", "planarity_rel",
-           "closeness_rel", "correlation_remesh", "correlation", "field_span", "remesh_s", "optimize_s",
-           "peak_mib", "grading_kept", "short_left", "missed", "status")
+           "closeness_rel", "correlation_remesh", "correlation", "field_span", "cells_span", "remesh_s",
+           "optimize_s", "peak_mib", "grading_kept", "short_left", "missed", "status")
 
 
 def panel_figures(path: Path) -> tuple[float, float, float, float]:
@@ -160,12 +168,20 @@ def measure(name: str, cells: int, args: list[str], out: Path, timeout: float) -
         "closeness_rel": after.get("closeness_max_rel"),
         "correlation_remesh": optimize["before"].get("size_correlation"), "correlation": after.get("size_correlation"),
         "field_span": remesh.get("field_size_ratio"),
+        "cells_span": _cells_span(optimize["before"], after, remesh.get("field_size_ratio")),
         "remesh_s": stages["remesh"].get("duration_s"), "optimize_s": stages["optimize"].get("duration_s"),
         "grading_kept": optimize.get("buildable", {}).get("grading_kept"),
         "short_left": optimize.get("buildable", {}).get("short_beams_left"), "status": "ok",
         "seconds": round(time.perf_counter() - started, 1)})
     row["missed"] = " ".join(missed(row)) or "-"
     return row
+
+
+def _cells_span(before: dict, after: dict, field_span: float | None) -> float | None:
+    """The field's span over the interior cells the correlation is measured on (the larger of the
+    remeshed and the optimised grid's); the field's own max/min from runs that do not report it."""
+    spans = [q["field_size_span_cells"] for q in (before, after) if q.get("field_size_span_cells") is not None]
+    return max(spans) if spans else field_span
 
 
 def missed(row: dict) -> list[str]:
@@ -181,9 +197,14 @@ def missed(row: dict) -> list[str]:
         out.append("planar")
     if (row.get("closeness_rel") or 1) > t["closeness"]:
         out.append("close")
+    # the optimiser keeps the remesh's correlation wherever the field is graded; the correlation
+    # reaches 0.7 where the interior cells it is measured on see the grading
     graded = (row.get("field_span") or 0) >= t["span"]
+    seen = (row.get("cells_span") or 0) >= t["span"]
     r0, r1 = row.get("correlation_remesh"), row.get("correlation")
-    if graded and (r1 is None or r1 < t["correlation"] or (r0 is not None and r0 - r1 > t["correlation_drop"])):
+    low = seen and (r1 is None or r1 < t["correlation"])
+    lost = r0 is not None and (r1 is None or r0 - r1 > t["correlation_drop"])
+    if graded and (low or lost):
         out.append("grading")
     if (row.get("optimize_s") or 0) > t["speed"] * max(row.get("remesh_s") or 0, 1e-9):
         out.append("speed")
