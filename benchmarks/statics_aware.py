@@ -15,7 +15,7 @@ its template, the others with the quick start's defaults and flagged supports). 
 | non-convex panels (a corner over 185 deg in the panel's plane) | <= 5 %, none over 200 deg |
 | planarity of every panel (largest node distance from its best-fit plane) | <= 0.5 % of the mean beam |
 | closeness (largest node distance to the surface) | <= 0.5 % of the bounding-box diagonal |
-| size correlation with the field (Spearman) | >= 0.7 where the field's sizes span >= 1.3 at the cells measured; within 0.1 of the remeshed grid's where the field's do |
+| size correlation with the field (Spearman; Pearson printed beside it) | >= 0.7 where the field's sizes span >= 1.3 at the cells measured; within 0.1 of the remeshed grid's where the field's do |
 | optimize seconds | <= 3 x the remesh's |
 
 The span at the cells measured is the 95th over the 5th percentile of the field's size at the
@@ -51,7 +51,8 @@ REAL_SURFACES = Path(os.environ.get("GRIDSHELL_SURFACES", ROOT.parent / "shared"
 TARGETS = {"hexagons": 0.70, "valence3": 0.95, "nonconvex": 0.05, "worst_corner": 200.0, "planarity": 0.005,
            "closeness": 0.005, "correlation": 0.7, "correlation_drop": 0.1, "span": 1.3, "speed": 3.0}
 COLUMNS = ("name", "cells", "hexagons", "valence3", "nonconvex", "worst_corner_deg", "planarity_rel",
-           "closeness_rel", "correlation_remesh", "correlation", "field_span", "cells_span", "remesh_s",
+           "closeness_rel", "correlation_remesh", "correlation", "pearson_remesh", "pearson", "field_span", "cells_span",
+           "remesh_s",
            "optimize_s", "peak_mib", "grading_kept", "short_left", "missed", "status")
 
 
@@ -166,7 +167,9 @@ def measure(name: str, cells: int, args: list[str], out: Path, timeout: float) -
         "hexagons": after.get("hexagon_share_interior"), "valence3": after.get("valence3_share_interior"),
         "nonconvex": nonconvex, "worst_corner_deg": worst, "planarity_rel": planarity,
         "closeness_rel": after.get("closeness_max_rel"),
-        "correlation_remesh": optimize["before"].get("size_correlation"), "correlation": after.get("size_correlation"),
+        "correlation_remesh": optimize["before"].get("size_rank_correlation"),
+        "correlation": after.get("size_rank_correlation"),
+        "pearson_remesh": optimize["before"].get("size_correlation"), "pearson": after.get("size_correlation"),
         "field_span": remesh.get("field_size_ratio"),
         "cells_span": _cells_span(optimize["before"], after, remesh.get("field_size_ratio")),
         "remesh_s": stages["remesh"].get("duration_s"), "optimize_s": stages["optimize"].get("duration_s"),

@@ -1073,8 +1073,11 @@ def polymesh_quality(polymesh: PolyMesh, *, mesh: TriMesh | None = None, field: 
         graded = _size_grading(sizes[pick], prescribed, field)
         if graded is not None:
             quality["size_correlation"], quality["size_grading_slope"], quality["achieved_size_ratio"] = graded
+            from scipy.stats import spearmanr
+
+            quality["size_rank_correlation"] = float(spearmanr(prescribed, sizes[pick]).statistic)
         else:
-            quality["size_correlation"] = None
+            quality["size_correlation"] = quality["size_rank_correlation"] = None
     return quality
 
 

@@ -94,6 +94,7 @@ def test_sixty_cells_follow_a_field_graded_on_their_scale_and_report_the_span_th
     q = result.quality
     assert 1.3 <= q["field_size_span_cells"] <= 1.8
     assert q["size_correlation"] > 0.9
+    assert q["size_rank_correlation"] > 0.9      # issue 13's measure: ranks, on the same cells
     assert 0.8 <= q["size_grading_slope"] <= 1.25
 
 

@@ -38,7 +38,8 @@ LABELS: dict[str, tuple[str, str, float]] = {
     # grids
     "hexagon_share_interior": ("hexagons among interior cells", "%", 100.0),
     "valence3_share_interior": ("interior nodes with three beams", "%", 100.0),
-    "size_correlation": ("size correlation with the field (Spearman)", "", 1.0),
+    "size_correlation": ("size correlation with the field (Pearson)", "", 1.0),
+    "size_rank_correlation": ("size rank correlation with the field (Spearman)", "", 1.0),
     "size_grading_slope": ("size grading slope", "", 1.0),
     "size_ratio_p5_p95": ("size ratio, 95th over 5th percentile", "", 1.0),
     "n_nodes": ("nodes", "", 1.0),

@@ -145,7 +145,8 @@ def _summary(project: Project, surface, polymesh, analysis: dict, fabrication: d
 
 
 #: The figures of a grid shown for the remesh and, before and after, for the optimisation.
-GRID_KEYS = ("hexagon_share_interior", "valence3_share_interior", "size_correlation", "achieved_size_ratio",
+GRID_KEYS = ("hexagon_share_interior", "valence3_share_interior", "size_correlation", "size_rank_correlation",
+             "achieved_size_ratio",
              "achieved_max_aspect", "n_nodes", "n_beams", "n_faces", "total_length_m", "mean_beam_length_m",
              "shortest_beam_m", "smallest_angle_deg")
 OPTIMIZE_KEYS = ("nonconvex_faces", "regularity", "planarity_max_m", "planarity_p95_m", "planarity_max_rel",
