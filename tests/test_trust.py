@@ -560,3 +560,14 @@ def test_a_dxf_is_the_same_bytes_from_any_process(tmp_path):
     assert len(set(digests)) == 1
     doc = ezdxf.readfile(tmp_path / "p1.dxf")
     assert doc.header["$INSUNITS"] == 4 and len(doc.modelspace().query("LWPOLYLINE")) == 1
+
+
+def test_a_mechanism_is_reported_as_one_naming_the_supports(capsys, tmp_path):
+    """Rollers round a cap's whole edge leave it free to slide and turn in plan: the run ends with
+    exit 2 and one message that says mechanism and names the [[supports]] keys, no traceback."""
+    project = _project(tmp_path, '[surface]\ntemplate = "cap"\n[surface.parameters]\nrings = 4\n'
+                                 '[[supports]]\nselect = "boundary"\nrestraint = "roller_z"\n')
+    code, out, err = _cli(capsys, "run", str(project), "--out", str(tmp_path / "out"), "--until", "shell", "--quiet")
+    assert code == 2 and "Traceback" not in err and err.count("error:") == 1, err
+    assert "mechanism" in err and "3 rigid-body mode" in err
+    assert "[[supports]]" in err and "pinned" in err

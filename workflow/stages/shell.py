@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from engine.errors import MechanismError
+
 from engine.loads import LoadCase, LoadCombination, combine
 from fabrication.files import write_text_atomic
 
@@ -58,7 +60,12 @@ def run(ctx):
     ctx.step("loads")
     loads = shell_nodal_loads(mesh, case, thickness=thickness, density=project.shell.density)
     ctx.step(f"solving {mesh.n_vertices * 6} DOF")
-    result = analyse_shell(mesh, surface.supports, loads, thickness=thickness, material=material)
+    try:
+        result = analyse_shell(mesh, surface.supports, loads, thickness=thickness, material=material)
+    except MechanismError as error:
+        error.hint = ('support more of the surface or restrain more directions: [[supports]] select and '
+                      'restraint = "pinned" instead of rollers (with --surface: --supports boundary)')
+        raise
     ctx.step("writing")
     save_result(result, ctx.folder / "shell.npz")
     n1, n2 = result.face_principal_forces[:, 0], result.face_principal_forces[:, 1]
