@@ -100,62 +100,18 @@ def _real_cases() -> list[Case]:
 def _generated_cases(n: int, out: Path, first_seed: int = 0, vary: bool = False) -> list[Case]:
     if n <= 0:
         return []
-    from tests.generated_surfaces import generate_surface, write_ply
+    from tests.generated_surfaces import drawn_settings, generate_surface, write_ply
 
     cases = []
     for seed in range(first_seed, first_seed + n):
         surface = generate_surface(seed)
         path = write_ply(surface, out / "surfaces" / f"{surface.name}.ply")
-        supports, settings = _drawn_settings(seed, surface.span_m) if vary else ("flagged", "")
+        supports, settings = drawn_settings(seed, surface.span_m) if vary else ("flagged", "")
         cases.append(Case(name=surface.name + ("-v" if vary else ""), source="generated", surface=path,
                           supports=supports, settings=settings))
     return cases
 
 
-# materials with the sections, joints and panels a designer would pair them with
-_KITS = (
-    ("steel_s355", "circular_hollow", (0.0483, 0.0889, 0.1143, 0.1683), "steel", "glass"),
-    ("steel_s235", "rectangular_hollow", (0.06, 0.08, 0.12, 0.16), "steel", "glass"),
-    ("aluminium_6061", "circular_hollow", (0.012, 0.03, 0.05, 0.08), "socket", "acrylic"),
-    ("aluminium_6063", "solid_round", (0.01, 0.02, 0.03), "socket", "acrylic"),
-    ("glulam_gl24h", "solid_rectangle", (0.12, 0.16, 0.2, 0.24), "steel", "glass"),
-)
-
-
-def _drawn_settings(seed: int, span_m: float) -> tuple[str, str]:
-    """Supports and project settings drawn from a seed: a material with a section of its kind and a size
-    that grows with the span, the joint kind, D and A, panels or none, stock sheets, the snow load."""
-    import numpy as np
-
-    rng = np.random.default_rng(10_000 + seed)
-    material, kind, sizes, joints, panels = _KITS[rng.integers(len(_KITS))]
-    size = sizes[min(len(sizes) - 1, int(rng.integers(0, 2)) + int(np.searchsorted((10, 25, 45), span_m)))]
-    if kind == "circular_hollow":
-        section = f'kind = "{kind}"\ndiameter = "{size * 1000:.1f} mm"\nthickness = "{max(1.0, size * 1000 / 20):.1f} mm"'
-    elif kind == "rectangular_hollow":
-        section = (f'kind = "{kind}"\nheight = "{size * 1000:.0f} mm"\nwidth = "{size * 600:.0f} mm"\n'
-                   f'thickness = "{max(2.0, size * 1000 / 25):.1f} mm"')
-    elif kind == "solid_round":
-        section = f'kind = "{kind}"\ndiameter = "{size * 1000:.0f} mm"'
-    else:
-        section = f'kind = "{kind}"\nheight = "{size * 1000:.0f} mm"\nwidth = "{size * 500:.0f} mm"'
-    lines = [f'[material]\nname = "{material}"', f"[section]\n{section}",
-             f"[field]\nmax_size_ratio = {rng.choice([1.0, 1.5, 2.0, 3.0])}\nmax_aspect = {rng.choice([1.0, 2.0, 3.0])}",
-             f'[loads.cases.dead]\nself_weight = 1.0\narea_true = "{rng.choice([0.2, 0.5, 1.0])} kN/m^2"',
-             f'[loads.cases.snow]\narea_plan = "{rng.choice([0.5, 1.0, 2.0])} kN/m^2"',
-             "[loads.combinations.ULS]\nlimit_state = \"ULS\"\nfactors = { dead = 1.35, snow = 1.5 }",
-             "[loads.combinations.SLS]\nlimit_state = \"SLS\"\nfactors = { dead = 1.0, snow = 1.0 }",
-             f'[fabrication.joints]\nkind = "{joints}"']
-    if rng.random() < 0.2:
-        lines.append("[fabrication.panels]\nenabled = false")
-    elif panels == "acrylic":
-        lines.append('[fabrication.panels]\nmaterial = "acrylic"\nthickness = "3 mm"\n'
-                     '[fabrication.sheets]\nwidth = "1200 mm"\nheight = "600 mm"')
-    else:
-        lines.append('[fabrication.panels]\nmaterial = "glass"\nthickness = "10 mm"\n'
-                     '[fabrication.sheets]\nwidth = "6000 mm"\nheight = "3210 mm"\nsizes = [["3210 mm", "2250 mm"]]')
-    supports = str(rng.choice(["flagged", "flagged", "boundary"]))
-    return supports, "\n\n".join(lines) + "\n"
 
 
 def _with_cells(text: str, cells: int) -> str:

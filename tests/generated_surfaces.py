@@ -24,6 +24,9 @@ annulus (1 + holes boundary loops, every boundary edge in one triangle, every ot
 consistently oriented triangles with normals pointing up (+z), smallest triangle angle above 15 degrees,
 at least one flagged vertex. The same seed and arguments give identical arrays.
 
+``drawn_settings(seed, span)`` draws the rest of a project for such a roof (material, section, joints,
+D and A, loads, panels, sheets, supports), so that runs meet settings nobody tuned the product on.
+
 ``write_ply`` writes the ASCII PLY that ``workflow.surface_io`` writes and reads (red vertices are
 the flagged supports); ``surfaces(n)`` is the list for seeds 0..n-1.
 """
@@ -37,7 +40,7 @@ import numpy as np
 
 from engine.mesh import boundary_loops
 
-__all__ = ["KINDS", "OUTLINES", "SUPPORT_PATTERNS", "GeneratedSurface", "GeneratorError",
+__all__ = ["KINDS", "OUTLINES", "SUPPORT_PATTERNS", "GeneratedSurface", "GeneratorError", "drawn_settings",
            "generate_surface", "surfaces", "triangle_angles_deg", "write_ply"]
 
 KINDS = ("dome", "saddle", "ridge", "wave", "hole")
@@ -551,3 +554,49 @@ def write_ply(surface: GeneratedSurface, path: str | Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     mesh = TriMesh(vertices=surface.vertices, faces=surface.faces, flagged=surface.flagged, name=surface.name)
     return write_surface_ply(mesh, path)
+
+
+# materials with the sections, joints and panels a designer would pair them with
+_KITS = (
+    ("steel_s355", "circular_hollow", (0.0483, 0.0889, 0.1143, 0.1683), "steel", "glass"),
+    ("steel_s235", "rectangular_hollow", (0.06, 0.08, 0.12, 0.16), "steel", "glass"),
+    ("aluminium_6061", "circular_hollow", (0.012, 0.03, 0.05, 0.08), "socket", "acrylic"),
+    ("aluminium_6063", "solid_round", (0.01, 0.02, 0.03), "socket", "acrylic"),
+    ("glulam_gl24h", "solid_rectangle", (0.12, 0.16, 0.2, 0.24), "steel", "glass"),
+)
+
+
+def drawn_settings(seed: int, span_m: float) -> tuple[str, str]:
+    """Supports ("flagged" or "boundary") and the TOML text of project settings drawn from a seed: a
+    material with a section of its kind and a size that grows with the span, the joint kind, D and A,
+    the loads, panels or none, stock sheets. Valid, and not tuned to pass: many designs fail their
+    checks, which the run reports as findings."""
+    rng = np.random.default_rng(10_000 + seed)
+    material, kind, sizes, joints, panels = _KITS[rng.integers(len(_KITS))]
+    size = sizes[min(len(sizes) - 1, int(rng.integers(0, 2)) + int(np.searchsorted((10, 25, 45), span_m)))]
+    if kind == "circular_hollow":
+        section = f'kind = "{kind}"\ndiameter = "{size * 1000:.1f} mm"\nthickness = "{max(1.0, size * 1000 / 20):.1f} mm"'
+    elif kind == "rectangular_hollow":
+        section = (f'kind = "{kind}"\nheight = "{size * 1000:.0f} mm"\nwidth = "{size * 600:.0f} mm"\n'
+                   f'thickness = "{max(2.0, size * 1000 / 25):.1f} mm"')
+    elif kind == "solid_round":
+        section = f'kind = "{kind}"\ndiameter = "{size * 1000:.0f} mm"'
+    else:
+        section = f'kind = "{kind}"\nheight = "{size * 1000:.0f} mm"\nwidth = "{size * 500:.0f} mm"'
+    lines = [f'[material]\nname = "{material}"', f"[section]\n{section}",
+             f"[field]\nmax_size_ratio = {rng.choice([1.0, 1.5, 2.0, 3.0])}\nmax_aspect = {rng.choice([1.0, 2.0, 3.0])}",
+             f'[loads.cases.dead]\nself_weight = 1.0\narea_true = "{rng.choice([0.2, 0.5, 1.0])} kN/m^2"',
+             f'[loads.cases.snow]\narea_plan = "{rng.choice([0.5, 1.0, 2.0])} kN/m^2"',
+             "[loads.combinations.ULS]\nlimit_state = \"ULS\"\nfactors = { dead = 1.35, snow = 1.5 }",
+             "[loads.combinations.SLS]\nlimit_state = \"SLS\"\nfactors = { dead = 1.0, snow = 1.0 }",
+             f'[fabrication.joints]\nkind = "{joints}"']
+    if rng.random() < 0.2:
+        lines.append("[fabrication.panels]\nenabled = false")
+    elif panels == "acrylic":
+        lines.append('[fabrication.panels]\nmaterial = "acrylic"\nthickness = "3 mm"\n'
+                     '[fabrication.sheets]\nwidth = "1200 mm"\nheight = "600 mm"')
+    else:
+        lines.append('[fabrication.panels]\nmaterial = "glass"\nthickness = "10 mm"\n'
+                     '[fabrication.sheets]\nwidth = "6000 mm"\nheight = "3210 mm"\nsizes = [["3210 mm", "2250 mm"]]')
+    supports = str(rng.choice(["flagged", "flagged", "boundary"]))
+    return supports, "\n\n".join(lines) + "\n"
