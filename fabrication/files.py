@@ -124,7 +124,86 @@ def stamp_step(path: str | os.PathLike) -> None:
         data = data[:match.start(1)] + stamp + data[match.end(1):]
     numbers = itertools.count(1)
     data = _STEP_OCCURRENCE.sub(lambda m: m.group(1) + str(next(numbers)).encode() + m.group(3), data)
-    path.write_bytes(data)
+    path.write_bytes(canonical_step_styles(data))
+
+
+_STEP_ENTITY = re.compile(rb"#(\d+)\s*=\s*((?:[^;']|'(?:[^']|'')*')*);")
+_STEP_REFERENCE = re.compile(rb"#(\d+)")
+_STEP_STRING = re.compile(rb"'(?:[^']|'')*'")
+_STEP_STYLES = re.compile(rb"(?m)^#(\d+)\s*=\s*MECHANICAL_DESIGN_GEOMETRIC_PRESENTATION_REPRESENTATION\s*\(")
+
+
+def canonical_step_styles(data: bytes) -> bytes:
+    """The colours of a STEP file in an order that follows from the model alone.
+
+    OCCT writes the presentation (MECHANICAL_DESIGN_GEOMETRIC_PRESENTATION_REPRESENTATION, its
+    STYLED_ITEMs, their style chains down to the shared COLOUR_RGBs) last, in the order of a map
+    keyed by memory addresses, so the same model gives another order, other ids and another first
+    definition of each colour from run to run. Here those entities are numbered again from the
+    first of them: the presentations sorted by their content (with the ids of the geometry they
+    style, which are the same every run), then depth first through their references. Files whose
+    presentation is referenced from before it, or that have none, are returned as they are."""
+    first = _STEP_STYLES.search(data)
+    end = data.rfind(b"ENDSEC;")
+    if first is None or end < first.start():
+        return data
+    start = int(first.group(1))
+    tail = {int(m.group(1)): m.group(2) for m in _STEP_ENTITY.finditer(data, first.start(), end)}
+    if min(tail) != start or any(int(r) >= start for r in _STEP_REFERENCE.findall(
+            _STEP_STRING.sub(b"''", data[:first.start()]))):
+        return data
+
+    def inner(body: bytes) -> list[int]:
+        return [r for r in map(int, _STEP_REFERENCE.findall(_STEP_STRING.sub(b"''", body))) if r in tail]
+
+    keys: dict[int, bytes] = {}
+
+    def key(entity: int) -> bytes:
+        """The entity's text with every reference into the presentation replaced by its own key."""
+        stack = [entity]
+        while stack:
+            top = stack[-1]
+            if top in keys:
+                stack.pop()
+                continue
+            missing = [r for r in inner(tail[top]) if r not in keys]
+            if missing:
+                if len(stack) > len(tail):
+                    raise ValueError("a cycle in the STEP presentation")
+                stack.extend(missing)
+                continue
+            keys[top] = _STEP_REFERENCE.sub(
+                lambda m: b"(" + keys[int(m.group(1))] + b")" if int(m.group(1)) in tail else m.group(0), tail[top])
+            stack.pop()
+        return keys[entity]
+
+    referenced = {r for body in tail.values() for r in inner(body)}
+    try:
+        roots = sorted((e for e in tail if e not in referenced), key=key)
+    except ValueError:
+        return data
+    order: list[int] = []
+    seen: set[int] = set()
+    for root in roots:
+        stack = [root]
+        while stack:
+            entity = stack.pop()
+            if entity in seen:
+                continue
+            seen.add(entity)
+            order.append(entity)
+            stack.extend(reversed(inner(tail[entity])))
+    new_id = {old: start + i for i, old in enumerate(order)}
+
+    def renumber(body: bytes) -> bytes:
+        parts = _STEP_STRING.split(body)
+        strings = _STEP_STRING.findall(body)
+        parts = [_STEP_REFERENCE.sub(lambda m: b"#%d" % new_id.get(int(m.group(1)), int(m.group(1))), part)
+                 for part in parts]
+        return b"".join(itertools.chain.from_iterable(itertools.zip_longest(parts, strings, fillvalue=b"")))
+
+    lines = b"".join(b"#%d = %s;\n" % (new_id[old], renumber(tail[old])) for old in order)
+    return data[:first.start()] + lines + data[end:]
 
 
 _CORE_TIMES = re.compile(rb"(<dcterms:(?:created|modified)[^>]*>)([^<]*)(</dcterms:)")

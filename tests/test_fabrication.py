@@ -5,6 +5,7 @@ part files) against the slower ways they replace."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -415,3 +416,68 @@ def test_beams_step_holds_each_tube_as_cut(small_run):
     area = np.pi * t * (D - t)
     for name, shape in parts:
         assert _volume(shape) == pytest.approx(area * cut.loc[name, "cut_length_mm"], rel=0.01), name
+
+
+_WRITE_GRIDSHELL_STEP = """
+import sys
+from tests.test_panels import hex_polymesh
+from fabrication.model3d import write_gridshell_step
+write_gridshell_step(hex_polymesh(2, 3), [], 5.0, 10.0, sys.argv[1])
+"""
+
+
+def test_gridshell_step_is_the_same_bytes_from_run_to_run_with_its_colours(tmp_path):
+    """OCCT writes the colours in an order of memory addresses: written by two processes, the file
+    differed. Now the bytes are the same, and OCCT's own reader finds each part's colour: joints
+    grey, beams blue."""
+    import subprocess
+    import sys
+
+    from OCP.Quantity import Quantity_Color
+    from OCP.STEPCAFControl import STEPCAFControl_Reader
+    from OCP.TCollection import TCollection_ExtendedString
+    from OCP.TDataStd import TDataStd_Name
+    from OCP.TDF import TDF_LabelSequence
+    from OCP.TDocStd import TDocStd_Document
+    from OCP.XCAFApp import XCAFApp_Application
+    from OCP.TDF import TDF_Label
+    from OCP.XCAFDoc import XCAFDoc_ColorTool, XCAFDoc_ColorType, XCAFDoc_DocumentTool, XCAFDoc_ShapeTool
+
+    paths = [tmp_path / f"g{i}.step" for i in range(2)]
+    root = Path(__file__).resolve().parents[1]
+    for path in paths:
+        subprocess.run([sys.executable, "-c", _WRITE_GRIDSHELL_STEP, str(path)], check=True, cwd=root)
+    assert paths[0].read_bytes() == paths[1].read_bytes()
+    document = TDocStd_Document(TCollection_ExtendedString("XmlOcaf"))
+    XCAFApp_Application.GetApplication_s().NewDocument(TCollection_ExtendedString("MDTV-XCAF"), document)
+    reader = STEPCAFControl_Reader()
+    reader.SetNameMode(True)
+    reader.SetColorMode(True)
+    reader.ReadFile(str(paths[0]))
+    assert reader.Transfer(document)
+    shapes = XCAFDoc_DocumentTool.ShapeTool_s(document.Main())
+    free = TDF_LabelSequence()
+    shapes.GetFreeShapes(free)
+    components = TDF_LabelSequence()
+    XCAFDoc_ShapeTool.GetComponents_s(free.Value(1), components)
+    found = {}
+    for i in range(1, components.Length() + 1):
+        label = components.Value(i)
+        name = TDataStd_Name()
+        assert label.FindAttribute(TDataStd_Name.GetID_s(), name)
+        part = TDF_Label()
+        XCAFDoc_ShapeTool.GetReferredShape_s(label, part)
+        colour = Quantity_Color()
+        assert any(XCAFDoc_ColorTool.GetColor_s(where, kind, colour) for where in (label, part)
+                   for kind in (XCAFDoc_ColorType.XCAFDoc_ColorGen, XCAFDoc_ColorType.XCAFDoc_ColorSurf)), \
+            name.Get().ToExtString()
+        found[name.Get().ToExtString()] = (colour.Red(), colour.Green(), colour.Blue())
+    from tests.test_panels import hex_polymesh
+
+    mesh = hex_polymesh(2, 3)
+    assert len(found) == mesh.n_nodes + len(mesh.edges)
+    grey = {v for k, v in found.items() if k.startswith("J")}
+    blue = {v for k, v in found.items() if k.startswith("B")}
+    assert len(grey) == 1 and len(blue) == 1 and grey != blue
+    (r, g, b), = blue
+    assert b > r and b > g
