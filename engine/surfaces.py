@@ -32,12 +32,15 @@ _TO_Z_UP = {"z": ((0, 1), (1, 1), (2, 1)), "y": ((0, 1), (2, -1), (1, 1)), "x": 
 
 def to_z_up(vertices: np.ndarray, up: str) -> np.ndarray:
     """The vertices (n, 3) of a mesh modelled with ``up`` (one of UP_AXES) as up, rotated so that it
-    points along +z (a rotation: lengths, areas and handedness are kept)."""
+    points along +z (a rotation: lengths, areas and handedness are kept). Vertices that are not
+    (n, 3) come back as they are, for clean_mesh to report."""
     try:
         picks = _TO_Z_UP[up]
     except KeyError:
         raise ValueError(f"up axis {up!r}: allowed are {', '.join(UP_AXES)}") from None
     vertices = np.asarray(vertices, dtype=float)
+    if up == "z" or vertices.ndim != 2 or vertices.shape[1:] != (3,):
+        return vertices
     return np.stack([sign * vertices[:, axis] for axis, sign in picks], axis=1)
 
 

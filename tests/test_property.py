@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import HealthCheck, example, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from workflow.cli import main  # noqa: E402
@@ -99,6 +99,7 @@ def meshes(draw) -> str:
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(mesh=meshes(), supports=st.sampled_from(["boundary", "flagged"]))
+@example(mesh="v 1\nv 0.0 0.0 0.0\nf 0 0 0\n", supports="boundary")   # found by this test: a one-coordinate vertex
 def test_a_damaged_mesh_is_valid_or_one_message(tmp_path_factory, mesh, supports):
     folder = tmp_path_factory.mktemp("mesh")
     (folder / "roof.obj").write_text(mesh, encoding="ascii")
@@ -108,6 +109,7 @@ def test_a_damaged_mesh_is_valid_or_one_message(tmp_path_factory, mesh, supports
 
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(mesh=meshes())
+@example(mesh="v 1\nv 0.0 0.0 0.0\nv 0.0 0.0 0.0\nf 0 0 0\n")
 def test_a_run_on_a_damaged_mesh_leaves_a_whole_stage_or_none(tmp_path_factory, mesh):
     folder = tmp_path_factory.mktemp("run")
     (folder / "roof.obj").write_text(mesh, encoding="ascii")

@@ -729,6 +729,9 @@ have z at least 0.69 times the largest (a saddle on its corners), generated ones
 def _check_upright(vertices: np.ndarray, faces: np.ndarray, path: Path, quick_start: bool) -> None:
     from engine.surfaces import normal_shares
 
+    if (vertices.ndim != 2 or vertices.shape[1:] != (3,) or faces.ndim != 2 or faces.shape[1:] != (3,)
+            or not len(faces) or faces.min() < 0 or faces.max() >= len(vertices)):
+        return                       # not a triangle mesh: the surface stage says what is wrong with it
     shares = normal_shares(vertices, faces)
     axis = int(np.argmax(shares[:2]))
     if not (shares[axis] > SIDEWAYS_SHARE and shares[2] < 0.5 * shares[axis]):
