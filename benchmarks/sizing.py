@@ -168,9 +168,9 @@ def main() -> None:
         print(f"sizing: no real surfaces at {SURFACES}; skipped", file=sys.stderr)
     if not args.no_large:
         sys.path.insert(0, str(ROOT))
-        from tests.generated_surfaces import generate_surface, write_ply
-
         from dataclasses import replace
+
+        from tests.generated_surfaces import generate_surface, write_ply
 
         # the generated dome (24 x 15 m) scaled to a station roof's 85 x 52 m, so that 1500 cells
         # of CHS 114.3 need no coarsening for their joints (about 3000 nodes)

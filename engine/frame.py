@@ -22,8 +22,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .condensed import CondensedFactor
-from .linalg import assemble_blocks, congruent
 from .errors import ConvergenceError, InputError, MechanismError
+from .linalg import assemble_blocks, congruent
 from .supports import Supports
 
 __all__ = ["FrameModel", "FrameStiffness", "LinearResult", "BucklingResult", "NonlinearResult", "factor_stiffness",

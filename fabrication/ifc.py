@@ -110,8 +110,8 @@ def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: l
     import ifcopenshell.api.material as material
     import ifcopenshell.api.pset as pset
     import ifcopenshell.api.root as root
-    import ifcopenshell.guid
     import ifcopenshell.api.unit as unit
+    import ifcopenshell.guid
 
     model = ifcopenshell.file(schema="IFC4")
     project = root.create_entity(model, ifc_class="IfcProject", name=project_name)

@@ -357,8 +357,8 @@ def test_displacements_match_pyfe3d():
     from dataclasses import replace
 
     import scipy.sparse as sp
-    from scipy.sparse.linalg import spsolve
     from pyfe3d.beamprop import BeamProp
+    from scipy.sparse.linalg import spsolve
 
     model, supports, loads = _space_frame()
     model = replace(model, elements_per_beam=1)

@@ -19,8 +19,9 @@ ezdxf = pytest.importorskip("ezdxf")
 
 @lru_cache(maxsize=None)
 def _mockup_heights():
-    from engine.parametric import mockup
     from scipy.interpolate import LinearNDInterpolator
+
+    from engine.parametric import mockup
 
     mesh = mockup(divisions=12).mesh
     return LinearNDInterpolator(mesh.vertices[:, :2], mesh.vertices[:, 2], fill_value=0.0)

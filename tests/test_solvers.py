@@ -83,9 +83,9 @@ def test_a_loose_part_of_a_shell_is_a_mechanism_for_either_library(library, monk
     import engine.solvers as solvers
     from engine.errors import MechanismError
     from engine.mesh import TriMesh
+    from engine.parametric import cap
     from engine.shell import ShellMaterial, analyse_shell
     from engine.supports import Supports
-    from engine.parametric import cap
 
     monkeypatch.setattr(solvers, "PARDISO_FROM_DOFS", 0 if library == "pardiso" else 10**9)
     one = cap(span=4.0, span_to_rise=4.0, rings=3)

@@ -8,8 +8,17 @@ import pytest
 from engine import parametric
 from engine.errors import InputError, SelectionError
 from engine.loads import LimitState, LoadCase, LoadCombination, combine, lump_area_load
-from engine.supports import (Supports, restraint_flags, select_box, select_boundary, select_flagged, select_ids,
-                             select_loop, select_nearest, select_plane)
+from engine.supports import (
+    Supports,
+    restraint_flags,
+    select_boundary,
+    select_box,
+    select_flagged,
+    select_ids,
+    select_loop,
+    select_nearest,
+    select_plane,
+)
 
 
 @pytest.fixture(scope="module")

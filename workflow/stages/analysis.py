@@ -17,20 +17,27 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.errors import MechanismError
-from engine.loads import LoadCombination, combine
-from engine.structure import BeamProperties, beam_up_vectors, gridshell_loads, node_normals, support_restraints
-from engine.findings import Finding
-from engine.supports import Supports
-from engine.parts import beam_id, node_id
-from fabrication.files import atomic_path, write_text_atomic
-
 from engine.en1993 import CHECKED, NOT_CHECKED
+from engine.errors import MechanismError
+from engine.findings import Finding
+from engine.loads import LoadCombination, combine
+from engine.parts import beam_id, node_id
+from engine.structure import BeamProperties, beam_up_vectors, gridshell_loads, node_normals, support_restraints
+from engine.supports import Supports
+from fabrication.files import atomic_path, write_text_atomic
 
 from ..config import Project
 from ._require import require
-from .sizing import (BeamSections, checks_method, make_analyse, profile_name, project_catalogue,
-                     project_sections, sized_checks, start_tubes)
+from .sizing import (
+    BeamSections,
+    checks_method,
+    make_analyse,
+    profile_name,
+    project_catalogue,
+    project_sections,
+    sized_checks,
+    start_tubes,
+)
 
 __all__ = ["run", "load", "beam_properties", "build_frame", "pick_combination", "AnalysisSummary"]
 

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.structure import node_normals
 from engine.findings import Finding
 from engine.mesh import PolyMesh
+from engine.structure import node_normals
 from fabrication.files import write_text_atomic
 
 from ..config import Project
@@ -297,7 +297,7 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
         clock.start("panels: flatten and DXFs")
         (PanelSettings, flatten_panels, write_panel_dxfs, write_panels_csv) = require(
             "fabrication", "fabrication.panels", "PanelSettings", "flatten_panels", "write_panel_dxfs", "write_panels_csv")
-        from fabrication.nesting_sheets import nest_on_stock, sheet_overshoot, write_sheet_dxfs, write_contact_sheet
+        from fabrication.nesting_sheets import nest_on_stock, sheet_overshoot, write_contact_sheet, write_sheet_dxfs
 
         p = config.panels
         panel_settings = PanelSettings(thickness_mm=MM * p.thickness, material_name=p.material, density=p.density,
@@ -379,8 +379,13 @@ def _write_ifc(ctx, folder: Path, polymesh, normals: np.ndarray, table, panels: 
 
     from engine.parts import joint_id
     from fabrication.ifc import IfcBeam, IfcJoint, IfcPanel, write_gridshell_ifc
-    from fabrication.joints import (joint_geometry, joint_hub_radius_mm, joint_setback_mm, joint_sleeve_mm,
-                                    smallest_angle)
+    from fabrication.joints import (
+        joint_geometry,
+        joint_hub_radius_mm,
+        joint_setback_mm,
+        joint_sleeve_mm,
+        smallest_angle,
+    )
     from fabrication.nc1 import grade_name
 
     project: Project = ctx.project

@@ -19,8 +19,17 @@ from engine import parametric
 from engine.errors import GridshellError, InputError
 from engine.loads import LimitState, LoadCase, LoadCombination
 from engine.mesh import TriMesh
-from engine.supports import (Supports, restraint_flags, select_box, select_boundary, select_flagged, select_ids,
-                             select_loop, select_nearest, select_plane)
+from engine.supports import (
+    Supports,
+    restraint_flags,
+    select_boundary,
+    select_box,
+    select_flagged,
+    select_ids,
+    select_loop,
+    select_nearest,
+    select_plane,
+)
 from engine.surfaces import clean_mesh, to_z_up
 from fabrication.files import write_text_atomic
 
