@@ -14,7 +14,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from engine.errors import InputError
 from engine.mesh import PolyMesh
 from engine.parts import beam_id, node_id
 

@@ -20,7 +20,7 @@ from workflow.config import load_project
 from workflow.plots.sweep import pareto_front
 from workflow.runner import _stage_key, product_version
 from workflow.stages import STAGES
-from workflow.sweep import Point, load_sweep, plan_tasks
+from workflow.sweep import Point, plan_tasks
 
 ROOT = Path(__file__).resolve().parents[1]
 GRIDSHELL = [sys.executable, "-m", "workflow.cli"]

@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from engine.errors import GridshellError
 from engine.supports import restraint_flags
 
-from .units import AreaLoad, Density, Force, Length, Stress, to_si
+from .units import AreaLoad, Density, Force, Length, Stress
 
 __all__ = ["ConfigError", "Project", "load_project", "parse_project", "read_toml", "project_from_surface", "check_inputs",
            "STAGE_SECTIONS"]
