@@ -69,7 +69,6 @@ def honeycomb_cap(nodes: int, span: float = 40.0, span_to_rise: float = 7.0):
 
 def model(nodes: int, elements_per_beam: int):
     points, beams, boundary, sphere = honeycomb_cap(nodes)
-    n_beams = len(beams)
     diameter, wall = 0.1683, 0.008
     area = np.pi / 4 * (diameter**2 - (diameter - 2 * wall) ** 2)
     inertia = np.pi / 64 * (diameter**4 - (diameter - 2 * wall) ** 4)

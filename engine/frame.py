@@ -792,7 +792,6 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     scale = max(np.linalg.norm(F_ref[free]), np.linalg.norm(F_dead[free]), 1e-300)
     x = cr.X.copy()
     triads = np.tile(np.eye(3), (cr.n_all, 1, 1))
-    control_dof = 6 * node + dof
 
     def residual(x, triads, lam):
         f_int, cache = cr.internal_forces(x, triads)

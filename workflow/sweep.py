@@ -500,7 +500,7 @@ def cmd_sweep(args) -> int:
         raise InputError(f"--workers {args.workers}: give 1 or more")
     if args.workers is not None and args.scheduler:
         raise InputError("--workers applies to the local cluster; a --scheduler cluster has its own workers")
-    rows = run_sweep(spec, out_dir, scheduler=args.scheduler, workers=args.workers, say=say)
+    run_sweep(spec, out_dir, scheduler=args.scheduler, workers=args.workers, say=say)
     print(f"results: {(out_dir / 'sweep.csv').resolve()}")
     print(f"plots: {(out_dir / 'sweep.html').resolve()}")
     return 0
