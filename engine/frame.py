@@ -63,7 +63,8 @@ class FrameModel:
         if beams.min() < 0 or beams.max() >= len(nodes):
             raise InputError(f"frame model: a beam refers to a node outside 0..{len(nodes) - 1}")
         if np.any(beams[:, 0] == beams[:, 1]):
-            raise InputError(f"frame model: beam {int(np.argmax(beams[:, 0] == beams[:, 1]))} starts and ends at one node")
+            loop = int(np.argmax(beams[:, 0] == beams[:, 1]))
+            raise InputError(f"frame model: beam {loop} starts and ends at one node")
         object.__setattr__(self, "nodes", nodes)
         object.__setattr__(self, "beams", beams)
         for name in ("E", "G", "A", "Iy", "Iz", "J"):
@@ -970,7 +971,8 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     displacements[:, 3:] = _rotation_vectors(lt)
     return NonlinearResult(path=np.array(path), limit_load_factor=limit, negative_pivots=np.array(pivots),
                            displacements=displacements[:n], converged=converged_all, load_factors=np.array(factors),
-                           iterations=np.array(iterations), monitored=np.array(monitored, dtype=float).reshape(len(path), len(watch)))
+                           iterations=np.array(iterations),
+                           monitored=np.array(monitored, dtype=float).reshape(len(path), len(watch)))
 
 
 def _single_threaded_blas():

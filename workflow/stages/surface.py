@@ -194,7 +194,8 @@ def load(folder: Path, ctx) -> SurfaceResult:
     from ..surface_io import read_surface as read
 
     vertices, faces, _ = read(folder / "surface.ply")
-    mesh = TriMesh(vertices=vertices, faces=faces, name=ctx.project.surface.template or Path(ctx.project.surface.file).stem)
+    mesh = TriMesh(vertices=vertices, faces=faces,
+                   name=ctx.project.surface.template or Path(ctx.project.surface.file).stem)
     support_data = json.loads((folder / "supports.json").read_text())["supports"]
     supports = Supports(nodes=np.array([int(k) for k in support_data], dtype=np.int64),
                         restraints=np.array(list(support_data.values()), dtype=bool).reshape(-1, 6))
