@@ -19,8 +19,9 @@ Per row: seconds per stage (manifest.json), the run's wall-clock seconds, the sh
 clashes (fabrication.json ``joint_clashes``), findings by kind (fabrication.json ``findings``), the
 structural verdict (analysis.json ``verdicts``) and whether report.html was written. Keys that are not
 written yet print "-". The cut-length minimum is --min-cut-mm, else the product's own (fabrication.json
-``limits.min_cut_length_mm``), else the section's outer size (a piece shorter than the tube is wide). The table is printed and written to OUT/any_roof.csv (rewritten after
-every run). Exit code 0; with --check, 1 when a run did not reach report.html or has joint clashes.
+``limits.min_cut_length_mm``), else the section's outer size (a piece shorter than the tube is wide). The
+table is printed and written to OUT/any_roof.csv (rewritten after every run). Exit code 0; with --check,
+1 when a run did not reach report.html or has joint clashes.
 """
 
 from __future__ import annotations
@@ -131,7 +132,8 @@ def _drawn_settings(seed: int, span_m: float) -> tuple[str, str]:
     material, kind, sizes, joints, panels = _KITS[rng.integers(len(_KITS))]
     size = sizes[min(len(sizes) - 1, int(rng.integers(0, 2)) + int(np.searchsorted((10, 25, 45), span_m)))]
     if kind == "circular_hollow":
-        section = f'kind = "{kind}"\ndiameter = "{size * 1000:.1f} mm"\nthickness = "{max(1.0, size * 1000 / 20):.1f} mm"'
+        section = (f'kind = "{kind}"\ndiameter = "{size * 1000:.1f} mm"\n'
+                   f'thickness = "{max(1.0, size * 1000 / 20):.1f} mm"')
     elif kind == "rectangular_hollow":
         section = (f'kind = "{kind}"\nheight = "{size * 1000:.0f} mm"\nwidth = "{size * 600:.0f} mm"\n'
                    f'thickness = "{max(2.0, size * 1000 / 25):.1f} mm"')
@@ -140,7 +142,8 @@ def _drawn_settings(seed: int, span_m: float) -> tuple[str, str]:
     else:
         section = f'kind = "{kind}"\nheight = "{size * 1000:.0f} mm"\nwidth = "{size * 500:.0f} mm"'
     lines = [f'[material]\nname = "{material}"', f"[section]\n{section}",
-             f"[field]\nmax_size_ratio = {rng.choice([1.0, 1.5, 2.0, 3.0])}\nmax_aspect = {rng.choice([1.0, 2.0, 3.0])}",
+             f"[field]\nmax_size_ratio = {rng.choice([1.0, 1.5, 2.0, 3.0])}\n"
+             f"max_aspect = {rng.choice([1.0, 2.0, 3.0])}",
              f'[loads.cases.dead]\nself_weight = 1.0\narea_true = "{rng.choice([0.2, 0.5, 1.0])} kN/m^2"',
              f'[loads.cases.snow]\narea_plan = "{rng.choice([0.5, 1.0, 2.0])} kN/m^2"',
              "[loads.combinations.ULS]\nlimit_state = \"ULS\"\nfactors = { dead = 1.35, snow = 1.5 }",
@@ -249,7 +252,8 @@ def _shortest_obj_edge_m(path: Path) -> float | None:
 def _shortest_cut_mm(path: Path) -> float | None:
     try:
         with path.open(newline="", encoding="utf-8") as handle:
-            values = [float(r["cut_length_mm"]) for r in csv.DictReader(handle) if r.get("cut_length_mm") not in (None, "")]
+            values = [float(r["cut_length_mm"]) for r in csv.DictReader(handle)
+                      if r.get("cut_length_mm") not in (None, "")]
     except (OSError, ValueError, KeyError):
         return None
     return min(values) if values else None
@@ -278,7 +282,8 @@ def _verdict(analysis: dict | None) -> tuple[str, str]:
     for v in failed:
         check = str(v.get("kind") or v.get("check", "?"))
         short.append(next((s for key, s in SHORT_CHECK.items() if key in check), check.split()[0]))
-    return "FAIL " + ",".join(short), "; ".join(f"{v.get('check')}: {v.get('value')} vs {v.get('limit')}" for v in failed)
+    return ("FAIL " + ",".join(short),
+            "; ".join(f"{v.get('check')}: {v.get('value')} vs {v.get('limit')}" for v in failed))
 
 
 def _findings(stages: dict) -> tuple[object, str]:
@@ -353,7 +358,8 @@ def run_one(case: Case, cells: int, out: Path, timeout: float, min_cut_mm: float
     for name in STAGES:
         entry = stages.get(name, {})
         seconds = entry.get("duration_s")
-        v[name] = round(float(seconds), 1) if entry.get("status") in ("ran", "cached", "failed") and seconds is not None else "-"
+        timed = entry.get("status") in ("ran", "cached", "failed") and seconds is not None
+        v[name] = round(float(seconds), 1) if timed else "-"
     problem = next((n for n in STAGES if stages.get(n, {}).get("status") in ("failed", "not available")), None)
     unfinished = next((n for n in STAGES if stages.get(n, {}).get("status") not in ("ran", "cached")), None)
 
@@ -406,7 +412,8 @@ def _cell(value) -> str:
     return "-" if value is None else str(value)
 
 
-TABLE = (("name", "name"), ("cells", "cells"), ("built", "built"), *((s, s[:5] if s != "fabrication" else "fabr") for s in STAGES),
+TABLE = (("name", "name"), ("cells", "cells"), ("built", "built"),
+         *((s, s[:5] if s != "fabrication" else "fabr") for s in STAGES),
          ("total_s", "total"), ("shortest_beam_mm", "beam_mm"), ("shortest_cut_mm", "cut_mm"),
          ("joint_clashes", "clash"), ("findings_by_kind", "findings"), ("verdict", "verdict"),
          ("report_html", "html"), ("status", "status"), ("error", "error"))
@@ -425,7 +432,8 @@ def format_table(rows: list[Row], error_width: int = 70) -> str:
                                                                 "shortest_cut_mm", "joint_clashes")}
 
     def line(cells: list[str]) -> str:
-        return "  ".join(c.rjust(w) if i in numeric else c.ljust(w) for i, (c, w) in enumerate(zip(cells, widths))).rstrip()
+        return "  ".join(c.rjust(w) if i in numeric else c.ljust(w)
+                         for i, (c, w) in enumerate(zip(cells, widths))).rstrip()
 
     return "\n".join([line(header), line(["-" * w for w in widths]), *(line(c) for c in body)])
 
@@ -465,7 +473,8 @@ def _cells(text: str) -> list[int]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("--cells", type=_cells, default=[60, 300, 1500], help="cell counts (default 60,300,1500)")
-    parser.add_argument("--surfaces", type=int, default=20, metavar="N", help="generated roofs, seeds 0..N-1 (default 20)")
+    parser.add_argument("--surfaces", type=int, default=20, metavar="N",
+                        help="generated roofs, seeds 0..N-1 (default 20)")
     parser.add_argument("--first-seed", type=int, default=0, metavar="S",
                         help="generated roofs from seed S (S..S+N-1; default 0): roofs the product was never tuned on")
     parser.add_argument("--only-generated", action="store_true", help="the generated roofs only")
@@ -474,11 +483,15 @@ def main(argv: list[str] | None = None) -> int:
                              "loads, panels, sheets, supports) instead of the quick-start ones")
     parser.add_argument("--only-templates", action="store_true", help="the templates only")
     parser.add_argument("--match", help="only roofs whose name contains one of these comma-separated strings")
-    parser.add_argument("--out", type=Path, default=ROOT / "out" / "any_roof", help="output folder (default out/any_roof)")
+    parser.add_argument("--out", type=Path, default=ROOT / "out" / "any_roof",
+                        help="output folder (default out/any_roof)")
     parser.add_argument("--jobs", type=int, default=1, help="runs at a time (default 1)")
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds per run (default 1800)")
-    parser.add_argument("--min-cut-mm", type=float, help="shortest acceptable cut length (default: the product's limit, else the section's outer size)")
-    parser.add_argument("--check", action="store_true", help="exit 1 when a run misses report.html or has joint clashes")
+    parser.add_argument("--min-cut-mm", type=float,
+                        help="shortest acceptable cut length (default: the product's limit, else the section's "
+                             "outer size)")
+    parser.add_argument("--check", action="store_true",
+                        help="exit 1 when a run misses report.html or has joint clashes")
     args = parser.parse_args(argv)
     if args.jobs < 1:
         parser.error("--jobs must be at least 1")

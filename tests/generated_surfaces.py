@@ -318,7 +318,8 @@ def _cotangent_laplacian(xy: np.ndarray, faces: np.ndarray):
     return matrix, area
 
 
-def _fourier(rng: np.random.Generator, xy: np.ndarray, span: float, n_modes: int, cycles: tuple[float, float]) -> np.ndarray:
+def _fourier(rng: np.random.Generator, xy: np.ndarray, span: float, n_modes: int,
+             cycles: tuple[float, float]) -> np.ndarray:
     z = np.zeros(len(xy))
     for _ in range(n_modes):
         k = rng.uniform(*cycles)
@@ -328,7 +329,8 @@ def _fourier(rng: np.random.Generator, xy: np.ndarray, span: float, n_modes: int
     return z
 
 
-def _membrane(rng: np.random.Generator, xy: np.ndarray, faces: np.ndarray, fixed: np.ndarray, span: float) -> np.ndarray:
+def _membrane(rng: np.random.Generator, xy: np.ndarray, faces: np.ndarray, fixed: np.ndarray,
+              span: float) -> np.ndarray:
     """Height of a membrane under a random positive pressure, zero at the fixed vertices."""
     from scipy.sparse.linalg import spsolve
 

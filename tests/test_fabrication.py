@@ -396,7 +396,8 @@ def test_files_that_carry_a_date_carry_the_day_and_are_the_same_bytes_a_second_l
     book = openpyxl.load_workbook(tmp_path / "run0" / "cutlist.xlsx")
     assert book.properties.created.date().isoformat() == "2023-11-14"
     assert book.properties.modified.date().isoformat() == "2023-11-14"
-    assert {info.date_time[:3] for info in zipfile.ZipFile(tmp_path / "run0" / "cutlist.xlsx").infolist()} == {(2023, 11, 14)}
+    entries = zipfile.ZipFile(tmp_path / "run0" / "cutlist.xlsx").infolist()
+    assert {info.date_time[:3] for info in entries} == {(2023, 11, 14)}
     assert "'2023-11-14T00:00:00'" in written[0][1][:2000].decode()
     assert import_step(str(tmp_path / "run0" / "J0001.step")).volume == pytest.approx(6000.0)
 
