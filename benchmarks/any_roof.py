@@ -19,8 +19,9 @@ Per row: seconds per stage (manifest.json), the run's wall-clock seconds, the sh
 clashes (fabrication.json ``joint_clashes``), findings by kind (fabrication.json ``findings``), the
 structural verdict (analysis.json ``verdicts``) and whether report.html was written. Keys that are not
 written yet print "-". The cut-length minimum is --min-cut-mm, else the product's own (fabrication.json
-``limits.min_cut_length_mm``), else the section's outer size (a piece shorter than the tube is wide). The table is printed and written to OUT/any_roof.csv (rewritten after
-every run). Exit code 0; with --check, 1 when a run did not reach report.html or has joint clashes.
+``limits.min_cut_length_mm``), else the section's outer size (a piece shorter than the tube is wide). The
+table is printed and written to OUT/any_roof.csv (rewritten after every run). Exit code 0; with --check,
+1 when a run did not reach report.html or has joint clashes.
 """
 
 from __future__ import annotations
@@ -205,7 +206,8 @@ def _shortest_obj_edge_m(path: Path) -> float | None:
 def _shortest_cut_mm(path: Path) -> float | None:
     try:
         with path.open(newline="", encoding="utf-8") as handle:
-            values = [float(r["cut_length_mm"]) for r in csv.DictReader(handle) if r.get("cut_length_mm") not in (None, "")]
+            values = [float(r["cut_length_mm"]) for r in csv.DictReader(handle)
+                      if r.get("cut_length_mm") not in (None, "")]
     except (OSError, ValueError, KeyError):
         return None
     return min(values) if values else None
@@ -234,7 +236,8 @@ def _verdict(analysis: dict | None) -> tuple[str, str]:
     for v in failed:
         check = str(v.get("kind") or v.get("check", "?"))
         short.append(next((s for key, s in SHORT_CHECK.items() if key in check), check.split()[0]))
-    return "FAIL " + ",".join(short), "; ".join(f"{v.get('check')}: {v.get('value')} vs {v.get('limit')}" for v in failed)
+    return ("FAIL " + ",".join(short),
+            "; ".join(f"{v.get('check')}: {v.get('value')} vs {v.get('limit')}" for v in failed))
 
 
 def _findings(stages: dict) -> tuple[object, str]:
@@ -309,7 +312,8 @@ def run_one(case: Case, cells: int, out: Path, timeout: float, min_cut_mm: float
     for name in STAGES:
         entry = stages.get(name, {})
         seconds = entry.get("duration_s")
-        v[name] = round(float(seconds), 1) if entry.get("status") in ("ran", "cached", "failed") and seconds is not None else "-"
+        timed = entry.get("status") in ("ran", "cached", "failed") and seconds is not None
+        v[name] = round(float(seconds), 1) if timed else "-"
     problem = next((n for n in STAGES if stages.get(n, {}).get("status") in ("failed", "not available")), None)
     unfinished = next((n for n in STAGES if stages.get(n, {}).get("status") not in ("ran", "cached")), None)
 
@@ -362,7 +366,8 @@ def _cell(value) -> str:
     return "-" if value is None else str(value)
 
 
-TABLE = (("name", "name"), ("cells", "cells"), ("built", "built"), *((s, s[:5] if s != "fabrication" else "fabr") for s in STAGES),
+TABLE = (("name", "name"), ("cells", "cells"), ("built", "built"),
+         *((s, s[:5] if s != "fabrication" else "fabr") for s in STAGES),
          ("total_s", "total"), ("shortest_beam_mm", "beam_mm"), ("shortest_cut_mm", "cut_mm"),
          ("joint_clashes", "clash"), ("findings_by_kind", "findings"), ("verdict", "verdict"),
          ("report_html", "html"), ("status", "status"), ("error", "error"))
@@ -381,7 +386,8 @@ def format_table(rows: list[Row], error_width: int = 70) -> str:
                                                                 "shortest_cut_mm", "joint_clashes")}
 
     def line(cells: list[str]) -> str:
-        return "  ".join(c.rjust(w) if i in numeric else c.ljust(w) for i, (c, w) in enumerate(zip(cells, widths))).rstrip()
+        return "  ".join(c.rjust(w) if i in numeric else c.ljust(w)
+                         for i, (c, w) in enumerate(zip(cells, widths))).rstrip()
 
     return "\n".join([line(header), line(["-" * w for w in widths]), *(line(c) for c in body)])
 
@@ -421,7 +427,8 @@ def _cells(text: str) -> list[int]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("--cells", type=_cells, default=[60, 300, 1500], help="cell counts (default 60,300,1500)")
-    parser.add_argument("--surfaces", type=int, default=20, metavar="N", help="generated roofs, seeds 0..N-1 (default 20)")
+    parser.add_argument("--surfaces", type=int, default=20, metavar="N",
+                        help="generated roofs, seeds 0..N-1 (default 20)")
     parser.add_argument("--first-seed", type=int, default=0, metavar="S",
                         help="generated roofs from seed S (S..S+N-1; default 0): roofs the product was never tuned on")
     parser.add_argument("--only-generated", action="store_true", help="the generated roofs only")
@@ -430,11 +437,15 @@ def main(argv: list[str] | None = None) -> int:
                              "loads, panels, sheets, supports) instead of the quick-start ones")
     parser.add_argument("--only-templates", action="store_true", help="the templates only")
     parser.add_argument("--match", help="only roofs whose name contains one of these comma-separated strings")
-    parser.add_argument("--out", type=Path, default=ROOT / "out" / "any_roof", help="output folder (default out/any_roof)")
+    parser.add_argument("--out", type=Path, default=ROOT / "out" / "any_roof",
+                        help="output folder (default out/any_roof)")
     parser.add_argument("--jobs", type=int, default=1, help="runs at a time (default 1)")
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds per run (default 1800)")
-    parser.add_argument("--min-cut-mm", type=float, help="shortest acceptable cut length (default: the product's limit, else the section's outer size)")
-    parser.add_argument("--check", action="store_true", help="exit 1 when a run misses report.html or has joint clashes")
+    parser.add_argument("--min-cut-mm", type=float,
+                        help="shortest acceptable cut length (default: the product's limit, else the section's "
+                             "outer size)")
+    parser.add_argument("--check", action="store_true",
+                        help="exit 1 when a run misses report.html or has joint clashes")
     args = parser.parse_args(argv)
     if args.jobs < 1:
         parser.error("--jobs must be at least 1")

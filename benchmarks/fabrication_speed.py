@@ -53,8 +53,8 @@ def bench_joints(nodes: int, workers: int) -> None:
     ok = sum(r["ok"] for r in reports)
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"joints: {len(reports)} on {workers} worker(s) in {seconds:.1f} s = {seconds / len(reports):.2f} s "
-          f"per joint (target < 1 s); {ok} pass every check; peak {peak_mib:.0f} MiB (parent); joints.step {size_mb:.0f} MB; "
-          f"load average {load:.2f} before, {os.getloadavg()[0]:.2f} after")
+          f"per joint (target < 1 s); {ok} pass every check; peak {peak_mib:.0f} MiB (parent); "
+          f"joints.step {size_mb:.0f} MB; load average {load:.2f} before, {os.getloadavg()[0]:.2f} after")
     phases = {k: np.mean([r["seconds"][k] for r in reports]) for k in reports[0]["seconds"]}
     print("  per joint in a worker (s, wall): " + ", ".join(f"{k} {v:.3f}" for k, v in phases.items())
           + f"; engraving: {dict(collections.Counter(r.get('engraving') for r in reports))}")

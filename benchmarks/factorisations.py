@@ -140,7 +140,7 @@ def main() -> int:
         print("  " + line)
     cases = [(f"shell {t} triangles", lambda t=t: shell_matrix(t)) for t in args.triangles]
     cases += [(f"frame {n} nodes", lambda n=n: frame_matrix(n)) for n in args.nodes]
-    print(f"| matrix | n | non-zeros | library | factor s | solve s | residual | negative pivots | factor / fastest |")
+    print("| matrix | n | non-zeros | library | factor s | solve s | residual | negative pivots | factor / fastest |")
     print("|---|---|---|---|---|---|---|---|---|")
     for title, build in cases:
         A = build()

@@ -45,7 +45,8 @@ def honeycomb_cap(nodes: int, span: float = 40.0, span_to_rise: float = 7.0):
     plan = np.c_[i * np.sqrt(3) / 2 * side, j * 1.5 * side + np.where(even, 0.25, -0.25) * side]
     index = {(a, b): k for k, (a, b) in enumerate(zip(i.tolist(), j.tolist()))}
     edges = [(index[a, b], index[a + 1, b]) for a, b in zip(i.tolist(), j.tolist()) if (a + 1, b) in index]
-    edges += [(index[a, b], index[a, b + 1]) for a, b, e in zip(i.tolist(), j.tolist(), even) if e and (a, b + 1) in index]
+    edges += [(index[a, b], index[a, b + 1]) for a, b, e in zip(i.tolist(), j.tolist(), even)
+              if e and (a, b + 1) in index]
     edges = np.array(edges)
     keep = np.linalg.norm(plan, axis=1) <= radius
     edges = edges[keep[edges].all(axis=1)]
@@ -69,7 +70,6 @@ def honeycomb_cap(nodes: int, span: float = 40.0, span_to_rise: float = 7.0):
 
 def model(nodes: int, elements_per_beam: int):
     points, beams, boundary, sphere = honeycomb_cap(nodes)
-    n_beams = len(beams)
     diameter, wall = 0.1683, 0.008
     area = np.pi / 4 * (diameter**2 - (diameter - 2 * wall) ** 2)
     inertia = np.pi / 64 * (diameter**4 - (diameter - 2 * wall) ** 4)
@@ -269,7 +269,8 @@ def _peer_lines(frame: FrameModel, supports: Supports, loads: np.ndarray, nodes:
         lines.append(f"PyNite             {result}")
     else:
         lines.append(f"PyNite linear       {result[0]:7.2f} s   largest deflection {result[1] * 1e3:.4f} mm on the "
-                     f"{label} (ours {t_small:.2f} s, {u_small * 1e3:.4f} mm; difference {abs(result[1] / u_small - 1):.1e})")
+                     f"{label} (ours {t_small:.2f} s, {u_small * 1e3:.4f} mm; "
+                     f"difference {abs(result[1] / u_small - 1):.1e})")
     if path_nodes:
         # a model small enough for OpenSees's path, whose first critical point is a limit point
         # (ours: one pivot turns negative at the maximum; on larger domes of this kind pivots turn
@@ -284,8 +285,9 @@ def _peer_lines(frame: FrameModel, supports: Supports, loads: np.ndarray, nodes:
         if isinstance(result, str):
             lines.append(f"OpenSees path      {result}")
         else:
-            lines.append(f"OpenSees path      {result[0]:7.2f} s   largest load factor {result[1]:.4f} in {result[2]} steps on "
-                         f"the {len(small[0].nodes)}-node model (Corotational, ArcLength; ours {t_path:.2f} s, limit "
+            lines.append(f"OpenSees path      {result[0]:7.2f} s   largest load factor {result[1]:.4f} "
+                         f"in {result[2]} steps on the {len(small[0].nodes)}-node model "
+                         f"(Corotational, ArcLength; ours {t_path:.2f} s, limit "
                          f"{run.limit_load_factor:.4f} in {len(run.path) - 1} steps; difference "
                          f"{abs(result[1] / run.limit_load_factor - 1):.1e})")
     return lines

@@ -58,7 +58,8 @@ def roof(triangles: int) -> Roof:
                    faces=grid_triangles(2 * divisions, 2 * divisions))
     ends = np.flatnonzero((np.isclose(y, 0) | np.isclose(y, length)).ravel())
     middle = np.flatnonzero(np.isclose(y, length / 2).ravel())
-    supports = Supports.merge([(ends, np.array([1, 0, 1, 0, 0, 0], bool)), (middle, np.array([0, 1, 0, 0, 0, 0], bool))])
+    supports = Supports.merge([(ends, np.array([1, 0, 1, 0, 0, 0], bool)),
+                               (middle, np.array([0, 1, 0, 0, 0, 0], bool))])
     loads = shell_nodal_loads(mesh, LoadCase(name="w", area_true=[0, 0, -90.0]), thickness=THICKNESS, density=0)
     control = int(np.flatnonzero((np.isclose(phi, angle) & np.isclose(y, length / 2)).ravel())[0])
     return Roof(mesh=mesh, restrained=supports.dof_mask(mesh.n_vertices), loads=loads, control=control)
@@ -122,7 +123,8 @@ def main() -> int:
     print(f"{'cells/quarter':>14}{'triangles':>11}{'deflection':>12}{'error %':>9}")
     for divisions in (4, 8, 16, 32, 64):
         deflection, _, mesh = scordelis_lo(divisions)
-        print(f"{divisions:>14}{mesh.n_faces:>11}{deflection:>12.5f}{100 * (deflection / SCORDELIS_LO_REFERENCE - 1):>9.2f}")
+        print(f"{divisions:>14}{mesh.n_faces:>11}{deflection:>12.5f}"
+              f"{100 * (deflection / SCORDELIS_LO_REFERENCE - 1):>9.2f}")
     print()
     print("Scaling, Scordelis-Lo roof refined (deflection: midside of the free edge)")
     print(f"{'triangles':>10}{'DOF':>9}{'assembly s':>12}{'solve s':>9}{'total s':>9}{'assembly %':>11}"

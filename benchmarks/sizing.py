@@ -11,11 +11,11 @@ gets the cap template's loads, material and section (CHS 114.3 x 6.3, S355) and 
 the project's one section, EN 1993-1-1 checks), then with ``[design] size_sections = true`` (3
 groups from EN 10210-2), reusing the check run's surface..optimize stages; where the sized tubes
 outgrow CHS 114.3, ``--fit-grid`` has the run make the grid again for the largest (``[design]
-fit_grid_to_tubes = true``: ``refits`` and ``grid_section``; ``sized_run_s`` is the whole run then). Per roof it prints the
-check run's verdict (largest utilisation, deflection over its limit, lambda_NL_worst), the mass
-before and after, the sized groups, the analyses the sizing took, the governing checks, whether
-every check passes, and the seconds of the analysis stage of both runs (manifest.json). The table
-is written to OUT/sizing.csv.
+fit_grid_to_tubes = true``: ``refits`` and ``grid_section``; ``sized_run_s`` is the whole run
+then). Per roof it prints the check run's verdict (largest utilisation, deflection over its limit,
+lambda_NL_worst), the mass before and after, the sized groups, the analyses the sizing took, the
+governing checks, whether every check passes, and the seconds of the analysis stage of both runs
+(manifest.json). The table is written to OUT/sizing.csv.
 """
 
 from __future__ import annotations
@@ -76,7 +76,8 @@ def _project(name: str, surface: Path, supports: str, cells: int, sized: bool, f
     design = ("\n[design]\nsize_sections = true\ncatalogue = \"EN 10210-2 CHS\"\ngroups = 3\n"
               f"fit_grid_to_tubes = {'true' if fit_grid else 'false'}\n") if sized else ""
     return (f'[project]\nname = "{name}"\n\n[surface]\nfile = "{surface.resolve()}"\n\n'
-            f'[[supports]]\nselect = "{supports}"\nrestraint = "pinned"\n{LOADS}\n[remesh]\nn_cells = {cells}\n{design}')
+            f'[[supports]]\nselect = "{supports}"\nrestraint = "pinned"\n{LOADS}\n'
+            f'[remesh]\nn_cells = {cells}\n{design}')
 
 
 def _run(project: Path, out: Path) -> tuple[int, float, str]:
@@ -141,7 +142,8 @@ def bench(name: str, surface: Path, supports: str, cells: int, out: Path, *, che
         "mass_after_kg": round(d.get("mass_after_kg", float("nan")), 0),
         "groups": " / ".join(f"{g['profile']} x{g['beams']}" for g in d.get("groups", [])),
         "analyses": d.get("iterations"), "nonlinear_rounds": d.get("nonlinear_rounds"),
-        "converged": d.get("converged"), "governing": ", ".join(f"{k} {v}" for k, v in d.get("governing_checks", {}).items()),
+        "converged": d.get("converged"),
+        "governing": ", ".join(f"{k} {v}" for k, v in d.get("governing_checks", {}).items()),
         "all_pass": all(v["pass"] for v in a.get("verdicts", [])) if a else None,
         "sized_verdict": _verdict(a), "sized_analysis_s": _stage_seconds(folder / "run", "analysis"),
         **_fitted(folder / "run"),
@@ -168,9 +170,9 @@ def main() -> None:
         print(f"sizing: no real surfaces at {SURFACES}; skipped", file=sys.stderr)
     if not args.no_large:
         sys.path.insert(0, str(ROOT))
-        from tests.generated_surfaces import generate_surface, write_ply
-
         from dataclasses import replace
+
+        from tests.generated_surfaces import generate_surface, write_ply
 
         # the generated dome (24 x 15 m) scaled to a station roof's 85 x 52 m, so that 1500 cells
         # of CHS 114.3 need no coarsening for their joints (about 3000 nodes)

@@ -71,7 +71,8 @@ class Catalogue:
         keep = self.diameter <= max_diameter + 1e-9
         if not keep.any():
             raise InputError(f"section catalogue {self.name}: no tube of {1000 * max_diameter:g} mm or less",
-                             hint=f"[design] max_diameter: at least {1000 * self.diameter.min():g} mm for this catalogue")
+                             hint=f"[design] max_diameter: at least {1000 * self.diameter.min():g} mm "
+                                  "for this catalogue")
         return Catalogue(name=self.name, names=[n for n, k in zip(self.names, keep) if k],
                          diameter=self.diameter[keep], thickness=self.thickness[keep], process=self.process,
                          source=self.source)

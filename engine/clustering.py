@@ -248,7 +248,8 @@ def cluster_vertices(vertices: np.ndarray, faces: np.ndarray, edges: np.ndarray,
     S, count = _accumulate(labels, P, n_clusters)
     if np.any(count == 0):
         raise ValueError("cluster_vertices: every cluster needs at least one vertex")
-    sweeps, moves, energy = _sweeps(np.ascontiguousarray(edges, dtype=np.int64), np.ascontiguousarray(faces, dtype=np.int64),
+    sweeps, moves, energy = _sweeps(np.ascontiguousarray(edges, dtype=np.int64),
+                                    np.ascontiguousarray(faces, dtype=np.int64),
                                     labels, P, S, count, adjacency.vertex_ptr, adjacency.vertex_neighbours,
                                     adjacency.face_ptr, adjacency.vertex_faces, int(max_sweeps), ENERGY_TOLERANCE)
     return ClusteringResult(labels=labels, centroids=centroids_of(S) + centre, energy=energy, sweeps=int(sweeps),

@@ -58,10 +58,11 @@ class CondensedFactor:
     element_matrices (b k, 12, 12) in global axes on ``connectivity`` (b k, 2) of ``n_nodes``
     nodes, beam by beam, k elements per beam, the internal nodes of beam j numbered
     n_original + j (k - 1) + t (as ``engine.frame`` builds them); ``free``: the sorted free DOFs
-    (6 per node, node-major), every internal DOF among them. ``solve(f)`` takes (n_free,) or (n_free, r). ``pivots``: the pivots
-    of the elimination (internal blocks, then the diagonal of S's U), whose signs give the inertia
-    of a symmetric K. Raises RuntimeError when K is exactly singular (an internal block or S), as
-    SuperLU does. With k = 1 it is a plain SuperLU of the assembled matrix.
+    (6 per node, node-major), every internal DOF among them. ``solve(f)`` takes (n_free,) or
+    (n_free, r). ``pivots``: the pivots of the elimination (internal blocks, then the diagonal of
+    S's U), whose signs give the inertia of a symmetric K. Raises RuntimeError when K is exactly
+    singular (an internal block or S), as SuperLU does. With k = 1 it is a plain SuperLU of the
+    assembled matrix.
     """
 
     def __init__(self, element_matrices: np.ndarray, connectivity: np.ndarray, n_nodes: int, n_original: int,

@@ -15,15 +15,15 @@ Units: any consistent set (SI in the workflow).
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .condensed import CondensedFactor
-from .linalg import assemble_blocks, congruent
 from .errors import ConvergenceError, InputError, MechanismError
+from .linalg import assemble_blocks, congruent
 from .supports import Supports
 
 __all__ = ["FrameModel", "FrameStiffness", "LinearResult", "BucklingResult", "NonlinearResult", "factor_stiffness",
@@ -63,7 +63,8 @@ class FrameModel:
         if beams.min() < 0 or beams.max() >= len(nodes):
             raise InputError(f"frame model: a beam refers to a node outside 0..{len(nodes) - 1}")
         if np.any(beams[:, 0] == beams[:, 1]):
-            raise InputError(f"frame model: beam {int(np.argmax(beams[:, 0] == beams[:, 1]))} starts and ends at one node")
+            loop = int(np.argmax(beams[:, 0] == beams[:, 1]))
+            raise InputError(f"frame model: beam {loop} starts and ends at one node")
         object.__setattr__(self, "nodes", nodes)
         object.__setattr__(self, "beams", beams)
         for name in ("E", "G", "A", "Iy", "Iz", "J"):
@@ -792,7 +793,6 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     scale = max(np.linalg.norm(F_ref[free]), np.linalg.norm(F_dead[free]), 1e-300)
     x = cr.X.copy()
     triads = np.tile(np.eye(3), (cr.n_all, 1, 1))
-    control_dof = 6 * node + dof
 
     def residual(x, triads, lam):
         f_int, cache = cr.internal_forces(x, triads)
@@ -971,7 +971,8 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     displacements[:, 3:] = _rotation_vectors(lt)
     return NonlinearResult(path=np.array(path), limit_load_factor=limit, negative_pivots=np.array(pivots),
                            displacements=displacements[:n], converged=converged_all, load_factors=np.array(factors),
-                           iterations=np.array(iterations), monitored=np.array(monitored, dtype=float).reshape(len(path), len(watch)))
+                           iterations=np.array(iterations),
+                           monitored=np.array(monitored, dtype=float).reshape(len(path), len(watch)))
 
 
 def _single_threaded_blas():

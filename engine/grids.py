@@ -74,7 +74,8 @@ def _clipped(kind: str, spacing: float, polygon, centre) -> tuple[np.ndarray, li
         if not prepared.intersects(shape):
             continue
         cut = prepared.intersection(shape)
-        parts = [cut] if cut.geom_type == "Polygon" else [g for g in getattr(cut, "geoms", []) if g.geom_type == "Polygon"]
+        parts = ([cut] if cut.geom_type == "Polygon"
+                 else [g for g in getattr(cut, "geoms", []) if g.geom_type == "Polygon"])
         for part in parts:
             if part.area < 1e-3 * shape.area:
                 continue
@@ -228,7 +229,8 @@ def lattice_grid(mesh: TriMesh, kind: str, spacing: float, support_vertices: np.
     rank = on_boundary.astype(np.int64) + outline_vertex + corners
     survivors, faces = _merge_short_beams(plan, faces, rank, MIN_BEAM_FRACTION * spacing)
     plan, on_boundary, corners = plan[survivors], on_boundary[survivors], corners[survivors]
-    interpolate = LinearTriInterpolator(Triangulation(mesh.vertices[:, 0], mesh.vertices[:, 1], mesh.faces), mesh.vertices[:, 2])
+    interpolate = LinearTriInterpolator(Triangulation(mesh.vertices[:, 0], mesh.vertices[:, 1], mesh.faces),
+                                        mesh.vertices[:, 2])
     z = np.asarray(interpolate(plan[:, 0], plan[:, 1]).filled(np.nan))
     if np.any(np.isnan(z)):
         _, nearest = cKDTree(mesh.vertices[:, :2]).query(plan[np.isnan(z)])

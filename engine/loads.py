@@ -55,7 +55,8 @@ class LoadCase:
     def __post_init__(self) -> None:
         object.__setattr__(self, "area_true", _vec3(self.area_true))
         object.__setattr__(self, "area_plan", _vec3(self.area_plan))
-        nodes = np.zeros(0, dtype=np.int64) if self.point_nodes is None else np.asarray(self.point_nodes, dtype=np.int64).ravel()
+        nodes = (np.zeros(0, dtype=np.int64) if self.point_nodes is None
+                 else np.asarray(self.point_nodes, dtype=np.int64).ravel())
         forces = (np.zeros((0, 6)) if self.point_forces is None
                   else np.asarray(self.point_forces, dtype=float).reshape(len(nodes), 6))
         nodes.flags.writeable = False

@@ -59,7 +59,7 @@ from .boundary_splits import cut_boundary_triangles, split_boundary_cells
 from .errors import InputError
 from .field import GuidingField
 from .mesh import PolyMesh, TriMesh
-from .planarise import PlanariseSettings, cell_planes, planarise
+from .planarise import PlanariseSettings, planarise
 from .projections import face_corners, lengthen_short_beams, open_narrow_corners
 from .proximity import closest_point_on_triangles
 

@@ -156,8 +156,10 @@ def courtyard(*, length: float = 30.0, width: float = 20.0, opening_length: floa
         raise InputError("the courtyard opening must be smaller than the roof")
     nx = max(6, divisions)
     ny = max(6, int(round(nx * width / length)))
-    xs = np.unique(np.concatenate([np.linspace(-length / 2, length / 2, nx + 1), [-opening_length / 2, opening_length / 2]]))
-    ys = np.unique(np.concatenate([np.linspace(-width / 2, width / 2, ny + 1), [-opening_width / 2, opening_width / 2]]))
+    xs = np.unique(np.concatenate([np.linspace(-length / 2, length / 2, nx + 1),
+                                   [-opening_length / 2, opening_length / 2]]))
+    ys = np.unique(np.concatenate([np.linspace(-width / 2, width / 2, ny + 1),
+                                   [-opening_width / 2, opening_width / 2]]))
     nx, ny = len(xs) - 1, len(ys) - 1
     x, y = np.meshgrid(xs, ys, indexing="ij")
     cx, cy = 0.5 * (xs[:-1] + xs[1:]), 0.5 * (ys[:-1] + ys[1:])

@@ -18,7 +18,8 @@ import numpy as np
 
 from .supports import Supports
 
-__all__ = ["ImperfectionCase", "ProtocolSettings", "ProtocolResult", "imperfection_shapes", "nonlinear_path", "run_protocol"]
+__all__ = ["ImperfectionCase", "ProtocolSettings", "ProtocolResult", "imperfection_shapes", "nonlinear_path",
+           "run_protocol"]
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -16,10 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
-from .linalg import assemble_blocks, congruent
 from .errors import InputError, MechanismError
+from .linalg import assemble_blocks, congruent
 from .loads import GRAVITY, LoadCase
 from .mesh import TriMesh
 from .supports import Supports

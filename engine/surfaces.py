@@ -189,7 +189,8 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, flagged: np.ndarray | No
     if faces.min() < 0 or faces.max() >= len(vertices):
         bad_faces = np.flatnonzero((faces < 0).any(axis=1) | (faces >= len(vertices)).any(axis=1))
         raise MeshError(f"{name}: faces {bad_faces[:10].tolist()} refer to vertices that do not exist "
-                        f"(the file has {len(vertices)} vertices)", hint="the file is truncated or corrupt; re-export it")
+                        f"(the file has {len(vertices)} vertices)",
+                        hint="the file is truncated or corrupt; re-export it")
 
     diagonal = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
     if diagonal == 0:
@@ -247,13 +248,15 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, flagged: np.ndarray | No
     for p in range(report.patches):
         sel = faces[patch == p]
         vs = np.unique(sel)
-        n_edges = len(np.unique(np.sort(np.stack([sel, np.roll(sel, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1), axis=0))
+        patch_edges = np.stack([sel, np.roll(sel, -1, axis=1)], axis=-1).reshape(-1, 2)
+        n_edges = len(np.unique(np.sort(patch_edges, axis=1), axis=0))
         n_loops = sum(1 for lp in loop_patch if lp == p)
         euler = len(vs) - n_edges + len(sel)
         where = _where(vertices[vs].mean(axis=0, keepdims=True))
         if n_loops == 0:
             raise MeshError(f"{name}: patch {p} ({len(sel)} faces, centred {where}) is closed, with no boundary",
-                            hint="a grid-shell needs an open surface with an edge to support; cut the closed surface open")
+                            hint="a grid-shell needs an open surface with an edge to support; "
+                                 "cut the closed surface open")
         if euler != 2 - n_loops:
             genus = (2 - n_loops - euler) // 2
             raise MeshError(f"{name}: patch {p} (centred {where}) is not disk-like: it has {genus} handle(s) "

@@ -242,7 +242,8 @@ class Homogenised:
 def _frame_stiffness(nodes3: np.ndarray, beams: np.ndarray, EA: float, EI_out: float, EI_in: float,
                      GJ: float, elements_per_beam: int) -> tuple[sp.csr_matrix, int, np.ndarray]:
     """Global stiffness (6N,6N) of the frame elements of engine.frame for a planar patch with the
-    beams' local z (strong-axis normal) = global z; returns K, N (nodes incl. internal ones) and their positions (N,3)."""
+    beams' local z (strong-axis normal) = global z; returns K, N (nodes incl. internal ones) and
+    their positions (N,3)."""
     from . import frame
     from .linalg import congruent
 

@@ -287,7 +287,8 @@ def _initial_seeds(fine: _Fine, n_cells: int, rng: np.random.Generator, turn_deg
         chosen = chosen[np.argsort(gap)[len(chosen) - n_cells:]]
     elif len(chosen) < n_cells:
         rest = np.setdiff1d(np.arange(len(fine.vertices)), chosen)
-        extra = rng.choice(rest, size=n_cells - len(chosen), replace=False, p=probability[rest] / probability[rest].sum())
+        extra = rng.choice(rest, size=n_cells - len(chosen), replace=False,
+                           p=probability[rest] / probability[rest].sum())
         chosen = np.concatenate([chosen, extra])
     return chosen
 
@@ -366,7 +367,8 @@ def _refined_seeds(fine: _Fine, tree: cKDTree, labels: np.ndarray, centroids: np
     elif len(seeds) < count:
         rest = np.setdiff1d(np.arange(len(fine.vertices)), seeds)
         weight = (fine.areas * fine.inverse_h2)[rest]
-        seeds = np.concatenate([seeds, rng.choice(rest, size=count - len(seeds), replace=False, p=weight / weight.sum())])
+        extra = rng.choice(rest, size=count - len(seeds), replace=False, p=weight / weight.sum())
+        seeds = np.concatenate([seeds, extra])
     return seeds
 
 
@@ -1049,7 +1051,8 @@ def polymesh_quality(polymesh: PolyMesh, *, mesh: TriMesh | None = None, field: 
         "n_nodes": int(polymesh.n_nodes), "n_beams": int(len(polymesh.edges)), "n_faces": int(polymesh.n_faces),
         "hexagon_share_interior": float(np.mean(degrees[interior] == 6)) if interior.any() else 0.0,
         "face_degree_histogram": histogram,
-        "valence3_share_interior": float(np.mean(polymesh.valence[interior_nodes] == 3)) if interior_nodes.any() else 0.0,
+        "valence3_share_interior": (float(np.mean(polymesh.valence[interior_nodes] == 3))
+                                    if interior_nodes.any() else 0.0),
         "achieved_size_ratio": float(hi / max(lo, 1e-300)),
         "achieved_max_aspect": float(np.percentile(aspects[pick], 95)),
         "regularity": float(np.mean(regularity)),

@@ -259,7 +259,8 @@ class _Growth:
                                      shape=(len(faces), polymesh.n_nodes))
         # distance along the beams from the nearest support, to rank cells "from the supports inward"
         lengths = polymesh.beam_lengths
-        graph = coo_matrix((np.r_[lengths, lengths], (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
+        graph = coo_matrix((np.r_[lengths, lengths],
+                            (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
                            shape=(polymesh.n_nodes,) * 2).tocsr()
         from_support = dijkstra(graph, indices=support_nodes, min_only=True)
         self.distance = np.array([from_support[loop].mean() for loop in self.face_nodes])

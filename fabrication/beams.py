@@ -14,7 +14,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from engine.errors import InputError
 from engine.mesh import PolyMesh
 from engine.parts import beam_id, node_id
 
@@ -91,15 +90,16 @@ def write_cut_list(table: pd.DataFrame, folder: Path) -> tuple[Path, Path]:
     folder.mkdir(parents=True, exist_ok=True)
     with atomic_path(folder / "cutlist.csv") as tmp:
         table.to_csv(tmp, index=False)
-    summary = table.groupby("profile").agg(beams=("id", "count"), cut_length_m=("cut_length_mm", lambda s: s.sum() / 1000),
+    summary = table.groupby("profile").agg(beams=("id", "count"),
+                                           cut_length_m=("cut_length_mm", lambda s: s.sum() / 1000),
                                            mass_kg=("mass_kg", "sum")).reset_index()
     with atomic_path(folder / "cutlist.xlsx") as tmp:
         with pd.ExcelWriter(tmp, engine="openpyxl") as writer:
             summary.to_excel(writer, sheet_name="summary", index=False)
             for number, (profile, rows) in enumerate(table.groupby("profile"), start=1):
                 totals = {c: "" for c in rows.columns}
-                totals.update({"id": "TOTAL", "cut_length_mm": rows["cut_length_mm"].sum(), "mass_kg": rows["mass_kg"].sum(),
-                               "label": f"{len(rows)} beams"})
+                totals.update({"id": "TOTAL", "cut_length_mm": rows["cut_length_mm"].sum(),
+                               "mass_kg": rows["mass_kg"].sum(), "label": f"{len(rows)} beams"})
                 sheet = pd.concat([rows, pd.DataFrame([totals])], ignore_index=True)
                 name = "".join(ch for ch in str(profile) if ch not in "[]:*?/\\")[:28] or f"profile {number}"
                 sheet.to_excel(writer, sheet_name=name, index=False)

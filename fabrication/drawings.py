@@ -260,7 +260,8 @@ def _write_pdf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.nd
         notes.append(f"{placement.left_out} of {len(texts)} ids left out for space (plan.dxf and the lists "
                      "have every part)")
     fig.text(0.96, 0.03, "\n".join([*title, *notes]),
-             ha="right", va="bottom", fontsize=9, bbox={"boxstyle": "square", "facecolor": "white", "edgecolor": "black"})
+             ha="right", va="bottom", fontsize=9,
+             bbox={"boxstyle": "square", "facecolor": "white", "edgecolor": "black"})
     with atomic_path(target) as tmp:
         fig.savefig(tmp, format="pdf", metadata={"CreationDate": file_date()})
     return target

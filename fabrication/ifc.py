@@ -4,9 +4,10 @@ Through ifcopenshell: a project, site and building ("grid-shell roof") holding a
 beam (a circular hollow profile swept along the beam's cut length, between its joints), an IfcPlate
 per panel (its outline extruded by the panel's thickness) and an IfcMechanicalFastener per joint (its
 hub and its sleeves or fin plates as swept solids: what a clash check needs; the exact solid with its
-holes and engraving is the part's STEP file, named in its properties). Each is Named by its id and carries a property set ``Pset_Gridshell``:
-profile, material, cut length, mass and assembly step for beams; material, thickness, mass, sheet
-and assembly step for panels; node, beams and part file for joints.
+holes and engraving is the part's STEP file, named in its properties). Each is Named by its id and
+carries a property set ``Pset_Gridshell``: profile, material, cut length, mass and assembly step for
+beams; material, thickness, mass, sheet and assembly step for panels; node, beams and part file for
+joints.
 """
 
 from __future__ import annotations
@@ -110,8 +111,8 @@ def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: l
     import ifcopenshell.api.material as material
     import ifcopenshell.api.pset as pset
     import ifcopenshell.api.root as root
-    import ifcopenshell.guid
     import ifcopenshell.api.unit as unit
+    import ifcopenshell.guid
 
     model = ifcopenshell.file(schema="IFC4")
     project = root.create_entity(model, ifc_class="IfcProject", name=project_name)
@@ -184,9 +185,11 @@ def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: l
         products.append(plate)
     def swept(profile, origin, z, depth: float, x=None):
         """An extruded solid of ``profile`` from ``origin`` along ``z`` (joint axes, mm)."""
-        return model.create_entity("IfcExtrudedAreaSolid", SweptArea=profile, Position=axes(_frame(origin, z, x)),
-                                   ExtrudedDirection=model.create_entity("IfcDirection", DirectionRatios=(0.0, 0.0, 1.0)),
-                                   Depth=float(depth))
+        # entities in the order the file numbers them: the placement, then the direction
+        position = axes(_frame(origin, z, x))
+        up = model.create_entity("IfcDirection", DirectionRatios=(0.0, 0.0, 1.0))
+        return model.create_entity("IfcExtrudedAreaSolid", SweptArea=profile, Position=position,
+                                   ExtrudedDirection=up, Depth=float(depth))
 
     for joint in joints:
         fastener = root.create_entity(model, ifc_class="IfcMechanicalFastener", name=joint.id)

@@ -61,7 +61,8 @@ def write_gridshell_3dm(polymesh: PolyMesh, panels, beam_radius_mm: float | np.n
     model = rhino3dm.File3dm()
     model.Settings.ModelUnitSystem = rhino3dm.UnitSystem.Millimeters
     layers = {}
-    for name, colour in (("joints", (150, 150, 150, 255)), ("beams", (70, 130, 180, 255)), ("panels", (180, 215, 240, 255))):
+    for name, colour in (("joints", (150, 150, 150, 255)), ("beams", (70, 130, 180, 255)),
+                         ("panels", (180, 215, 240, 255))):
         layer = rhino3dm.Layer()
         layer.Name = name
         layer.Color = colour

@@ -89,8 +89,8 @@ def nc1_pieces(table: pd.DataFrame, diameters_mm: np.ndarray, walls_mm: np.ndarr
             continue
         reach = (0.5 if steel else 0.6) * joint_sleeve_mm(joint_settings, float(D))
         holes = tuple((x, hole) for x in (reach, length - reach)) if length > 2 * reach else ()
-        pieces.append(Nc1Piece(piece=row.id, profile=str(row.profile), grade=grade_name(material_name), length_mm=length,
-                               diameter_mm=float(D), wall_mm=float(t), mass_per_m=float(kg),
+        pieces.append(Nc1Piece(piece=row.id, profile=str(row.profile), grade=grade_name(material_name),
+                               length_mm=length, diameter_mm=float(D), wall_mm=float(t), mass_per_m=float(kg),
                                paint_m2_per_m=float(np.pi * D / 1000.0),
                                start_cut_deg=float(row.end_angle_start_deg), end_cut_deg=float(row.end_angle_end_deg),
                                holes=holes, note=note))

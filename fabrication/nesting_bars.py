@@ -129,7 +129,8 @@ def nest_bars(lengths_mm, labels: list[str], stock_length_mm: float, kerf_mm: fl
     too_long = np.flatnonzero(lengths + kerf_mm > stock_length_mm)
     if len(too_long):
         i = int(too_long[0])
-        raise InputError(f"beam {labels[i]} ({lengths[i]:.0f} mm) is longer than the stock bar ({stock_length_mm:.0f} mm)",
+        raise InputError(f"beam {labels[i]} ({lengths[i]:.0f} mm) is longer than the stock bar "
+                         f"({stock_length_mm:.0f} mm)",
                          hint="use longer stock bars or split the beam")
     bound = lower_bound(lengths, stock_length_mm, kerf_mm)
     bars = best_fit_decreasing(lengths, stock_length_mm, kerf_mm)

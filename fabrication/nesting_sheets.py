@@ -432,7 +432,8 @@ def nest_sheets(panels: list["Panel"], settings: SheetSettings | None = None) ->
             sheets.append(_Sheet())
             members.append([int(i)])
             k = len(sheets) - 1
-            if not _place(sheets[k], k, i, orientations[i], settings, placements, radii[i], rebuild[i]):  # pragma: no cover
+            if not _place(sheets[k], k, i, orientations[i], settings, placements,  # pragma: no cover
+                          radii[i], rebuild[i]):
                 raise InputError(f"panel {panels[i].id} does not fit on an empty sheet")
             sheets[k].area += areas[i]
     per_sheet = [sheet.area / sheet_area for sheet in sheets]
@@ -460,7 +461,8 @@ def write_sheet_dxfs(nesting: SheetNesting, panels: list["Panel"], folder: str |
         msp.add_lwpolyline([(0, 0), (sheet.width_mm, 0), (sheet.width_mm, sheet.height_mm), (0, sheet.height_mm)],
                            close=True, dxfattribs={"layer": "NOTES"})
         name = sheet_id(first_number - 1 + k)
-        msp.add_text(f"{name}  {sheet.width_mm:g} x {sheet.height_mm:g} mm  {len(members)} parts  utilisation {100 * nesting.sheet_utilisation[k]:.1f} %",
+        msp.add_text(f"{name}  {sheet.width_mm:g} x {sheet.height_mm:g} mm  {len(members)} parts  "
+                     f"utilisation {100 * nesting.sheet_utilisation[k]:.1f} %",
                      height=5.0, dxfattribs={"layer": "NOTES", "insert": (0.0, -10.0)})
         for i in members:
             p = nesting.placements[i]

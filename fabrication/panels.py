@@ -352,5 +352,4 @@ def write_panels_csv(panels: list[Panel], nesting: "SheetNesting | None", settin
 
 
 # re-exported so the whole panel workflow can be taken from this module
-from fabrication.nesting_sheets import (  # noqa: E402
-    SheetNesting, SheetSettings, nest_sheets, write_sheet_dxfs, write_sheets_picture)
+from fabrication.nesting_sheets import SheetNesting, SheetSettings, nest_sheets, write_sheet_dxfs, write_sheets_picture  # noqa: E402

@@ -50,7 +50,8 @@ var c = document.getElementById('viewer');
 var p = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
 var background = [p[0], p[1], p[2]], ink = 0;
 for (var i = 0; i < p.length; i += 4) {
-  if (Math.abs(p[i] - background[0]) + Math.abs(p[i + 1] - background[1]) + Math.abs(p[i + 2] - background[2]) > 30) ink++;
+  if (Math.abs(p[i] - background[0]) + Math.abs(p[i + 1] - background[1])
+      + Math.abs(p[i + 2] - background[2]) > 30) ink++;
 }
 return [c.width, c.height, ink];
 """

@@ -321,7 +321,8 @@ def _cotangent_laplacian(xy: np.ndarray, faces: np.ndarray):
     return matrix, area
 
 
-def _fourier(rng: np.random.Generator, xy: np.ndarray, span: float, n_modes: int, cycles: tuple[float, float]) -> np.ndarray:
+def _fourier(rng: np.random.Generator, xy: np.ndarray, span: float, n_modes: int,
+             cycles: tuple[float, float]) -> np.ndarray:
     z = np.zeros(len(xy))
     for _ in range(n_modes):
         k = rng.uniform(*cycles)
@@ -331,7 +332,8 @@ def _fourier(rng: np.random.Generator, xy: np.ndarray, span: float, n_modes: int
     return z
 
 
-def _membrane(rng: np.random.Generator, xy: np.ndarray, faces: np.ndarray, fixed: np.ndarray, span: float) -> np.ndarray:
+def _membrane(rng: np.random.Generator, xy: np.ndarray, faces: np.ndarray, fixed: np.ndarray,
+              span: float) -> np.ndarray:
     """Height of a membrane under a random positive pressure, zero at the fixed vertices."""
     from scipy.sparse.linalg import spsolve
 
@@ -575,7 +577,8 @@ def drawn_settings(seed: int, span_m: float) -> tuple[str, str]:
     material, kind, sizes, joints, panels = _KITS[rng.integers(len(_KITS))]
     size = sizes[min(len(sizes) - 1, int(rng.integers(0, 2)) + int(np.searchsorted((10, 25, 45), span_m)))]
     if kind == "circular_hollow":
-        section = f'kind = "{kind}"\ndiameter = "{size * 1000:.1f} mm"\nthickness = "{max(1.0, size * 1000 / 20):.1f} mm"'
+        section = (f'kind = "{kind}"\ndiameter = "{size * 1000:.1f} mm"\n'
+                   f'thickness = "{max(1.0, size * 1000 / 20):.1f} mm"')
     elif kind == "rectangular_hollow":
         section = (f'kind = "{kind}"\nheight = "{size * 1000:.0f} mm"\nwidth = "{size * 600:.0f} mm"\n'
                    f'thickness = "{max(2.0, size * 1000 / 25):.1f} mm"')
@@ -584,7 +587,8 @@ def drawn_settings(seed: int, span_m: float) -> tuple[str, str]:
     else:
         section = f'kind = "{kind}"\nheight = "{size * 1000:.0f} mm"\nwidth = "{size * 500:.0f} mm"'
     lines = [f'[material]\nname = "{material}"', f"[section]\n{section}",
-             f"[field]\nmax_size_ratio = {rng.choice([1.0, 1.5, 2.0, 3.0])}\nmax_aspect = {rng.choice([1.0, 2.0, 3.0])}",
+             f"[field]\nmax_size_ratio = {rng.choice([1.0, 1.5, 2.0, 3.0])}\n"
+             f"max_aspect = {rng.choice([1.0, 2.0, 3.0])}",
              f'[loads.cases.dead]\nself_weight = 1.0\narea_true = "{rng.choice([0.2, 0.5, 1.0])} kN/m^2"',
              f'[loads.cases.snow]\narea_plan = "{rng.choice([0.5, 1.0, 2.0])} kN/m^2"',
              "[loads.combinations.ULS]\nlimit_state = \"ULS\"\nfactors = { dead = 1.35, snow = 1.5 }",

@@ -211,8 +211,9 @@ def test_generated_roofs_with_drawn_settings_reach_the_report(seed, tmp_path):
     """Roofs and settings nobody tuned on (seeds past the 0-19 of the benchmarks): seed 34 is a
     courtyard roof of glulam on steel nodes, coarsened so far that its hole lay inside one cell and
     the remesh stopped; seed 24 has aluminium tubes in printed sockets round two holes."""
-    from .generated_surfaces import drawn_settings
     from workflow.config import load_project
+
+    from .generated_surfaces import drawn_settings
 
     surface = generate_surface(seed)
     write_ply(surface, tmp_path / "roof.ply")

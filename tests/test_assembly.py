@@ -11,7 +11,14 @@ import pytest
 
 from engine.errors import InputError
 from engine.mesh import PolyMesh
-from fabrication.assembly import step_groups, step_image_name, _build_model, partial_frame_deflection, plan_assembly, write_assembly
+from fabrication.assembly import (
+    _build_model,
+    partial_frame_deflection,
+    plan_assembly,
+    step_groups,
+    step_image_name,
+    write_assembly,
+)
 from fabrication.drawings import beam_id, node_id, panel_id
 from tests.test_panels import hex_polymesh
 

@@ -8,8 +8,16 @@ import json
 import numpy as np
 import pytest
 
-from engine.collapse import (MAX_VALENCE, collapse_beams, collapse_short_beams, dissolve_kinks, flip_beams,
-                             open_narrow_joints, remove_beams, remove_short_beams)
+from engine.collapse import (
+    MAX_VALENCE,
+    collapse_beams,
+    collapse_short_beams,
+    dissolve_kinks,
+    flip_beams,
+    open_narrow_joints,
+    remove_beams,
+    remove_short_beams,
+)
 from engine.findings import Finding, findings_table
 from engine.mesh import PolyMesh
 from fabrication.joints import JointSettings, build_joint, joint_setback_mm

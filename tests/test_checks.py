@@ -20,7 +20,8 @@ def test_circular_hollow_section_matches_the_tables():
 
 
 def test_rectangular_sections():
-    """RHS 100 x 50 x 4 with sharp corners: A = 100 x 50 - 92 x 42 = 1136 mm^2 (tables with rounded corners: 10.95 cm^2)."""
+    """RHS 100 x 50 x 4 with sharp corners: A = 100 x 50 - 92 x 42 = 1136 mm^2 (tables with rounded
+    corners: 10.95 cm^2)."""
     s = section_from_spec("rectangular_hollow", height=0.1, width=0.05, thickness=0.004)
     assert s.A == pytest.approx(11.36e-4, rel=1e-9)
     assert s.Iy == pytest.approx(1.0 / 12 * (0.05 * 0.1**3 - 0.042 * 0.092**3))

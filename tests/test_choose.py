@@ -16,7 +16,8 @@ def test_run_keeps_the_candidate_with_the_most_load_factor_per_kg(tmp_path, caps
 
     project = _tiny_mockup(tmp_path / "job")
     text = project.read_text(encoding="utf-8")
-    text += '\n[design]\nchoose = "best"\nchoose_from = { "field.max_size_ratio" = [1.0, 2.0], "remesh.seed" = [1, 2] }\n'
+    text += ('\n[design]\nchoose = "best"\n'
+             'choose_from = { "field.max_size_ratio" = [1.0, 2.0], "remesh.seed" = [1, 2] }\n')
     project.write_text(text, encoding="utf-8")
     out = tmp_path / "out"
     assert main(["run", str(project), "--out", str(out), "--until", "analysis", "--quiet"]) == 0
@@ -37,7 +38,8 @@ def test_run_keeps_the_candidate_with_the_most_load_factor_per_kg(tmp_path, caps
         section, name = key.split(".")
         assert manifest["config"][section][name] == value
     point = out / "choose" / "points" / f"{best:04d}"
-    assert (out / "06-analysis" / "analysis.json").stat().st_ino == (point / "06-analysis" / "analysis.json").stat().st_ino
+    assert ((out / "06-analysis" / "analysis.json").stat().st_ino
+            == (point / "06-analysis" / "analysis.json").stat().st_ino)
     statuses = {s["name"]: s["status"] for s in manifest["stages"]}
     assert statuses["analysis"] in ("ran", "cached")
     capsys.readouterr()

@@ -39,7 +39,8 @@ def test_bad_mesh(capsys, tmp_path):
 
 def test_empty_selection(capsys, tmp_path):
     path = tmp_path / "p.toml"
-    path.write_text('[surface]\ntemplate = "hypar"\n[[supports]]\nselect = "box"\nlower = [50, 50, 0]\nupper = [60, 60, 1]\n')
+    path.write_text('[surface]\ntemplate = "hypar"\n'
+                    '[[supports]]\nselect = "box"\nlower = [50, 50, 0]\nupper = [60, 60, 1]\n')
     code, out, err = _run(capsys, "run", str(path), "--out", str(tmp_path / "o"), "--quiet")
     assert code == 2 and "supports[0]" in err and "matched no node" in err
 
@@ -49,7 +50,8 @@ def test_flagged_without_red_vertices(capsys, tmp_path):
     from engine.parametric import hypar
 
     hypar(divisions=4).to_trimesh().export(path)
-    code, out, err = _run(capsys, "run", "--surface", str(path), "--supports", "flagged", "--out", str(tmp_path / "o"), "--quiet")
+    code, out, err = _run(capsys, "run", "--surface", str(path), "--supports", "flagged",
+                          "--out", str(tmp_path / "o"), "--quiet")
     assert code == 2 and "flagged" in err and "red" in err
 
 

@@ -174,9 +174,8 @@ def test_compare_sizes_each_grid_and_the_voronoi_row_weighs_what_run_sizes(tmp_p
 
     import pandas as pd
 
-    from workflow.cli import main
-
     import templates
+    from workflow.cli import main
 
     text = (Path(templates.__file__).parent / "cap.toml").read_text(encoding="utf-8")
     text = text.replace("n_cells = 150", "n_cells = 40")

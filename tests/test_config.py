@@ -27,7 +27,8 @@ def test_units_convert_to_si(text, dimension, expected):
     assert to_si(text, dimension) == pytest.approx(expected)
 
 
-@pytest.mark.parametrize("text, dimension", [("5 kg", "length"), ("2 m", "stress"), ("fast", "length"), (True, "length")])
+@pytest.mark.parametrize("text, dimension", [("5 kg", "length"), ("2 m", "stress"), ("fast", "length"),
+                                             (True, "length")])
 def test_wrong_units_are_rejected(text, dimension):
     with pytest.raises(ValueError, match=dimension):
         to_si(text, dimension)

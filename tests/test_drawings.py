@@ -36,7 +36,8 @@ def test_plan_dxf_and_pdf(tmp_path):
     assert len(lines) == len(mesh.edges)
     plan = mesh.nodes[:, :2] * 1e3
     def key(p, q):
-        return tuple(sorted([tuple(np.round(np.asarray(p, float)[:2], 6)), tuple(np.round(np.asarray(q, float)[:2], 6))]))
+        return tuple(sorted([tuple(np.round(np.asarray(p, float)[:2], 6)),
+                             tuple(np.round(np.asarray(q, float)[:2], 6))]))
 
     drawn = {key(line.dxf.start, line.dxf.end) for line in lines}
     expected = {key(plan[a], plan[b]) for a, b in mesh.edges}
@@ -69,7 +70,8 @@ def test_default_supports_and_bad_index(tmp_path):
         write_plan_drawings(mesh, tmp_path, project_name="x", support_nodes=np.array([mesh.n_nodes]))
 
 
-@pytest.mark.parametrize("extent, paper, expected", [((2400, 2400), (386, 249), 10), ((100_000, 40_000), (386, 249), 500),
+@pytest.mark.parametrize("extent, paper, expected", [((2400, 2400), (386, 249), 10),
+                                                     ((100_000, 40_000), (386, 249), 500),
                                                      ((240, 100), (386, 249), 1), ((386, 249), (386, 249), 1),
                                                      ((387, 100), (386, 249), 2)])
 def test_plans_are_drawn_at_the_smallest_standard_scale_that_fits(extent, paper, expected):

@@ -397,7 +397,8 @@ def test_files_that_carry_a_date_carry_the_day_and_are_the_same_bytes_a_second_l
     book = openpyxl.load_workbook(tmp_path / "run0" / "cutlist.xlsx")
     assert book.properties.created.date().isoformat() == "2023-11-14"
     assert book.properties.modified.date().isoformat() == "2023-11-14"
-    assert {info.date_time[:3] for info in zipfile.ZipFile(tmp_path / "run0" / "cutlist.xlsx").infolist()} == {(2023, 11, 14)}
+    entries = zipfile.ZipFile(tmp_path / "run0" / "cutlist.xlsx").infolist()
+    assert {info.date_time[:3] for info in entries} == {(2023, 11, 14)}
     assert "'2023-11-14T00:00:00'" in written[0][1][:2000].decode()
     assert import_step(str(tmp_path / "run0" / "J0001.step")).volume == pytest.approx(6000.0)
 
@@ -437,10 +438,9 @@ def test_gridshell_step_is_the_same_bytes_from_run_to_run_with_its_colours(tmp_p
     from OCP.STEPCAFControl import STEPCAFControl_Reader
     from OCP.TCollection import TCollection_ExtendedString
     from OCP.TDataStd import TDataStd_Name
-    from OCP.TDF import TDF_LabelSequence
+    from OCP.TDF import TDF_Label, TDF_LabelSequence
     from OCP.TDocStd import TDocStd_Document
     from OCP.XCAFApp import XCAFApp_Application
-    from OCP.TDF import TDF_Label
     from OCP.XCAFDoc import XCAFDoc_ColorTool, XCAFDoc_ColorType, XCAFDoc_DocumentTool, XCAFDoc_ShapeTool
 
     paths = [tmp_path / f"g{i}.step" for i in range(2)]

@@ -8,8 +8,16 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError
-from engine.field import (AnisotropyMap, FieldSettings, SizeMap, guiding_field, principal_forces, smooth_directions,
-                          smooth_scalar, symmetrise)
+from engine.field import (
+    AnisotropyMap,
+    FieldSettings,
+    SizeMap,
+    guiding_field,
+    principal_forces,
+    smooth_directions,
+    smooth_scalar,
+    symmetrise,
+)
 from engine.mesh import TriMesh
 from engine.parametric import grid_triangles, mockup, vault
 

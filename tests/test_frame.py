@@ -106,7 +106,8 @@ def _lee_frame(n: int = 10):
     column = np.c_[np.zeros(n + 1), np.zeros(n + 1), np.linspace(0, 120.0, n + 1)]
     beam = np.c_[np.linspace(0, 120.0, n + 1)[1:], np.zeros(n), np.full(n, 120.0)]
     nodes = np.vstack([column, beam])
-    beams = np.r_[np.c_[np.arange(n), np.arange(1, n + 1)], np.c_[np.r_[n, np.arange(n + 1, 2 * n)], np.arange(n + 1, 2 * n + 1)]]
+    beams = np.r_[np.c_[np.arange(n), np.arange(1, n + 1)],
+                  np.c_[np.r_[n, np.arange(n + 1, 2 * n)], np.arange(n + 1, 2 * n + 1)]]
     model = FrameModel(nodes=nodes, beams=beams, E=720.0, G=720.0 / 2.6, A=6.0, Iy=2.0, Iz=2.0, J=4.0,
                        up=np.array([0.0, 1.0, 0.0]))
     pin = np.array([1, 1, 1, 1, 0, 1], bool)
@@ -164,7 +165,8 @@ def test_mechanisms_are_reported():
 def _json_model() -> dict:
     n = 8
     nodes = np.c_[np.linspace(0, 4.0, n + 1), np.zeros(n + 1), 0.5 * np.sin(np.linspace(0, np.pi, n + 1))]
-    beams = [{"nodes": [i, i + 1], "E": E, "G": G, "A": A, "Iy": IY, "Iz": IZ, "J": J, "up": [0, 1, 0]} for i in range(n)]
+    beams = [{"nodes": [i, i + 1], "E": E, "G": G, "A": A, "Iy": IY, "Iz": IZ, "J": J, "up": [0, 1, 0]}
+             for i in range(n)]
     return {"nodes": nodes.tolist(), "beams": beams, "elements_per_beam": 2,
             "supports": {"0": [1, 1, 1, 1, 0, 1], str(n): [1, 1, 1, 1, 0, 1]},
             "loads": {str(n // 2): [0, 0, -1000.0, 0, 0, 0]}}
@@ -357,8 +359,8 @@ def test_displacements_match_pyfe3d():
     from dataclasses import replace
 
     import scipy.sparse as sp
-    from scipy.sparse.linalg import spsolve
     from pyfe3d.beamprop import BeamProp
+    from scipy.sparse.linalg import spsolve
 
     model, supports, loads = _space_frame()
     model = replace(model, elements_per_beam=1)

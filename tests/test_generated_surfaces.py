@@ -150,7 +150,8 @@ def test_deterministic_and_options():
     for name in ("vertices", "faces", "flagged"):
         assert np.array_equal(getattr(first, name), getattr(again, name))
         assert not getattr(first, name).flags.writeable
-    assert (first.name, first.kind, first.supports, first.span_m) == (again.name, again.kind, again.supports, again.span_m)
+    assert ((first.name, first.kind, first.supports, first.span_m)
+            == (again.name, again.kind, again.supports, again.span_m))
     assert not np.array_equal(generate_surface(8).vertices[:10], first.vertices[:10])
     chosen = generate_surface(3, kind="hole", span_m=12.0, n_vertices=600)
     assert chosen.kind == "hole" and chosen.name == "gen03-hole" and chosen.n_holes >= 1

@@ -70,6 +70,7 @@ def test_writing_the_ifc_leaves_the_project_templates_importable(tmp_path):
             "                    joints=[], beam_material='S355')\n"
             "print(r.files('templates').joinpath('report.html').is_file())\n")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
-                          env={**__import__("os").environ, "PYTHONPATH": str(__import__("pathlib").Path(__file__).parents[1])})
+                          env={**__import__("os").environ,
+                               "PYTHONPATH": str(__import__("pathlib").Path(__file__).parents[1])})
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "True"

@@ -175,8 +175,8 @@ def _hashes(out: Path) -> dict[str, str]:
 
 
 def _different_pictures(a: Path, b: Path) -> list[str]:
-    from PIL import Image
     import numpy as np
+    from PIL import Image
 
     out = []
     for path in sorted(a.rglob("*.png")):

@@ -203,7 +203,8 @@ def test_the_free_space_bound_finds_the_same_bottom_left_positions():
                     assert np.allclose(whole, fast, atol=1e-3)
                     checked += 1
                     core = o.eroded_bounds(sheet.free_radius)
-                    big = (free[:, 2] - free[:, 0] >= core[2] - core[0]) & (free[:, 3] - free[:, 1] >= core[3] - core[1])
+                    big = ((free[:, 2] - free[:, 0] >= core[2] - core[0])
+                           & (free[:, 3] - free[:, 1] >= core[3] - core[1]))
                     bounded += free[big, 0].min() - core[0] > settings.margin_mm + 1.0
         if not ns._place(sheet, 0, j, options, settings, placements, radius, 0.9 * radius):
             break

@@ -29,7 +29,6 @@ from engine.parametric import cap, grid_triangles, mockup
 from engine.planarise import cell_planes, planarity_terms
 from engine.proximity import closest_point_on_triangles
 
-
 # ----------------------------------------------------------------------------- test grids
 
 def _honeycomb(outline: Polygon, spacing: float, rng: np.random.Generator, jitter: float):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 from functools import lru_cache
 
 import numpy as np
@@ -12,15 +11,16 @@ from shapely.geometry import Point, Polygon
 
 from engine.errors import InputError
 from engine.mesh import PolyMesh, best_fit_plane
-from fabrication.panels import Panel, PanelSettings, flatten_panels, write_panel_dxfs, write_panels_csv
+from fabrication.panels import PanelSettings, flatten_panels, write_panel_dxfs, write_panels_csv
 
 ezdxf = pytest.importorskip("ezdxf")
 
 
 @lru_cache(maxsize=None)
 def _mockup_heights():
-    from engine.parametric import mockup
     from scipy.interpolate import LinearNDInterpolator
+
+    from engine.parametric import mockup
 
     mesh = mockup(divisions=12).mesh
     return LinearNDInterpolator(mesh.vertices[:, :2], mesh.vertices[:, 2], fill_value=0.0)

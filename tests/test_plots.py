@@ -10,8 +10,7 @@ from matplotlib import image  # noqa: E402
 
 from engine.grids import quad_grid  # noqa: E402
 from engine.parametric import cap  # noqa: E402
-from workflow.plots.analysis import (plot_axial_forces, plot_buckling_modes, plot_response,  # noqa: E402
-                                     plot_utilisation)
+from workflow.plots.analysis import plot_axial_forces, plot_buckling_modes, plot_response, plot_utilisation  # noqa: E402
 from workflow.plots.remesh import plot_gridshell  # noqa: E402
 
 

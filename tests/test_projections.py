@@ -106,7 +106,10 @@ def test_the_optimiser_keeps_the_grading_of_a_graded_grid():
 
     before = sizes(graded)
     after = sizes(optimize(graded, surface, None, OptimizeSettings(iterations=40, planar=False)).polymesh)
-    spread = lambda s: np.percentile(s, 90) / np.percentile(s, 10)
+
+    def spread(s):
+        return np.percentile(s, 90) / np.percentile(s, 10)
+
     assert spread(before) > 1.6
     assert spread(after) == pytest.approx(spread(before), rel=0.03)
     assert spearmanr(before, after).statistic > 0.98

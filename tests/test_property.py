@@ -1,7 +1,8 @@
 """Property-based: valid project files and meshes mutated at random. ``gridshell validate`` either
 accepts the project or stops with exit 2 and one message (an error line, its details indented
-under it, at most one hint, no library internals); it never shows a traceback. ``gridshell run --until surface`` on a mutated mesh leaves either a complete stage
-folder or none, and nothing half-written."""
+under it, at most one hint, no library internals); it never shows a traceback. ``gridshell run
+--until surface`` on a mutated mesh leaves either a complete stage folder or none, and nothing
+half-written."""
 
 from __future__ import annotations
 

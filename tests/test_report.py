@@ -173,8 +173,9 @@ def test_the_report_reads_like_an_engineers_no_raw_keys_no_e_notation_and_its_li
 
 
 @pytest.mark.parametrize("value, page, terminal", [
-    (1234567, "1\u2009234\u2009567", "1 234 567"), (0.0368, "0.0368", "0.0368"), (9.937e-07, "9.94 \u00d7 10\u207b\u2077", "9.94e-07"),
-    (203.2, "203", "203"), (float("inf"), "\u221e", "inf"), (None, "-", "-"), (True, "yes", "yes")])
+    (1234567, "1\u2009234\u2009567", "1 234 567"), (0.0368, "0.0368", "0.0368"),
+    (9.937e-07, "9.94 \u00d7 10\u207b\u2077", "9.94e-07"), (203.2, "203", "203"), (float("inf"), "\u221e", "inf"),
+    (None, "-", "-"), (True, "yes", "yes")])
 def test_one_number_format_for_the_report_and_the_terminal(value, page, terminal):
     """The report and the run's last lines write numbers the same way; the terminal's in ASCII."""
     from workflow.labels import format_value

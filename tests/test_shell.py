@@ -11,11 +11,25 @@ from engine.errors import InputError, MechanismError
 from engine.loads import LoadCase
 from engine.mesh import TriMesh
 from engine.parametric import cap, grid_triangles
-from engine.shell import ShellMaterial, analyse_shell, rigid_body_modes, shell_nodal_loads, shell_stiffness, solve_shell_json
+from engine.shell import (
+    ShellMaterial,
+    analyse_shell,
+    rigid_body_modes,
+    shell_nodal_loads,
+    shell_stiffness,
+    solve_shell_json,
+)
 from engine.supports import Supports
 
-from .shell_models import (HEMISPHERE_REFERENCE, PLATE_CLAMPED, PLATE_SIMPLY_SUPPORTED, SCORDELIS_LO_REFERENCE,
-                           pinched_hemisphere, scordelis_lo, square_plate)
+from .shell_models import (
+    HEMISPHERE_REFERENCE,
+    PLATE_CLAMPED,
+    PLATE_SIMPLY_SUPPORTED,
+    SCORDELIS_LO_REFERENCE,
+    pinched_hemisphere,
+    scordelis_lo,
+    square_plate,
+)
 
 
 @pytest.mark.parametrize("clamped, reference, tolerance", [(False, PLATE_SIMPLY_SUPPORTED, 0.01),

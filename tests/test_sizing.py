@@ -120,12 +120,12 @@ def _sized_cap(tmp_path, *, nonlinear: bool, cells: int = 40, **analysis):
 
 def _separate_check(project, out):
     """Linear analysis and EN 1993-1-1 checks of the sections in members.csv, built here."""
+    from engine.catalogue import chs_properties
     from engine.en1993 import EndForces, chs_checks
     from engine.frame import FrameModel, linear_buckling, linear_static
     from engine.loads import combine
     from engine.structure import beam_up_vectors, gridshell_loads, node_normals, support_restraints
     from engine.supports import Supports
-    from engine.catalogue import chs_properties
     from workflow.stages.analysis import pick_combination
     from workflow.stages.polymesh_io import read_polymesh_obj
     from workflow.stages.surface import load as load_surface
@@ -353,9 +353,8 @@ def test_the_grid_is_made_again_for_tubes_larger_than_the_section(tmp_path, caps
     """The cap with CHS 48.3 x 3.2 sizes to far larger tubes: gridshell run makes the grid again for
     the largest (fitted_grid.json), the optimised grid's limits are those of its joints, and no
     sized tube is larger than the section the grid was made for."""
-    from workflow.cli import main
-
     import templates
+    from workflow.cli import main
 
     text = (Path(templates.__file__).parent / "cap.toml").read_text(encoding="utf-8")
     text = text.replace('diameter = "114.3 mm"', 'diameter = "48.3 mm"').replace('thickness = "6.3 mm"',

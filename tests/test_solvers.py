@@ -64,8 +64,8 @@ def test_the_library_follows_the_size_and_what_is_installed():
 @pytest.mark.skipif(not pardiso_available(), reason="pypardiso is not installed")
 def test_the_shell_solved_by_pardiso_is_the_shell_solved_by_superlu(monkeypatch):
     """The Scordelis-Lo roof with PARDISO forced (its size threshold set to 0): the same midside
-    deflection as SuperLU's to 1e-9, within 15 % of the published 0.3024 at this coarse mesh (12.6 % off, docs/benchmarks.md), and the
-    stage records which library solved it."""
+    deflection as SuperLU's to 1e-9, within 15 % of the published 0.3024 at this coarse mesh
+    (12.6 % off, docs/benchmarks.md), and the stage records which library solved it."""
     import engine.solvers as solvers
     from tests.shell_models import scordelis_lo
 
@@ -83,9 +83,9 @@ def test_a_loose_part_of_a_shell_is_a_mechanism_for_either_library(library, monk
     import engine.solvers as solvers
     from engine.errors import MechanismError
     from engine.mesh import TriMesh
+    from engine.parametric import cap
     from engine.shell import ShellMaterial, analyse_shell
     from engine.supports import Supports
-    from engine.parametric import cap
 
     monkeypatch.setattr(solvers, "PARDISO_FROM_DOFS", 0 if library == "pardiso" else 10**9)
     one = cap(span=4.0, span_to_rise=4.0, rings=3)

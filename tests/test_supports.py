@@ -8,8 +8,17 @@ import pytest
 from engine import parametric
 from engine.errors import InputError, SelectionError
 from engine.loads import LimitState, LoadCase, LoadCombination, combine, lump_area_load
-from engine.supports import (Supports, restraint_flags, select_box, select_boundary, select_flagged, select_ids,
-                             select_loop, select_nearest, select_plane)
+from engine.supports import (
+    Supports,
+    restraint_flags,
+    select_boundary,
+    select_box,
+    select_flagged,
+    select_ids,
+    select_loop,
+    select_nearest,
+    select_plane,
+)
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +80,8 @@ def test_bad_restraints():
 
 
 def test_merged_supports_or_their_flags():
-    s = Supports.merge([(np.array([1, 2]), restraint_flags("roller_x")), (np.array([2, 5]), restraint_flags("roller_y"))])
+    s = Supports.merge([(np.array([1, 2]), restraint_flags("roller_x")),
+                        (np.array([2, 5]), restraint_flags("roller_y"))])
     assert s.nodes.tolist() == [1, 2, 5]
     assert s.restraints[1].astype(int).tolist() == [1, 1, 1, 0, 0, 0]
     assert s.dof_mask(6).sum() == 2 + 3 + 2

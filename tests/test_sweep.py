@@ -20,7 +20,7 @@ from workflow.config import load_project
 from workflow.plots.sweep import pareto_front
 from workflow.runner import _stage_key, product_version
 from workflow.stages import STAGES
-from workflow.sweep import Point, load_sweep, plan_tasks
+from workflow.sweep import Point, plan_tasks
 
 ROOT = Path(__file__).resolve().parents[1]
 GRIDSHELL = [sys.executable, "-m", "workflow.cli"]
@@ -58,7 +58,8 @@ def test_a_sweep_file_needs_its_project_a_stage_and_parameters(tmp_path, capsys)
                        ('project = "p.toml"\nuntil = "shop"\n[parameters]\n"remesh.n_cells" = [1]',
                         "until = 'shop' is not a stage"),
                        ('project = "p.toml"\n', "[parameters] is missing or empty"),
-                       ('project = "p.toml"\nseeds = [1]\n[parameters]\n"remesh.n_cells" = [1]', "unknown key 'seeds'")]:
+                       ('project = "p.toml"\nseeds = [1]\n[parameters]\n"remesh.n_cells" = [1]',
+                        "unknown key 'seeds'")]:
         (tmp_path / "p.toml").write_text("")
         path.write_text(text)
         assert main(["sweep", str(path)]) == 2

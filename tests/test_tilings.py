@@ -10,8 +10,16 @@ import pytest
 from engine.errors import InputError
 from engine.frame import FrameModel, linear_static
 from engine.supports import Supports
-from engine.tilings import (TILINGS, PeriodicCell, closed_form_stiffness, equal_length_edges, homogenise,
-                            length_per_area, periodic_cell, periodic_voronoi_cell)
+from engine.tilings import (
+    TILINGS,
+    PeriodicCell,
+    closed_form_stiffness,
+    equal_length_edges,
+    homogenise,
+    length_per_area,
+    periodic_cell,
+    periodic_voronoi_cell,
+)
 
 # the thesis's bar: solid steel 50 mm, E = 210 GPa, nu = 0.3 (METHOD.md section 6)
 EA, EI, GJ = 412_334e3, 64.427e3, 49.559e3

@@ -214,7 +214,8 @@ def test_quick_start_mesh_in_millimetres(capsys, tmp_path):
     # with the unit given, the same mesh is 10 m across and passes the check
     from workflow.config import check_inputs, project_from_surface
 
-    assert check_inputs(project_from_surface(tmp_path / "roof.stl", units="mm"), quick_start=True) == pytest.approx(10.0)
+    project = project_from_surface(tmp_path / "roof.stl", units="mm")
+    assert check_inputs(project, quick_start=True) == pytest.approx(10.0)
 
 
 def test_surface_units_need_a_surface(capsys, tmp_path):

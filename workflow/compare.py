@@ -27,7 +27,6 @@ from pathlib import Path
 import numpy as np
 
 from engine.errors import ConvergenceError, GridshellError
-from engine.loads import combine
 from engine.mesh import PolyMesh
 from fabrication.files import atomic_path, write_text_atomic
 

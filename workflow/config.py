@@ -23,10 +23,10 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from engine.errors import GridshellError
 from engine.supports import restraint_flags
 
-from .units import AreaLoad, Density, Force, Length, Stress, to_si
+from .units import AreaLoad, Density, Force, Length, Stress
 
-__all__ = ["ConfigError", "Project", "load_project", "parse_project", "read_toml", "project_from_surface", "check_inputs",
-           "STAGE_SECTIONS"]
+__all__ = ["ConfigError", "Project", "load_project", "parse_project", "read_toml", "project_from_surface",
+           "check_inputs", "STAGE_SECTIONS"]
 
 
 class ConfigError(GridshellError):
@@ -226,7 +226,8 @@ class SectionConfig(_Section):
         return value
 
     def dimensions(self) -> dict[str, float]:
-        return {k: getattr(self, k) for k in ("diameter", "thickness", "height", "width") if getattr(self, k) is not None}
+        return {k: getattr(self, k) for k in ("diameter", "thickness", "height", "width")
+                if getattr(self, k) is not None}
 
 
 def _mm(value: float) -> str:
@@ -338,10 +339,10 @@ class DesignConfig(_Section):
     diameter (e.g. the [section]'s, so that the joints the grid was made for fit: the walls grow
     instead). fit_grid_to_tubes: where the sized tubes are larger than [section], ``gridshell run``
     makes the grid again for the largest of them (its joints need longer beams, so it has fewer
-    cells; workflow.design_loop); off, a ``tubes_outgrow_grid`` finding says so. choose = "best": ``gridshell run`` first runs
-    the sweep of ``choose_from`` (dotted keys -> values, their product) up to the analysis and keeps
-    the point with the highest lambda_NL_worst per kg among those that pass every check
-    (workflow.choose)."""
+    cells; workflow.design_loop); off, a ``tubes_outgrow_grid`` finding says so. choose = "best":
+    ``gridshell run`` first runs the sweep of ``choose_from`` (dotted keys -> values, their
+    product) up to the analysis and keeps the point with the highest lambda_NL_worst per kg among
+    those that pass every check (workflow.choose)."""
 
     size_sections: bool = False
     catalogue: str = "EN 10210-2 CHS"
@@ -670,7 +671,8 @@ def load_project(path: str | Path) -> Project:
     if path.is_dir():
         if not (path / "project.toml").is_file():
             raise ConfigError(f"{path} is a folder without a project.toml",
-                              hint=f"give the project file, or create one with: gridshell init {path} --template mockup")
+                              hint=f"give the project file, or create one with: "
+                                   f"gridshell init {path} --template mockup")
         path = path / "project.toml"
     data = read_toml(path, "project file", hint="create one with: gridshell init DIR --template mockup")
     return parse_project(data, source=str(path), base_dir=path.parent.resolve())

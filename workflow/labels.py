@@ -99,8 +99,9 @@ _SUFFIXES: list[tuple[str, str, float]] = [
 #: table column names (CSV headers) -> what the report heads them with
 _COLUMNS = {"length_m": "length (m)", "axial_force_kN": "axial force (kN)", "area_mm2": "area (mm2)",
             "perimeter_mm": "perimeter (mm)", "planarity_mm": "planarity (mm)", "thickness_mm": "thickness (mm)",
-            "mass_kg": "mass (kg)", "cut_length_m": "cut length (m)", "largest_deflection_mm": "largest deflection (mm)",
-            "vertex_count": "corners", "start_node": "start node", "end_node": "end node",
+            "mass_kg": "mass (kg)", "cut_length_m": "cut length (m)",
+            "largest_deflection_mm": "largest deflection (mm)", "vertex_count": "corners",
+            "start_node": "start node", "end_node": "end node",
             "governing_check": "governing check", "lambda_NL": "lambda_NL"}
 
 
@@ -151,7 +152,8 @@ def format_value(value, digits: int = 3, *, text: bool = False) -> str:
             if text:
                 return f"{value:.{max(digits - 1, 0)}e}"
             mantissa = value / 10**magnitude
-            return f"{mantissa:.{max(digits - 1, 0)}f}".rstrip("0").rstrip(".") + f" \u00d7 10{str(magnitude).translate(_SUPERSCRIPT)}"
+            return (f"{mantissa:.{max(digits - 1, 0)}f}".rstrip("0").rstrip(".")
+                    + f" \u00d7 10{str(magnitude).translate(_SUPERSCRIPT)}")
         if magnitude >= digits:
             return f"{round(value):,}".replace(",", space)
         decimals = max(digits - 1 - magnitude, 0)

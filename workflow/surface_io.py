@@ -93,7 +93,8 @@ def read_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=float)
     faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), dtype=np.int64)
     if len(vertices) == 0 or len(faces) == 0:
-        raise InputError(f"surface file {path} holds no triangles", hint="export the surface as a mesh, not as points or curves")
+        raise InputError(f"surface file {path} holds no triangles",
+                         hint="export the surface as a mesh, not as points or curves")
     return vertices, faces, _red_flags(loaded, len(vertices))
 
 

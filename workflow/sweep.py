@@ -91,7 +91,8 @@ def load_sweep(path: str | Path) -> SweepSpec:
     if unknown:
         raise InputError(f"{path}: unknown key {unknown[0]!r}", hint="a sweep file has project, until and [parameters]")
     if not isinstance(data.get("project"), str):
-        raise InputError(f"{path}: project = \"FILE\" is missing", hint="name the project file, relative to the sweep file")
+        raise InputError(f"{path}: project = \"FILE\" is missing",
+                         hint="name the project file, relative to the sweep file")
     project_file = (path.parent / data["project"]).resolve()
     if project_file.is_dir():
         project_file = project_file / "project.toml"
@@ -147,7 +148,8 @@ def sweep_points(spec: SweepSpec, out_dir: Path) -> list[Point]:
         except GridshellError as exc:
             shown = ", ".join(f"{k} = {v!r}" for k, v in values.items())
             raise InputError(f"{spec.file}: [parameters] point {number} ({shown}) is not a valid project: "
-                             f"{' '.join(str(exc.args[0] if exc.args else exc).split())}", hint=getattr(exc, "hint", None)) from None
+                             f"{' '.join(str(exc.args[0] if exc.args else exc).split())}",
+                             hint=getattr(exc, "hint", None)) from None
         points.append(Point(number=number, values=values, project=project,
                             folder=Path(out_dir) / "points" / f"{number:04d}"))
     return points
@@ -500,7 +502,7 @@ def cmd_sweep(args) -> int:
         raise InputError(f"--workers {args.workers}: give 1 or more")
     if args.workers is not None and args.scheduler:
         raise InputError("--workers applies to the local cluster; a --scheduler cluster has its own workers")
-    rows = run_sweep(spec, out_dir, scheduler=args.scheduler, workers=args.workers, say=say)
+    run_sweep(spec, out_dir, scheduler=args.scheduler, workers=args.workers, say=say)
     print(f"results: {(out_dir / 'sweep.csv').resolve()}")
     print(f"plots: {(out_dir / 'sweep.html').resolve()}")
     return 0

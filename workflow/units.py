@@ -76,7 +76,9 @@ def to_si(value: Any, dimension: str) -> float:
     if not hasattr(quantity, "dimensionality"):
         return float(quantity)
     if quantity.dimensionless and dimensionality == "":
-        return float(quantity.to("radian").magnitude) if str(quantity.units) != "dimensionless" else float(quantity.magnitude)
+        if str(quantity.units) != "dimensionless":
+            return float(quantity.to("radian").magnitude)
+        return float(quantity.magnitude)
     if quantity.dimensionless:
         return float(quantity.magnitude)
     if quantity.dimensionality != ureg.Quantity(1, si_unit.replace("^", "**")).dimensionality:

@@ -66,7 +66,8 @@ def plot_sections(nodes: np.ndarray, beams: np.ndarray, profiles: list[str], dia
     segments = _segments(nodes, beams)
     for colour, name in zip(colours, order):
         mine = names == name
-        ax.add_collection(LineCollection(segments[mine], colors=[colour], linewidths=1.0 + 4.0 * diameters[mine] / scale,
+        ax.add_collection(LineCollection(segments[mine], colors=[colour],
+                                         linewidths=1.0 + 4.0 * diameters[mine] / scale,
                                          label=f"{name} ({int(mine.sum())} beams)"))
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)  # beside, not over the grid
     _frame(ax, nodes)

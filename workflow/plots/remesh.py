@@ -27,7 +27,9 @@ def plot_gridshell(polymesh: PolyMesh, path: Path, *, color_by: str = "degree", 
     polygons = [nodes[f] for f in polymesh.faces]
     if color_by == "degree":
         colours = [DEGREE_COLOURS[min(max(len(f), 3), 8)] for f in polymesh.faces]
-        legend = [Patch(color=c, label=f"{d}{'+' if d == 8 else ''} sides: {int(np.sum(np.clip(polymesh.face_degrees, 3, 8) == d))}")
+        legend = [Patch(color=c,
+                        label=f"{d}{'+' if d == 8 else ''} sides: "
+                              f"{int(np.sum(np.clip(polymesh.face_degrees, 3, 8) == d))}")
                   for d, c in DEGREE_COLOURS.items() if np.any(np.clip(polymesh.face_degrees, 3, 8) == d)]
         mappable = None
     elif color_by == "planarity":
@@ -60,6 +62,7 @@ def plot_gridshell(polymesh: PolyMesh, path: Path, *, color_by: str = "degree", 
         ax.legend(handles=legend, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     if mappable is not None:
         fig.colorbar(mappable, ax=ax, shrink=0.8, label="planarity: largest distance to best-fit plane (mm)")
-    fig.suptitle(title or f"grid-shell: {polymesh.n_nodes} nodes, {len(polymesh.edges)} beams, {polymesh.n_faces} cells")
+    fig.suptitle(title or f"grid-shell: {polymesh.n_nodes} nodes, {len(polymesh.edges)} beams, "
+                          f"{polymesh.n_faces} cells")
     fig.tight_layout()
     return save_png(fig, path)

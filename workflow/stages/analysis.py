@@ -17,20 +17,27 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.errors import MechanismError
-from engine.loads import LoadCombination, combine
-from engine.structure import BeamProperties, beam_up_vectors, gridshell_loads, node_normals, support_restraints
-from engine.findings import Finding
-from engine.supports import Supports
-from engine.parts import beam_id, node_id
-from fabrication.files import atomic_path, write_text_atomic
-
 from engine.en1993 import CHECKED, NOT_CHECKED
+from engine.errors import MechanismError
+from engine.findings import Finding
+from engine.loads import LoadCombination, combine
+from engine.parts import beam_id, node_id
+from engine.structure import BeamProperties, beam_up_vectors, gridshell_loads, node_normals, support_restraints
+from engine.supports import Supports
+from fabrication.files import atomic_path, write_text_atomic
 
 from ..config import Project
 from ._require import require
-from .sizing import (BeamSections, checks_method, make_analyse, profile_name, project_catalogue,
-                     project_sections, sized_checks, start_tubes)
+from .sizing import (
+    BeamSections,
+    checks_method,
+    make_analyse,
+    profile_name,
+    project_catalogue,
+    project_sections,
+    sized_checks,
+    start_tubes,
+)
 
 __all__ = ["run", "load", "beam_properties", "build_frame", "pick_combination", "AnalysisSummary"]
 
@@ -266,7 +273,8 @@ def _load_test(ctx, project: Project, surface, polymesh, model, supports, props,
         if not factors:
             return np.zeros((polymesh.n_nodes, 6))
         case = combine(surface.load_cases, LoadCombination(name="part", limit_state="SLS", factors=factors))
-        return gridshell_loads(polymesh, case, mass_per_length=props.mass_per_length, surface_vertices=surface.mesh.vertices)
+        return gridshell_loads(polymesh, case, mass_per_length=props.mass_per_length,
+                               surface_vertices=surface.mesh.vertices)
 
     names = list(project.analysis.control_points)
     points = np.array([project.analysis.control_points[n] for n in names], dtype=float)
@@ -453,8 +461,8 @@ class _Sizer:
         analyse = make_analyse(self.method, cat, self.material, self.lengths, self._solve, self.project)
         result = size_sections(analyse, cat, self.lengths, self.material.density, start=start, groups=design.groups,
                                deflection_limit=self.deflection_limit,
-                               required_load_factor=self.required, stiffness_floor=floor, max_iterations=design.max_iterations,
-                               progress=lambda text: self.ctx.step(text))
+                               required_load_factor=self.required, stiffness_floor=floor,
+                               max_iterations=design.max_iterations, progress=lambda text: self.ctx.step(text))
         round_ = 0 if previous is None else self.history[-1]["round"] + 1
         self.history += [{"round": round_, **record} for record in result.iterations]
         return result
@@ -470,13 +478,15 @@ class _Sizer:
         for tube in sorted(set(design.tube.tolist()), key=lambda k: -self.catalogue.A[k]):
             beams = design.tube == tube
             names, counts = np.unique(governing[beams], return_counts=True)
-            groups.append({"profile": self.catalogue.names[tube], "diameter_mm": round(1000 * self.catalogue.diameter[tube], 3),
+            groups.append({"profile": self.catalogue.names[tube],
+                           "diameter_mm": round(1000 * self.catalogue.diameter[tube], 3),
                            "thickness_mm": round(1000 * self.catalogue.thickness[tube], 3),
                            "beams": int(beams.sum()), "length_m": float(lengths[beams].sum()),
                            "mass_kg": float(mass[beams].sum()), "max_utilisation": float(utilisation[beams].max()),
                            "governing": str(names[np.argmax(counts)]) if len(names) else ""})
         names, counts = np.unique(governing, return_counts=True)
-        return {"catalogue": self.catalogue.name, "process": self.catalogue.process, "catalogue_source": self.catalogue.source.splitlines()[:2],
+        return {"catalogue": self.catalogue.name, "process": self.catalogue.process,
+                "catalogue_source": self.catalogue.source.splitlines()[:2],
                 "checks": self.method, "groups_asked": self.project.design.groups, "converged": design.converged,
                 "reason": design.reason,
                 "failing_member": None if design.failing_beam is None else beam_id(design.failing_beam),

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.structure import node_normals
 from engine.findings import Finding
 from engine.mesh import PolyMesh
+from engine.structure import node_normals
 from fabrication.files import write_text_atomic
 
 from ..config import Project
@@ -142,7 +142,8 @@ def output_sizes_mb(folder: Path) -> dict[str, float]:
     for entry in sorted(Path(folder).iterdir()):
         if entry.name.startswith("."):
             continue
-        files = [entry] if entry.is_file() else [p for p in entry.rglob("*") if p.is_file() and not p.name.startswith(".")]
+        files = ([entry] if entry.is_file()
+                 else [p for p in entry.rglob("*") if p.is_file() and not p.name.startswith(".")])
         sizes[entry.name] = round(sum(p.stat().st_size for p in files) / 1e6, 2)
     sizes["total"] = round(sum(sizes.values()), 2)
     return sizes
@@ -226,7 +227,8 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     sizes_mm = np.full(len(polymesh.edges), size_mm) if tubes is None else MM * tubes.diameter
     walls_mm = None if tubes is None else MM * tubes.thickness
     clock.start("beams: cut list")
-    beams = require("fabrication", "fabrication.beams", "BeamSettings", "cut_list", "write_cut_list", "write_beams_step")
+    beams = require("fabrication", "fabrication.beams",
+                    "BeamSettings", "cut_list", "write_cut_list", "write_beams_step")
     BeamSettings, cut_list, write_cut_list, write_beams_step = beams
     nest_bars = require("fabrication", "fabrication.nesting_bars", "nest_bars")
     b = config.beams
@@ -269,7 +271,8 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     stock = MM * b.stock_length
     for i in np.flatnonzero(cut + MM * b.kerf > stock):
         findings.append(Finding(kind="stock_length", parts=[ids[i]], measure=float(cut[i]), limit=stock, unit="mm",
-                                stage="fabrication", message=f"beam {ids[i]} ({cut[i]:.0f} mm) is longer than a stock bar",
+                                stage="fabrication",
+                                message=f"beam {ids[i]} ({cut[i]:.0f} mm) is longer than a stock bar",
                                 fix="raise [fabrication.beams] stock_length, or more cells ([remesh] n_cells)"))
     nestable = (cut > 0) & (cut + MM * b.kerf <= stock)
     clock.start("beams: bar nesting")
@@ -296,13 +299,15 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     if config.panels.enabled:
         clock.start("panels: flatten and DXFs")
         (PanelSettings, flatten_panels, write_panel_dxfs, write_panels_csv) = require(
-            "fabrication", "fabrication.panels", "PanelSettings", "flatten_panels", "write_panel_dxfs", "write_panels_csv")
-        from fabrication.nesting_sheets import nest_on_stock, sheet_overshoot, write_sheet_dxfs, write_contact_sheet
+            "fabrication", "fabrication.panels",
+            "PanelSettings", "flatten_panels", "write_panel_dxfs", "write_panels_csv")
+        from fabrication.nesting_sheets import nest_on_stock, sheet_overshoot, write_contact_sheet, write_sheet_dxfs
 
         p = config.panels
         panel_settings = PanelSettings(thickness_mm=MM * p.thickness, material_name=p.material, density=p.density,
                                        clearance_mm=MM * p.clearance, hole_diameter_mm=MM * p.hole_diameter,
-                                       hole_inset_mm=MM * p.hole_inset, planarity_tolerance_mm=MM * p.planarity_tolerance,
+                                       hole_inset_mm=MM * p.hole_inset,
+                                       planarity_tolerance_mm=MM * p.planarity_tolerance,
                                        split_nonplanar=p.split_nonplanar)
         problems: list[tuple[str, str]] = []
         pieces = panels_of(ctx, polymesh)
@@ -338,7 +343,8 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
         summary.update({"panels": len(panels), "sheets": int(stock_nesting.n_sheets),
                         "sheet_sizes_mm": [[s.width_mm, s.height_mm, n.n_sheets] for s, _, n in stock_nesting.groups],
                         "sheet_utilisation": float(stock_nesting.utilisation),
-                        "panels_over_planarity_tolerance": [getattr(x, "id", "") for x in panels if getattr(x, "nonplanar", False)]})
+                        "panels_over_planarity_tolerance": [getattr(x, "id", "") for x in panels
+                                                            if getattr(x, "nonplanar", False)]})
 
     clock.start("drawings")
     write_plan_drawings = require("fabrication", "fabrication.drawings", "write_plan_drawings")
@@ -379,8 +385,13 @@ def _write_ifc(ctx, folder: Path, polymesh, normals: np.ndarray, table, panels: 
 
     from engine.parts import joint_id
     from fabrication.ifc import IfcBeam, IfcJoint, IfcPanel, write_gridshell_ifc
-    from fabrication.joints import (joint_geometry, joint_hub_radius_mm, joint_setback_mm, joint_sleeve_mm,
-                                    smallest_angle)
+    from fabrication.joints import (
+        joint_geometry,
+        joint_hub_radius_mm,
+        joint_setback_mm,
+        joint_sleeve_mm,
+        smallest_angle,
+    )
     from fabrication.nc1 import grade_name
 
     project: Project = ctx.project

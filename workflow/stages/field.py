@@ -22,7 +22,8 @@ __all__ = ["run", "load", "field_settings"]
 
 def field_settings(project: Project):
     """The engine's FieldSettings from the project's [field] section."""
-    FieldSettings, SizeMap, AnisotropyMap = require("field", "engine.field", "FieldSettings", "SizeMap", "AnisotropyMap")
+    FieldSettings, SizeMap, AnisotropyMap = require("field", "engine.field",
+                                                    "FieldSettings", "SizeMap", "AnisotropyMap")
     config = project.field
     return FieldSettings(
         max_size_ratio=config.max_size_ratio, max_aspect=config.max_aspect,

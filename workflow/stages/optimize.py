@@ -7,10 +7,9 @@ beams, the end game's record, with the weights used) and pictures.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
-
-import dataclasses
 
 import numpy as np
 
@@ -18,8 +17,8 @@ from fabrication.files import write_text_atomic
 
 from ..config import Project
 from ._require import require
-from .polymesh_io import read_polymesh_obj, write_polymesh_obj
 from .fabrication import build_limits_of
+from .polymesh_io import read_polymesh_obj, write_polymesh_obj
 from .remesh import MAX_COLLAPSE_SHARE, buildable_grid, grid_figures, short_count, short_share, too_fine_finding
 
 #: The end game keeps beams this much above the shortest buildable beam between 120-degree joints.

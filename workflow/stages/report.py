@@ -126,10 +126,12 @@ def _summary(project: Project, surface, polymesh, analysis: dict, fabrication: d
     if verdicts:
         rows = [[v.get("check"), *_in_mm(v.get("value"), v.get("limit"), v.get("unit", "")), bool(v.get("pass"))]
                 for v in verdicts]
-        tables.insert(0, Table(name="verdicts", caption="Verdicts", columns=["check", "value", "limit", "unit", "result"],
+        tables.insert(0, Table(name="verdicts", caption="Verdicts",
+                               columns=["check", "value", "limit", "unit", "result"],
                                rows=rows, verdict_column="result"))
     passed = all(bool(v.get("pass")) for v in verdicts) if verdicts else None
-    text = {True: "Every structural check passes.", False: "At least one structural check fails: see the verdicts below.",
+    text = {True: "Every structural check passes.",
+            False: "At least one structural check fails: see the verdicts below.",
             None: "No structural verdicts (the analysis did not run)."}[passed]
     if findings:
         rows = [[r["kind"].replace("_", " "), r["count"], r["worst"], r["limit"], r["unit"],
@@ -166,7 +168,8 @@ def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
                             tables=[_figures_table("shell", "Continuous shell under the serviceability load", shell,
                                                    shell_keys)]))
     sections.append(Section(title="3. Guiding field", figures=_figures(out_dir, "field"),
-                            tables=[_figures_table("field", "Field against the bounds D and A", field)] if field else []))
+                            tables=([_figures_table("field", "Field against the bounds D and A", field)]
+                                    if field else [])))
     remesh_rows = {k: remesh[k] for k in GRID_KEYS if k in remesh}
     sections.append(Section(title="4. Statics-aware Voronoi remeshing", figures=_figures(out_dir, "remesh"),
                             tables=[_figures_table("remesh", "Remeshing quality", remesh_rows)]))
@@ -179,7 +182,8 @@ def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
             rows.append([label, unit, in_unit(key, before.get(key)), in_unit(key, after[key])])
     sections.append(Section(title="5. Regular cells, planar panels", figures=_figures(out_dir, "optimize"),
                             tables=[Table(name="optimize", caption="Before and after the optimisation",
-                                          columns=["figure", "unit", "remeshed", "optimised"], rows=rows)] if rows else []))
+                                          columns=["figure", "unit", "remeshed", "optimised"], rows=rows)]
+                            if rows else []))
     figure_keys = ("uls_combination", "sls_combination", "delta_L_m", "max_vertical_sls_m", "deflection_limit_m",
                    "max_utilisation", "governing_member", "lambda_LB", "lambda_NL_perfect", "lambda_NL_worst",
                    "worst_imperfection", "knock_down", "imperfection_amplitude_m", "control_node", "beam_mass_kg",
@@ -188,12 +192,13 @@ def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
     imperfections = analysis.get("imperfections", [])
     if imperfections:
         tables.append(Table(name="imperfections", caption="Non-linear limit load factor per imperfection",
-                            columns=["imperfection", "non-linear limit load factor"], rows=[[i["shape"], i["lambda_NL"]] for i in imperfections]))
+                            columns=["imperfection", "non-linear limit load factor"],
+                            rows=[[i["shape"], i["lambda_NL"]] for i in imperfections]))
     design = analysis.get("design")
     if design:
         tables.append(Table(name="design", caption=(
-            f"Section sizing from {design['catalogue']}: {design['mass_before_kg']:,.0f} kg with the project's section, "
-            f"{design['mass_after_kg']:,.0f} kg sized, {design['iterations']} analyses"
+            f"Section sizing from {design['catalogue']}: {design['mass_before_kg']:,.0f} kg "
+            f"with the project's section, {design['mass_after_kg']:,.0f} kg sized, {design['iterations']} analyses"
             + ("" if design["converged"] else f"; not settled: {design['reason']} ({design['failing_member']})")),
             columns=["profile", "beams", "length (m)", "mass (kg)", "largest utilisation", "governing check"],
             rows=[[g["profile"], g["beams"], round(g["length_m"], 1), round(g["mass_kg"], 1),
@@ -206,7 +211,8 @@ def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
                    f"Not checked: {'; '.join(checks['not_checked'])}." if checks else "")
     sections.append(Section(title="6. Structural analysis", text=checks_text, figures=_figures(out_dir, "analysis"),
                             tables=tables,
-                            links=[("members.csv", "06-analysis/members.csv"), ("response.csv", "06-analysis/response.csv"),
+                            links=[("members.csv", "06-analysis/members.csv"),
+                                   ("response.csv", "06-analysis/response.csv"),
                                    ("analysis.json", "06-analysis/analysis.json")]))
     compare = _csv_table(out_dir / "compare/compare.csv", "compare", "Grids of the same total length", max_rows=20)
     if compare:
@@ -225,10 +231,11 @@ def _fabrication_section(out_dir: Path) -> Section:
     cut = folder / "beams/cutlist.csv"
     if cut.is_file():
         frame = pd.read_csv(cut)
-        group = frame.groupby("profile").agg(beams=("id", "count"), cut_length_m=("cut_length_mm", lambda s: s.sum() / 1000),
+        group = frame.groupby("profile").agg(beams=("id", "count"),
+                                             cut_length_m=("cut_length_mm", lambda s: s.sum() / 1000),
                                              mass_kg=("mass_kg", "sum")).reset_index()
-        tables.append(Table(name="cutlist", caption="Cut list by profile", columns=[column_label(c) for c in group.columns],
-                            rows=group.values.tolist()))
+        tables.append(Table(name="cutlist", caption="Cut list by profile",
+                            columns=[column_label(c) for c in group.columns], rows=group.values.tolist()))
     fabrication = _json(folder / "fabrication.json")
     bars = {k: fabrication.get(k) for k in ("bars_used", "bars_lower_bound") if k in fabrication}
     if bars:

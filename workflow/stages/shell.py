@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 
 from engine.errors import MechanismError
-
 from engine.loads import LoadCase, LoadCombination, combine
 from fabrication.files import write_text_atomic
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+
 import numpy as np
 
 from engine.catalogue import CATALOGUES, Catalogue, catalogue, chs_properties

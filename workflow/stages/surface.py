@@ -19,8 +19,17 @@ from engine import parametric
 from engine.errors import GridshellError, InputError
 from engine.loads import LimitState, LoadCase, LoadCombination
 from engine.mesh import TriMesh
-from engine.supports import (Supports, restraint_flags, select_box, select_boundary, select_flagged, select_ids,
-                             select_loop, select_nearest, select_plane)
+from engine.supports import (
+    Supports,
+    restraint_flags,
+    select_boundary,
+    select_box,
+    select_flagged,
+    select_ids,
+    select_loop,
+    select_nearest,
+    select_plane,
+)
 from engine.surfaces import clean_mesh, to_z_up
 from fabrication.files import write_text_atomic
 
@@ -185,7 +194,8 @@ def load(folder: Path, ctx) -> SurfaceResult:
     from ..surface_io import read_surface as read
 
     vertices, faces, _ = read(folder / "surface.ply")
-    mesh = TriMesh(vertices=vertices, faces=faces, name=ctx.project.surface.template or Path(ctx.project.surface.file).stem)
+    mesh = TriMesh(vertices=vertices, faces=faces,
+                   name=ctx.project.surface.template or Path(ctx.project.surface.file).stem)
     support_data = json.loads((folder / "supports.json").read_text())["supports"]
     supports = Supports(nodes=np.array([int(k) for k in support_data], dtype=np.int64),
                         restraints=np.array(list(support_data.values()), dtype=bool).reshape(-1, 6))
