@@ -846,23 +846,6 @@ def _split_ring_cells(fine: _Fine, labels: np.ndarray, centroids: np.ndarray) ->
     return labels, np.asarray(centroids)
 
 
-def _within_loop_size(nodes: np.ndarray, flat: np.ndarray, offsets: np.ndarray, local_size: np.ndarray) -> None:
-    """Lower the size of the nodes of each boundary loop of the polygons to a RING_SPLIT-th of its
-    length (in place), so that no collapse of short beams closes a small hole."""
-    a, b = flat, flat[_following(offsets)]
-    key = np.minimum(a, b) * len(nodes) + np.maximum(a, b)
-    unique, count = np.unique(key, return_counts=True)
-    once = np.isin(key, unique[count == 1])
-    a, b = a[once], b[once]
-    if not len(a):
-        return
-    graph = sp.csr_matrix((np.ones(len(a)), (a, b)), shape=(len(nodes), len(nodes)))
-    _, loop = connected_components(graph, directed=False)
-    perimeter = np.bincount(loop[a], weights=np.linalg.norm(nodes[a] - nodes[b], axis=1), minlength=loop.max() + 1)
-    on_loop = np.unique(np.concatenate([a, b]))
-    local_size[on_loop] = np.minimum(local_size[on_loop], perimeter[loop[on_loop]] / RING_SPLIT)
-
-
 def _polygons(mesh: TriMesh, fine: _Fine, clusters: _Clusters, support_vertices: np.ndarray | None) -> PolyMesh:
     """The polygon grid-shell of a clustering: extraction, orientation, short beams collapsed, supports."""
     labels, centroids = _split_ring_cells(fine, clusters.labels, clusters.centroids)
@@ -872,7 +855,6 @@ def _polygons(mesh: TriMesh, fine: _Fine, clusters: _Clusters, support_vertices:
     # a node's size: its largest cell's (cut cells at corners are small, their neighbours are not)
     local_size = np.zeros(len(nodes))
     np.maximum.at(local_size, flat, np.sqrt(region_area)[np.repeat(cell_labels, np.diff(offsets))])
-    _within_loop_size(nodes, flat, offsets, local_size)
     nodes, flat, offsets, boundary, corners, _ = _collapse_short_beams(nodes, flat, offsets, boundary, corners,
                                                                        local_size)
     boundary_ids = np.unique(np.concatenate(fine.loops)) if fine.loops else np.zeros(0, dtype=np.int64)
