@@ -381,11 +381,14 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
         height = 2.5 * size
         hub = Cylinder(hub_radius, height).moved(Location(_plane((0, 0, 0), axis)))
         plates, holes = [], []
+        # each plate starts halfway into the hub, not at its centre: there plates met one another
+        # as well as the hub, and OCCT's fuse of them all at once left some plate a solid apart
+        start = 0.5 * hub_radius
         for d in directions:
             side = _perpendicular(d, axis)  # the plate's normal
-            plate = Box(setback + sleeve, settings.plate_thickness_mm, 0.8 * height,
+            plate = Box(setback + sleeve - start, settings.plate_thickness_mm, 0.8 * height,
                         align=(Align.MIN, Align.CENTER, Align.CENTER))
-            plates.append(plate.moved(Location(_plane((0, 0, 0), np.cross(d, side), d))).wrapped)
+            plates.append(plate.moved(Location(_plane(start * d, np.cross(d, side), d))).wrapped)
             hole = Cylinder(0.5 * settings.bolt_hole_mm, 3 * settings.plate_thickness_mm)
             holes.append(hole.moved(Location(_plane(d * (setback + 0.5 * sleeve), side))).wrapped)
         # one fuse and one cut with all tools, as for the sockets: a boolean per plate and hole

@@ -481,3 +481,36 @@ def test_gridshell_step_is_the_same_bytes_from_run_to_run_with_its_colours(tmp_p
     assert len(grey) == 1 and len(blue) == 1 and grey != blue
     (r, g, b), = blue
     assert b > r and b > g
+
+
+def test_a_steel_node_is_one_solid_of_the_hub_and_its_plates():
+    """A node of a generated saddle (seed 31, 1068 cells, CHS 168.3 on steel nodes) whose three fin
+    plates all started at the node's centre: OCCT's fuse of them at once left one plate a solid
+    apart, on 27 of its 1068 nodes. Now one solid, of the volume of the hub and the plates fused
+    one at a time, less the bolt holes (build123d's own booleans)."""
+    from build123d import Align, Box, Cylinder, Location
+
+    from fabrication import joints
+
+    directions = np.array([[-0.51709574, 0.85244023, -0.0771858], [-0.48950451, -0.86635476, 0.09906954],
+                           [0.99784846, 0.0605175, -0.02522053]])
+    axis = np.array([0.0186972, 0.10223855, 0.99458418])
+    geometry = joints.JointGeometry(node=111, position_mm=np.zeros(3), directions=directions,
+                                    axis=axis / np.linalg.norm(axis), beam_size_mm=168.3)
+    settings = joints.JointSettings(kind="steel")
+    solid, report = joints.build_joint(geometry, settings)
+    assert len(solid.solids()) == 1 and solid.is_valid
+    size = 168.3
+    radius, height = joints.joint_hub_radius_mm(settings, size), 2.5 * size
+    length = report["setback_mm"] + joints.joint_sleeve_mm(settings, size)
+    expected = Cylinder(radius, height).moved(Location(joints._plane((0, 0, 0), geometry.axis)))
+    for d in geometry.directions:
+        side = joints._perpendicular(d, geometry.axis)
+        plate = Box(length, settings.plate_thickness_mm, 0.8 * height, align=(Align.MIN, Align.CENTER, Align.CENTER))
+        expected = expected + plate.moved(Location(joints._plane((0, 0, 0), np.cross(d, side), d)))
+    for d in geometry.directions:
+        side = joints._perpendicular(d, geometry.axis)
+        hole = Cylinder(0.5 * settings.bolt_hole_mm, 3 * settings.plate_thickness_mm)
+        expected = expected - hole.moved(Location(joints._plane(d * (length - 0.5 * joints.joint_sleeve_mm(
+            settings, size)), side)))
+    assert _volume(solid.wrapped) == pytest.approx(expected.volume, rel=1e-6)
