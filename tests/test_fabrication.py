@@ -514,3 +514,17 @@ def test_a_steel_node_is_one_solid_of_the_hub_and_its_plates():
         expected = expected - hole.moved(Location(joints._plane(d * (length - 0.5 * joints.joint_sleeve_mm(
             settings, size)), side)))
     assert _volume(solid.wrapped) == pytest.approx(expected.volume, rel=1e-6)
+
+
+def test_a_joint_that_fails_its_checks_is_a_finding_in_words():
+    """The finding says what is wrong with the joint, not the name of the check."""
+    from types import SimpleNamespace
+
+    from workflow.stages.fabrication import _joint_findings
+
+    report = {"id": "J0007", "smallest_angle_deg": 120.0, "ok": False, "valid": True, "single_solid": False,
+              "watertight": True, "wall_ok": False, "min_wall_mm": 1.2, "clashes": [], "max_axis_error_deg": 0.0}
+    (finding,) = _joint_findings([report], SimpleNamespace(min_angle_deg=30.0))
+    assert finding.kind == "joint_solid" and finding.parts == ["J0007"]
+    assert "not one solid" in finding.message and "thinnest wall is 1.2 mm" in finding.message
+    assert "single_solid" not in finding.message and "wall_ok" not in finding.message

@@ -179,7 +179,11 @@ def _joint_findings(reports: list[dict], limits) -> list[Finding]:
         if r.get("ok", True):
             continue
         failed = [r["error"]] if r.get("error") else []
-        failed += [name for name in ("valid", "single_solid", "watertight", "wall_ok") if not r.get(name, True)]
+        failed += [words for name, words in (
+            ("valid", "not a valid solid"), ("single_solid", "not one solid (a part of it does not join the rest)"),
+            ("watertight", "its STL is not watertight"),
+            ("wall_ok", f"its thinnest wall is {r.get('min_wall_mm', float('nan')):.1f} mm, under min_wall"))
+            if not r.get(name, True)]
         if r.get("clashes"):
             failed.append(f"{len(r['clashes'])} sleeve pairs overlap")
         error = r.get("max_axis_error_deg")
