@@ -153,9 +153,9 @@ def canonical_step_styles(data: bytes) -> bytes:
             _STEP_STRING.sub(b"''", data[:first.start()]))):
         return data
 
-    def inner(body: bytes) -> list[int]:
-        return [r for r in map(int, _STEP_REFERENCE.findall(_STEP_STRING.sub(b"''", body))) if r in tail]
-
+    # each entity's references into the presentation, read once (strings may hold '#')
+    inner = {e: [r for r in map(int, _STEP_REFERENCE.findall(_STEP_STRING.sub(b"''", body))) if r in tail]
+             for e, body in tail.items()}
     keys: dict[int, bytes] = {}
 
     def key(entity: int) -> bytes:
@@ -166,7 +166,7 @@ def canonical_step_styles(data: bytes) -> bytes:
             if top in keys:
                 stack.pop()
                 continue
-            missing = [r for r in inner(tail[top]) if r not in keys]
+            missing = [r for r in inner[top] if r not in keys]
             if missing:
                 if len(stack) > len(tail):
                     raise ValueError("a cycle in the STEP presentation")
@@ -177,7 +177,7 @@ def canonical_step_styles(data: bytes) -> bytes:
             stack.pop()
         return keys[entity]
 
-    referenced = {r for body in tail.values() for r in inner(body)}
+    referenced = {r for refs in inner.values() for r in refs}
     try:
         roots = sorted((e for e in tail if e not in referenced), key=key)
     except ValueError:
@@ -192,7 +192,7 @@ def canonical_step_styles(data: bytes) -> bytes:
                 continue
             seen.add(entity)
             order.append(entity)
-            stack.extend(reversed(inner(tail[entity])))
+            stack.extend(reversed(inner[entity]))
     new_id = {old: start + i for i, old in enumerate(order)}
 
     def renumber(body: bytes) -> bytes:
