@@ -184,6 +184,7 @@ def _label_places(plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, font
     along = plan[beams[:, 1]] - plan[beams[:, 0]] if nb else np.zeros((0, 2))
     normal = np.column_stack([-along[:, 1], along[:, 0]])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    # the eight places round a node, the first again to make nine, as the beams and panels have
     node_unit = np.array([[1, 1], [-1, 1], [1, -1], [-1, -1], [1, 0], [-1, 0], [0, 1], [0, -1], [1, 1]], float)
     k = len(node_unit)
     while True:

@@ -2,8 +2,9 @@
 meets no box placed before it (greedy, in the order given), the far ones with a leader line back to
 the part; a label with no free place is left out and counted.
 
-Boxes are axis-aligned rectangles in paper millimetres, found through a uniform grid of buckets, so
-placing n labels with k candidates each costs about n k box tests.
+Boxes are axis-aligned rectangles in the drawing's length unit (the plan PDF places them in model
+mm, its type sizes times the scale), found through a uniform grid of buckets, so placing n labels
+with k candidates each costs about n k box tests.
 """
 
 from __future__ import annotations
@@ -17,8 +18,8 @@ __all__ = ["Placement", "place_labels", "ring_offsets"]
 
 @dataclass(frozen=True)
 class Placement:
-    """Where the labels went: centre (n, 2) paper mm (NaN where left out), placed (n,) bool, leader (n,)
-    bool (a line from the anchor to the label is drawn)."""
+    """Where the labels went: centre (n, 2) (NaN where left out), placed (n,) bool, leader (n,) bool
+    (a line from the anchor to the label is drawn)."""
 
     centre: np.ndarray
     placed: np.ndarray
@@ -62,12 +63,12 @@ class _Buckets:
 def place_labels(anchor: np.ndarray, size: np.ndarray, near: np.ndarray, far: np.ndarray | None = None, *,
                  bounds: tuple[float, float, float, float] | None = None, obstacles: np.ndarray | None = None,
                  gap: float = 0.2) -> Placement:
-    """Place labels of ``size`` (n, 2) width and height around ``anchor`` (n, 2), all in paper mm.
+    """Place labels of ``size`` (n, 2) width and height around ``anchor`` (n, 2), all in one length unit.
 
     near (n, k, 2) or (k, 2): offsets of the label's centre from its anchor, tried in turn; far (m, 2):
     offsets tried after them, each drawn with a leader line. bounds (x0, y0, x1, y1): the frame every
     label stays inside; obstacles (j, 4): a few boxes no label may meet (titles, dimensions). ``gap``:
-    clear space kept round every label (mm). Labels are placed in their given order, so the first
+    clear space kept round every label. Labels are placed in their given order, so the first
     have the first choice.
     """
     anchor = np.asarray(anchor, dtype=float).reshape(-1, 2)
