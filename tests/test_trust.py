@@ -157,6 +157,36 @@ def test_bare_metres_and_lengths_with_units_are_taken_as_given(section):
     parse_project(tomllib.loads(f'[surface]\ntemplate = "cap"\n[section]\n{section}\n'))
 
 
+@pytest.mark.parametrize("toml, line", [
+    ('[section]\ndiameter = "50 m"\nthickness = "3 mm"',
+     "section.diameter = 50 m is far outside the usual 5 mm to 1 m"),
+    ('[material]\nE = "2100 GPa"', "material.E = 2100 GPa is far outside the usual 500 MPa to 500 GPa"),
+    ('[loads.cases.snow]\narea_plan = [0, 0, "-800 kN/m^2"]',
+     "loads.cases.snow.area_plan = 800 kN/m^2 is far outside"),
+])
+def test_a_quantity_far_outside_its_usual_range_is_a_warning_naming_the_key(capsys, tmp_path, toml, line):
+    """validate passes (exit 0) and says so; run says the same before its first stage."""
+    project = _project(tmp_path, f'[surface]\ntemplate = "cap"\n{toml}\n')
+    code, out, err = _cli(capsys, "validate", str(project))
+    assert code == 0 and "valid" in out, err
+    assert err.count("warning:") == 1 and f"warning: {line}" in err and "check its value and unit" in err, err
+    code, _, run_err = _cli(capsys, "run", str(project), "--out", str(tmp_path / "out"), "--until", "surface",
+                            "--quiet")
+    assert code == 0 and run_err == err, run_err
+
+
+def test_the_templates_and_the_defaults_give_no_warning():
+    from workflow.config import load_project, unusual_values
+
+    from .conftest import small_project
+
+    templates = sorted((Path(__file__).resolve().parents[1] / "templates").glob("*.toml"))
+    assert len(templates) >= 5
+    assert {t.stem: unusual_values(load_project(t)) for t in templates} == {t.stem: [] for t in templates}
+    assert unusual_values(parse_project({"surface": {"template": "cap"}})) == []
+    assert unusual_values(small_project()) == []
+
+
 def test_a_mesh_in_millimetres_read_as_metres_names_file_units(capsys, tmp_path):
     import trimesh
 
