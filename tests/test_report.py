@@ -4,6 +4,7 @@ loads and the 3D view draws."""
 from __future__ import annotations
 
 import io
+import re
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -112,6 +113,21 @@ def test_report_of_a_small_project_in_chromium(small_run):
     assert len(state["images"]) >= 8
     assert all(complete and width > 0 for _, complete, width in state["images"])
     assert state["canvas"][2] > 500
+    # the text as the reader sees it: no raw keys, no e-notation; sections numbered 1, 2, 3, ...
+    assert RAW_TEXT.findall(state["text"]) == []
+    numbers = [int(m[1]) for m in map(re.compile(r"(\d+)\. ").match, state["headings"]) if m]
+    assert len(numbers) >= 6 and numbers == list(range(1, len(numbers) + 1)), state["headings"]
+    # the modes, the assembly and the sheets across the page; the other pictures in columns
+    widths = {name: (width, row) for name, width, row in state["figures"]}
+    for name in ("figure-06-analysis-modes", "figure-07-fabrication-assembly-steps_strip",
+                 "figure-07-fabrication-panels-sheets"):
+        assert widths[name][0] >= 0.98 * widths[name][1], (name, widths[name])
+    assert widths["figure-06-analysis-axial"][0] < 0.6 * widths["figure-06-analysis-axial"][1]
+
+
+#: What a raw key or a computer's number looks like in the page's text: a word ending in a unit
+#: suffix (max_displacement_m, N1_max_N_per_m, planarity_max_mm) or a number in e-notation.
+RAW_TEXT = re.compile(r"\b\w+_(?:m|mm|N|kN|N_per_m|kg|deg|m2|mm2|Pa|MPa|s)\b|_N_per_m|\d[eE][+-]?\d")
 
 
 class _Cells(HTMLParser):
