@@ -188,6 +188,40 @@ def test_the_report_reads_like_an_engineers_no_raw_keys_no_e_notation_and_its_li
     assert not (out / "report" / "report.html").exists(), "one report page"
 
 
+def _tables(page: str) -> list[list[list[str]]]:
+    """Every table of a page as rows of cell texts, the header row first."""
+    import html as html_lib
+
+    tables = []
+    for table in re.findall(r"<table.*?</table>", page, re.S):
+        rows = [[html_lib.unescape(re.sub(r"<[^>]+>", "", cell)).strip()
+                 for cell in re.findall(r"<t[dh][^>]*>(.*?)</t[dh]>", row, re.S)]
+                for row in re.findall(r"<tr.*?</tr>", table, re.S)]
+        tables.append([row for row in rows if row])
+    return tables
+
+
+def test_each_quantity_of_the_report_has_one_unit(small_run):
+    """A column's header names one unit; a table with a unit column gives each row's. Across the
+    whole report a quantity is always in the same unit (not planarity in m here and mm there)."""
+    _, out = small_run
+    tables = _tables((out / "report.html").read_text(encoding="utf-8"))
+    assert len(tables) >= 8
+    units: dict[str, set[str]] = {}
+    for header, *rows in tables:
+        assert all(len(re.findall(r"\(([^()]*)\)", h)) <= 1 for h in header), header
+        for h in header:
+            named = re.fullmatch(r"(.+?) \(([^()]*(?:m|g|N|deg|%|Pa|m\^?2))\)", h)
+            if named:
+                units.setdefault(named[1], set()).add(named[2])
+        if "unit" in header:
+            unit = header.index("unit")
+            for row in rows:
+                units.setdefault(row[0], set()).add(row[unit])
+    assert len(units) > 30
+    assert {k: v for k, v in units.items() if len(v) > 1} == {}
+
+
 @pytest.mark.parametrize("value, page, terminal", [
     (1234567, "1\u2009234\u2009567", "1 234 567"), (0.0368, "0.0368", "0.0368"),
     (9.937e-07, "9.94 \u00d7 10\u207b\u2077", "9.94e-07"), (203.2, "203", "203"), (float("inf"), "\u221e", "inf"),
