@@ -515,6 +515,11 @@ def test_the_same_input_gives_the_same_analysis_files(tmp_path):
         run_project(project, out, STAGES, until="analysis", progress=Progress(enabled=False))
     for name in ("members.csv", "response.csv"):
         assert (outs[0] / "06-analysis" / name).read_bytes() == (outs[1] / "06-analysis" / name).read_bytes(), name
+    # every file but the pictures, byte for byte: no seconds in remesh.json or analysis.json (the
+    # manifest holds them), no clock anywhere
+    files = sorted(p.relative_to(outs[0]) for p in outs[0].glob("0*/**/*") if p.is_file() and p.suffix != ".png")
+    assert {"04-remesh/remesh.json", "06-analysis/analysis.json"} <= {f.as_posix() for f in files}
+    assert [f.as_posix() for f in files if (outs[0] / f).read_bytes() != (outs[1] / f).read_bytes()] == []
     import json
 
     first, second = (json.loads((o / "06-analysis" / "analysis.json").read_text()) for o in outs)
