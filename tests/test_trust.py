@@ -366,6 +366,26 @@ def test_the_heartbeat_prints_the_current_step_when_no_step_comes(capsys):
     assert err.rstrip().splitlines()[-1].split()[:2] == ["fabrication", "ran"], err
 
 
+def test_plain_lines_through_a_pipe_and_the_live_line_on_a_terminal():
+    """What a run chooses by itself: stderr a pipe (CI, `make demo | tee`) gives the plain lines,
+    stderr a terminal the rich live line."""
+    import subprocess
+    import sys
+
+    script = "import sys; from workflow.progress import Progress; print(Progress().live, file=sys.__stdout__)"
+    root = Path(__file__).resolve().parents[1]
+    piped = subprocess.run([sys.executable, "-c", script], cwd=root, capture_output=True, text=True, check=True)
+    assert piped.stdout.strip() == "False"
+    main, terminal = os.openpty()
+    try:
+        on_terminal = subprocess.run([sys.executable, "-c", script], cwd=root, stdout=subprocess.PIPE,
+                                     stderr=terminal, text=True, check=True)
+    finally:
+        os.close(main)
+        os.close(terminal)
+    assert on_terminal.stdout.strip() == "True"
+
+
 def test_no_plain_lines_when_quiet_or_live(capsys):
     from workflow.progress import Progress
 
