@@ -215,6 +215,37 @@ def test_flagged_supports_on_a_mesh_without_red_vertices(capsys, tmp_path):
     assert 'supports[0]: select = "flagged"' in err and "red" in err and 'select = "boundary"' in err
 
 
+@pytest.mark.parametrize("selection, words", [
+    ('select = "box"\nlower = [100, 100, 100]\nupper = [101, 101, 101]', "matched no node"),
+    ('select = "ids"\nids = [99999]', "outside 0.."),
+    ('select = "loop"\nloop = 3', "loop"),
+])
+def test_a_support_selection_matching_no_node_is_caught_by_validate(capsys, tmp_path, selection, words):
+    """validate builds the surface (milliseconds for a template) and resolves the selections: it
+    stops with the message the run's surface stage gives, before anything is written."""
+    project = _project(tmp_path, f'[surface]\ntemplate = "cap"\n[[supports]]\n{selection}\n')
+    code, out, err = _cli(capsys, "validate", str(project))
+    assert code == 2 and out == "" and "Traceback" not in err and err.count("error:") == 1, err
+    assert err.startswith("error: supports[0]: ") and words in err, err
+    code, _, run_err = _cli(capsys, "run", str(project), "--out", str(tmp_path / "out"), "--quiet")
+    assert code == 2 and run_err.splitlines()[0] == err.splitlines()[0], run_err
+    code, out, err = _cli(capsys, "validate", str(_project(tmp_path, '[surface]\ntemplate = "cap"\n', "ok.toml")))
+    assert code == 0 and "supported nodes" in out, err
+
+
+@pytest.mark.parametrize("template", ["vault", "hypar"])
+@pytest.mark.parametrize("divisions", [-1, 0, 1])
+def test_too_few_divisions_of_a_template_is_one_message(capsys, tmp_path, template, divisions):
+    """-1 divisions gave numpy's "negative dimensions are not allowed" as a traceback, 0 a mesh error."""
+    project = _project(tmp_path, f'[surface]\ntemplate = "{template}"\n[surface.parameters]\n'
+                                 f'divisions = {divisions}\n')
+    code, out, err = _cli(capsys, "validate", str(project))
+    assert code == 2 and "Traceback" not in err and err.count("error:") == 1, err
+    assert f"divisions = {divisions} must be >= 2" in err
+    code, _, run_err = _cli(capsys, "run", str(project), "--out", str(tmp_path / "out"), "--quiet")
+    assert code == 2 and run_err.splitlines()[0] == err.splitlines()[0], run_err
+
+
 # --- 4. the quick start speaks of its options, not of a project file ------------------------------
 
 def _quick_start(capsys, tmp_path, *argv) -> str:

@@ -108,16 +108,19 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_validate(args: argparse.Namespace) -> int:
     from .config import check_inputs, load_project, unusual_values
+    from .stages.surface import check_selections
 
     project = load_project(args.project)
     across = check_inputs(project)
+    supported = check_selections(project)  # the selections match nodes of the surface
     for line in unusual_values(project):
         print(f"warning: {line}", file=sys.stderr)
     source = project.surface.file or f"template {project.surface.template}"
     if across is not None:
         source += f", {across:.3g} m across"
     print(f"{args.project}: valid ({project.project.name}; surface {source}; "
-          f"{len(project.supports)} support selection(s); {len(project.loads.cases)} load case(s))")
+          f"{len(project.supports)} support selection(s), {supported} supported nodes; "
+          f"{len(project.loads.cases)} load case(s))")
     return 0
 
 
