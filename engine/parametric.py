@@ -122,6 +122,8 @@ def cap(*, span: float = 20.0, span_to_rise: float = 21.43, rings: int = 12) -> 
 def vault(*, span: float = 10.0, length: float = 15.0, rise: float = 3.0, divisions: int = 24) -> TriMesh:
     """Circular barrel vault: arch of ``span`` and ``rise`` across y, extruded along x for ``length``."""
     _positive(span=span, length=length, rise=rise)
+    if divisions < 2:
+        raise InputError(f"surface parameter divisions = {divisions} must be >= 2")
     if rise > span / 2:
         raise InputError(f"vault rise {rise} m must not exceed half the span ({span / 2} m)")
     radius = (span**2 / 4 + rise**2) / (2 * rise)
@@ -138,6 +140,8 @@ def vault(*, span: float = 10.0, length: float = 15.0, rise: float = 3.0, divisi
 def hypar(*, span: float = 10.0, rise: float = 2.0, divisions: int = 20) -> TriMesh:
     """Hyperbolic paraboloid z = rise * (2x/span)(2y/span) over a square of side ``span``."""
     _positive(span=span, rise=rise)
+    if divisions < 2:
+        raise InputError(f"surface parameter divisions = {divisions} must be >= 2")
     nodes = _plan_grid(span, span, divisions, divisions)
     nodes[:, 2] = rise * (2 * nodes[:, 0] / span) * (2 * nodes[:, 1] / span)
     mesh, _ = clean_mesh(nodes, grid_triangles(divisions, divisions), name="hypar")

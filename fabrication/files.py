@@ -11,13 +11,15 @@ import datetime as _dt
 import itertools
 import os
 import re
+import struct
 import tempfile
 import zipfile
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
 
 __all__ = ["atomic_path", "atomic_folder", "write_text_atomic", "write_bytes_atomic", "save_dxf", "file_date",
-           "stamp_step", "stamp_zip"]
+           "stamp_step", "stamp_zip", "stamp_3dm"]
 
 
 def _umask() -> int:
@@ -228,3 +230,59 @@ def stamp_zip(path: str | os.PathLike) -> None:
             fixed.compress_type, fixed.external_attr = info.compress_type, info.external_attr
             target.writestr(fixed, data)
     os.replace(tmp, path)
+
+
+#: openNURBS chunk type codes (opennurbs_3dm.h): the properties table, and in it the revision
+#: history (who created and last edited the model, and when); the bits of a code that say the
+#: chunk holds an 8-byte value instead of content (the revision history's code has the bit
+#: 0x8000 too: its content ends with a CRC-32).
+_3DM_PROPERTIES, _3DM_REVISION_HISTORY = 0x10000014, 0x20008021
+_3DM_SHORT = 0x80000000
+
+
+def _3dm_chunks(data: bytes, start: int, end: int, big: bool) -> Iterator[tuple[int, int, int]]:
+    """(type code, content start, content length) of the chunks between ``start`` and ``end``."""
+    head = "<IQ" if big else "<II"
+    size = struct.calcsize(head)
+    while start + size <= end:
+        code, length = struct.unpack_from(head, data, start)
+        length = 0 if code & _3DM_SHORT else length
+        yield code, start + size, length
+        start += size + length
+
+
+def _3dm_time(day: _dt.datetime) -> bytes:
+    """``day`` as openNURBS writes a time: the C library's struct tm, eight 32-bit integers."""
+    t = day.timetuple()
+    return struct.pack("<8i", t.tm_sec, t.tm_min, t.tm_hour, t.tm_mday, t.tm_mon - 1, t.tm_year - 1900,
+                       (t.tm_wday + 1) % 7, t.tm_yday - 1)
+
+
+def stamp_3dm(data: bytes) -> bytes:
+    """A Rhino .3dm file's bytes with file_date() as the model's created and last edited times.
+
+    openNURBS stamps both with the time of writing (the revision history in the properties table,
+    two struct tm under a CRC-32). Write the model to memory (rhino3dm's ``File3dm.Encode``): a
+    file written by ``File3dm.Write`` also carries the path it was written to. Bytes whose layout
+    is not the one expected are returned as they are."""
+    if len(data) < 32 or not data.startswith(b"3D Geometry File Format ") or not data[24:32].strip().isdigit():
+        return data
+    big = int(data[24:32]) >= 50  # chunk lengths take 8 bytes from version 5 on
+    for code, start, length in _3dm_chunks(data, 32, len(data), big):
+        if code != _3DM_PROPERTIES:
+            continue
+        for sub, begin, size in _3dm_chunks(data, start, start + length, big):
+            if sub != _3DM_REVISION_HISTORY:
+                continue
+            body = bytearray(data[begin:begin + size - 4])
+            when, at = _3dm_time(file_date()), 1  # after the chunk's version byte
+            for _ in range(2):  # created by, created; last edited by, last edited
+                (chars,) = struct.unpack_from("<I", body, at)
+                at += 4 + 2 * chars  # the name, UTF-16 with its terminating zero
+                if at + len(when) > len(body):
+                    return data
+                body[at:at + len(when)] = when
+                at += len(when)
+            crc = struct.pack("<I", zlib.crc32(body))
+            return data[:begin] + bytes(body) + crc + data[begin + size:]
+    return data

@@ -10,7 +10,7 @@ import numpy as np
 from engine.mesh import PolyMesh
 from engine.parts import beam_id, joint_id
 
-from .files import atomic_path, stamp_step
+from .files import atomic_path, stamp_3dm, stamp_step, write_bytes_atomic
 
 __all__ = ["write_gridshell_step", "write_gridshell_3dm"]
 
@@ -55,7 +55,13 @@ def _stable_id(name: str):
 
 def write_gridshell_3dm(polymesh: PolyMesh, panels, beam_radius_mm: float | np.ndarray, joint_radius_mm: float,
                         path: Path) -> Path:
-    """Layers joints (spheres), beams (centre lines), panels (meshes); object names are the ids."""
+    """Layers joints (spheres), beams (centre lines), panels (meshes); object names are the ids.
+
+    The same model gives the same bytes: object and layer ids follow from the names, the file is
+    encoded in memory (``File3dm.Write`` records the path it wrote to, here a temporary name) and
+    its created and last edited times are fabrication.files.file_date's day."""
+    import base64
+
     import rhino3dm
 
     model = rhino3dm.File3dm()
@@ -95,7 +101,9 @@ def write_gridshell_3dm(polymesh: PolyMesh, panels, beam_radius_mm: float | np.n
             mesh.Faces.AddFace(j, (j + 1) % c, c)
         mesh.Normals.ComputeNormals()
         model.Objects.AddMesh(mesh, attributes("panels", panel.id))
-    with atomic_path(path) as tmp:
-        if not model.Write(str(tmp), 7):
-            raise OSError(f"rhino3dm could not write {path}")
-    return Path(path)
+    options = rhino3dm.File3dmWriteOptions()
+    options.Version = 7
+    encoded = model.Encode(options)
+    if not encoded:
+        raise OSError(f"rhino3dm could not write {path}")
+    return write_bytes_atomic(path, stamp_3dm(base64.b64decode(encoded)))

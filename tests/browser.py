@@ -61,12 +61,25 @@ return Array.from(document.images).map(function (im) { return [im.alt, im.comple
 """
 
 
+#: Each figure's id, its width and the width of the figure grid it sits in (CSS pixels, as laid out).
+FIGURE_WIDTHS = """
+return Array.from(document.querySelectorAll('figure')).map(function (f) {
+  return [f.id, f.getBoundingClientRect().width, f.parentElement.getBoundingClientRect().width];
+});
+"""
+
+
 def check_page(driver, page: Path, screenshot: Path) -> dict:
-    """Open ``page``; return console errors, image states, canvas ink and save a screenshot."""
+    """Open ``page``; return console errors, image states, canvas ink, the text as shown, the
+    section headings, the figures' widths, and save a screenshot."""
     driver.get(page.resolve().as_uri())
     width, height, ink = driver.execute_script(CANVAS_INK)
     images = driver.execute_script(IMAGES)
     errors = [entry for entry in driver.get_log("browser") if entry.get("level") == "SEVERE"]
     screenshot.parent.mkdir(parents=True, exist_ok=True)
     driver.save_screenshot(str(screenshot))
-    return {"errors": errors, "images": images, "canvas": (width, height, ink)}
+    text = driver.execute_script("return document.body.innerText;")
+    headings = driver.execute_script("return Array.from(document.querySelectorAll('h2')).map(h => h.innerText);")
+    figures = driver.execute_script(FIGURE_WIDTHS)
+    return {"errors": errors, "images": images, "canvas": (width, height, ink), "text": text,
+            "headings": headings, "figures": figures}

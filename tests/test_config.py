@@ -18,6 +18,17 @@ def test_templates_validate(name):
     assert project.surface.template == name
 
 
+@pytest.mark.parametrize("name", ["mockup", "cap", "vault", "hypar", "courtyard"])
+def test_templates_cite_only_files_the_repository_has(name):
+    """`gridshell init` copies a template to the user: a document it cites (METHOD.md, docs/...)
+    must be one they have, in the repository."""
+    import re
+
+    root = TEMPLATES.parent
+    cited = re.findall(r"[\w./-]+\.md\b", (TEMPLATES / f"{name}.toml").read_text(encoding="utf-8"))
+    assert [c for c in cited if not (root / c).is_file() and not (root / "docs" / c).is_file()] == []
+
+
 @pytest.mark.parametrize("text, dimension, expected", [
     ("50 mm", "length", 0.05), ("2.4 m", "length", 2.4), (3, "length", 3.0),
     ("210 GPa", "stress", 210e9), ("0.5 kN/m^2", "area load", 500.0), ("7850 kg/m^3", "density", 7850.0),

@@ -403,6 +403,36 @@ def test_files_that_carry_a_date_carry_the_day_and_are_the_same_bytes_a_second_l
     assert import_step(str(tmp_path / "run0" / "J0001.step")).volume == pytest.approx(6000.0)
 
 
+def test_the_3dm_model_is_the_same_bytes_from_another_folder_a_second_later(tmp_path, monkeypatch):
+    """gridshell.3dm written twice, 1.1 s apart, into folders of different names: the same bytes
+    (rhino3dm's File3dm.Write records the time and the path it wrote to). Read back by rhino3dm:
+    created and last edited on SOURCE_DATE_EPOCH's day, every object there, and no path inside."""
+    import time
+    from types import SimpleNamespace
+
+    import rhino3dm
+
+    from engine.mesh import PolyMesh
+    from fabrication.model3d import write_gridshell_3dm
+
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")  # 2023-11-14 22:13:20 UTC
+    nodes = np.array([[0, 0, 0], [1, 0, 0.2], [1, 1, 0.3], [0, 1, 0.1]], dtype=float)
+    polymesh = PolyMesh(nodes=nodes, faces=(np.array([0, 1, 2, 3]),))
+    panels = [SimpleNamespace(id="P0001", outline_3d_m=0.9 * nodes + 0.05)]
+    written = []
+    for folder in ("run0", "a-longer-folder-name"):
+        path = write_gridshell_3dm(polymesh, panels, 10.0, 25.0, tmp_path / folder / "gridshell.3dm")
+        written.append(path.read_bytes())
+        time.sleep(1.1)
+    assert written[0] == written[1]
+    assert b"run0" not in written[0] and "run0".encode("utf-16-le") not in written[0]
+    model = rhino3dm.File3dm.Read(str(tmp_path / "run0" / "gridshell.3dm"))
+    assert model.Created.date().isoformat() == "2023-11-14" and model.LastEdited == model.Created
+    assert sorted(o.Attributes.Name for o in model.Objects) == ["B0001", "B0002", "B0003", "B0004", "J0001",
+                                                               "J0002", "J0003", "J0004", "P0001"]
+    assert model.Settings.ModelUnitSystem == rhino3dm.UnitSystem.Millimeters
+
+
 def test_beams_step_holds_each_tube_as_cut(small_run):
     """beams.step read back with OCCT's XCAF reader: a solid per beam with a cut length, named by its
     id, whose volume is the tube's area A = pi t (D - t) times its cut length (within 1 %), not a rod's."""

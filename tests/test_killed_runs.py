@@ -160,18 +160,22 @@ def _sigkill_when(command: list[str], ready, *, poll_s: float = 0.2, seconds: fl
 
 
 #: Formats that must be byte-identical between two runs of the same input on one day (the files
-#: that carry a date carry the day: fabrication.files.file_date); pictures are compared by their
-#: pixels. Not yet: 3DM (rhino3dm writes its own clock and the path it wrote to). gridshell.step
-#: is compared since its colours are numbered in the model's order (fabrication.files).
+#: that carry a date carry the day, fabrication.files.file_date: STEP, PDF, XLSX, IFC and 3DM
+#: headers); pictures are compared by their pixels. That is every file a run writes.
 DETERMINISTIC = (".csv", ".json", ".obj", ".ply", ".npz", ".stl", ".dxf", ".nc1", ".html", ".step", ".pdf", ".xlsx",
-                 ".ifc")
-NOT_YET: tuple[str, ...] = ()
+                 ".ifc", ".3dm")
 
 
 def _hashes(out: Path) -> dict[str, str]:
     """sha256 of every deterministic artifact of a run, from its manifest."""
     return {a["path"]: a["sha256"] for stage in json.loads((out / "manifest.json").read_text())["stages"]
-            for a in stage.get("artifacts", []) if a["path"].endswith(DETERMINISTIC) and a["path"] not in NOT_YET}
+            for a in stage.get("artifacts", []) if a["path"].endswith(DETERMINISTIC)}
+
+
+def _suffixes(out: Path) -> set[str]:
+    """The suffixes of a run's artifacts (every file its manifest lists)."""
+    return {Path(a["path"]).suffix for stage in json.loads((out / "manifest.json").read_text())["stages"]
+            for a in stage.get("artifacts", [])}
 
 
 def _different_pictures(a: Path, b: Path) -> list[str]:
@@ -213,6 +217,7 @@ def test_a_run_killed_during_fabrication_leaves_nothing_and_the_next_run_heals(t
     # fabrication itself), and the same pixels in every picture
     mine, theirs = _hashes(out), _hashes(reference)
     assert len(mine) > 100 and set(mine) == set(theirs)
+    assert _suffixes(out) <= {*DETERMINISTIC, ".png"}, "every file is compared: by its bytes or its pixels"
     assert sorted(k for k in mine if mine[k] != theirs[k]) == []
     assert _different_pictures(out, reference) == []
 

@@ -209,3 +209,28 @@ def test_the_free_space_bound_finds_the_same_bottom_left_positions():
         if not ns._place(sheet, 0, j, options, settings, placements, radius, 0.9 * radius):
             break
     assert checked >= 20 and bounded >= 10  # the bound did cut the union on most probes
+
+
+def test_the_contact_sheet_shows_every_sheet_of_every_stock_size(tmp_path, monkeypatch):
+    """Issue 18: the report showed 6 of 18 sheets. 19 panels of 500 x 350 mm (one a 600 x 400
+    sheet) and two of 900 x 350 mm (a 1200 x 800 sheet): 20 sheets, each drawn once, numbered
+    across the sizes, each with its parts, as the fabrication stage calls it."""
+    from matplotlib.figure import Figure
+
+    from fabrication.nesting_sheets import nest_on_stock, write_contact_sheet
+
+    panels = flatten_panels(_rectangles([(500, 350)] * 19 + [(900, 350)] * 2), PanelSettings(clearance_mm=0))
+    stock = nest_on_stock(panels, [SheetSettings(width_mm=600, height_mm=400),
+                                   SheetSettings(width_mm=1200, height_mm=800)])
+    assert stock.n_sheets == 20
+    figures = []
+    savefig = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig", lambda self, *a, **k: (figures.append(self), savefig(self, *a, **k))[1])
+    path = write_contact_sheet([(nesting, [panels[i] for i in members], first) for first, (_, members, nesting)
+                                in zip(stock.first_numbers(), stock.groups)], tmp_path / "sheets.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    titles = [ax.get_title() for ax in figures[-1].axes if ax.get_title()]
+    assert [t.split()[0] for t in titles] == [f"SHEET{k:02d}" for k in range(1, 21)]
+    assert all("(600 x 400 mm): 1 parts" in t for t in titles[:19]) and "(1200 x 800 mm): 2 parts" in titles[19]
+    labels = sorted(text.get_text() for ax in figures[-1].axes for text in ax.texts)
+    assert labels == sorted(p.id for p in panels)

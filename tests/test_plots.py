@@ -121,3 +121,79 @@ def test_response_picture_with_some_points_left_out_keeps_the_curve(tmp_path):
     np.testing.assert_allclose(xy, [[0.0, 0.0], [10.0, 0.5], [30.0, 1.2]])
     assert _drawable(np.zeros((0, 2))) == (None, 0) and _drawable(np.full((2, 2), np.nan))[0] is None
     _check_png(plot_response({"worst": curve}, tmp_path / "response.png", worst="worst"))
+
+
+# --- the report's captions say what the pictures draw (issue 18: "supports (black)" under red ones) --
+
+@pytest.fixture
+def drawn(monkeypatch):
+    """The figures the plotting functions save, kept (with their artists) for inspection."""
+    from matplotlib.figure import Figure
+
+    figures = []
+    savefig = Figure.savefig
+
+    def keep(self, *args, **kwargs):
+        figures.append(self)
+        return savefig(self, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", keep)
+    return figures
+
+
+def _caption(relative: str) -> str:
+    from workflow.stages.report import FIGURES
+
+    return next(caption for figures in FIGURES.values() for path, caption in figures if path == relative)
+
+
+def _is(colour: str, rgba) -> bool:
+    r, g, b = np.asarray(rgba, dtype=float)[:3]
+    return {"red": r > 0.6 and g < 0.35 and b < 0.35, "blue": b > 0.5 and r < 0.45,
+            "black": max(r, g, b) < 0.25, "green": g > 0.5 and r < 0.45 and b < 0.45}[colour]
+
+
+def test_the_surface_caption_names_the_colour_the_supports_are_drawn_in(drawn, tmp_path):
+    from workflow.plots.surface import plot_surface
+
+    mesh = cap()
+    supports = np.asarray(mesh.boundary_loops[0])
+    plot_surface(mesh, supports, tmp_path / "surface.png")
+    (colour,) = [c for c in ("red", "blue", "black", "green") if f"({c})" in _caption("01-surface/surface.png")]
+    dots = [c for ax in drawn[-1].axes for c in ax.collections if c.get_label().endswith("supports")
+            or c.get_label().endswith("supported nodes")]
+    assert len(dots) == 2 and all(len(d.get_offsets()) == len(supports) for d in dots)
+    assert all(_is(colour, rgba) for d in dots for rgba in d.get_facecolor())
+
+
+def test_the_axial_force_caption_says_which_colour_is_compression(drawn, grid, tmp_path):
+    """'compression red, tension blue': each beam's drawn colour by the sign of its force."""
+    import re
+
+    caption = _caption("06-analysis/axial.png")
+    words = dict(re.findall(r"(compression|tension) (red|blue)", caption))
+    assert set(words) == {"compression", "tension"}
+    forces = np.where(np.arange(len(grid.edges)) % 2 == 0, -10e3, 10e3)
+    plot_axial_forces(grid.nodes, grid.edges, forces, tmp_path / "axial.png")
+    (lines,) = [c for c in drawn[-1].axes[0].collections if c.get_array() is not None]
+    lines.update_scalarmappable()
+    colours = lines.get_edgecolor()
+    assert all(_is(words["compression" if n < 0 else "tension"], rgba) for n, rgba in zip(forces, colours))
+
+
+def test_the_modes_caption_gives_the_amplitude_the_picture_draws_with_its_colour_scale(drawn, grid, tmp_path):
+    """The report says each mode is drawn at a share of the span; the picture's title gives that
+    share of this grid's span in mm, and a colour bar says what the colours are."""
+    import re
+
+    share = float(re.search(r"drawn at (\d+(?:\.\d+)?) % of\s+the span", _caption("06-analysis/modes.png"))[1])
+    modes = np.zeros((3, grid.n_nodes, 6))
+    modes[:, :, 2] = np.cos(np.arange(1, 4)[:, None] * grid.nodes[None, :, 0])
+    plot_buckling_modes(grid.nodes, grid.edges, modes, np.array([4.2, 5.1, 6.3]), tmp_path / "modes.png")
+    figure = drawn[-1]
+    drawn_mm = float(re.search(r"largest displacement drawn (\d+) mm", figure._suptitle.get_text())[1])
+    span_mm = 1000 * float(np.ptp(grid.nodes, axis=0).max())
+    assert drawn_mm == pytest.approx(share / 100 * span_mm, abs=0.5)
+    assert any(ax.get_ylabel() == "displacement / the mode's largest" for ax in figure.axes), "a colour bar"
+    assert [ax.get_title() for ax in figure.axes if ax.get_title()] == [
+        "mode 1: lambda = 4.2", "mode 2: lambda = 5.1", "mode 3: lambda = 6.3"]

@@ -4,6 +4,7 @@ loads and the 3D view draws."""
 from __future__ import annotations
 
 import io
+import re
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -112,6 +113,21 @@ def test_report_of_a_small_project_in_chromium(small_run):
     assert len(state["images"]) >= 8
     assert all(complete and width > 0 for _, complete, width in state["images"])
     assert state["canvas"][2] > 500
+    # the text as the reader sees it: no raw keys, no e-notation; sections numbered 1, 2, 3, ...
+    assert RAW_TEXT.findall(state["text"]) == []
+    numbers = [int(m[1]) for m in map(re.compile(r"(\d+)\. ").match, state["headings"]) if m]
+    assert len(numbers) >= 6 and numbers == list(range(1, len(numbers) + 1)), state["headings"]
+    # the modes, the assembly and the sheets across the page; the other pictures in columns
+    widths = {name: (width, row) for name, width, row in state["figures"]}
+    for name in ("figure-06-analysis-modes", "figure-07-fabrication-assembly-steps_strip",
+                 "figure-07-fabrication-panels-sheets"):
+        assert widths[name][0] >= 0.98 * widths[name][1], (name, widths[name])
+    assert widths["figure-06-analysis-axial"][0] < 0.6 * widths["figure-06-analysis-axial"][1]
+
+
+#: What a raw key or a computer's number looks like in the page's text: a word ending in a unit
+#: suffix (max_displacement_m, N1_max_N_per_m, planarity_max_mm) or a number in e-notation.
+RAW_TEXT = re.compile(r"\b\w+_(?:m|mm|N|kN|N_per_m|kg|deg|m2|mm2|Pa|MPa|s)\b|_N_per_m|\d[eE][+-]?\d")
 
 
 class _Cells(HTMLParser):
@@ -170,6 +186,40 @@ def test_the_report_reads_like_an_engineers_no_raw_keys_no_e_notation_and_its_li
     assert scientific == []
     assert parser.hrefs and all((out / href).is_file() for href in parser.hrefs), parser.hrefs
     assert not (out / "report" / "report.html").exists(), "one report page"
+
+
+def _tables(page: str) -> list[list[list[str]]]:
+    """Every table of a page as rows of cell texts, the header row first."""
+    import html as html_lib
+
+    tables = []
+    for table in re.findall(r"<table.*?</table>", page, re.S):
+        rows = [[html_lib.unescape(re.sub(r"<[^>]+>", "", cell)).strip()
+                 for cell in re.findall(r"<t[dh][^>]*>(.*?)</t[dh]>", row, re.S)]
+                for row in re.findall(r"<tr.*?</tr>", table, re.S)]
+        tables.append([row for row in rows if row])
+    return tables
+
+
+def test_each_quantity_of_the_report_has_one_unit(small_run):
+    """A column's header names one unit; a table with a unit column gives each row's. Across the
+    whole report a quantity is always in the same unit (not planarity in m here and mm there)."""
+    _, out = small_run
+    tables = _tables((out / "report.html").read_text(encoding="utf-8"))
+    assert len(tables) >= 8
+    units: dict[str, set[str]] = {}
+    for header, *rows in tables:
+        assert all(len(re.findall(r"\(([^()]*)\)", h)) <= 1 for h in header), header
+        for h in header:
+            named = re.fullmatch(r"(.+?) \(([^()]*(?:m|g|N|deg|%|Pa|m\^?2))\)", h)
+            if named:
+                units.setdefault(named[1], set()).add(named[2])
+        if "unit" in header:
+            unit = header.index("unit")
+            for row in rows:
+                units.setdefault(row[0], set()).add(row[unit])
+    assert len(units) > 30
+    assert {k: v for k, v in units.items() if len(v) > 1} == {}
 
 
 @pytest.mark.parametrize("value, page, terminal", [

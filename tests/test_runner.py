@@ -74,6 +74,27 @@ def test_changed_artifact_invalidates_cache_and_force_reruns(tmp_path):
     assert calls == ["surface", "shell", "field", "remesh"]
 
 
+@pytest.mark.parametrize("damage", ["truncated", "deleted", "same size"])
+def test_a_damaged_or_missing_artifact_reruns_its_stage(tmp_path, damage):
+    """An artifact whose sha256 no longer matches the manifest (cut short, removed, or changed in
+    place at the same size) makes its stage run again; the stages after it, given the same result,
+    stay cached."""
+    calls: list[str] = []
+    run_project(_project(), tmp_path, _stages(calls))
+    artifact = tmp_path / "03-field" / "field.txt"
+    if damage == "truncated":
+        artifact.write_text("")
+    elif damage == "deleted":
+        artifact.unlink()
+    else:
+        artifact.write_text("FIELD")
+    calls.clear()
+    run_project(_project(), tmp_path, _stages(calls))
+    assert calls == ["field"]
+    assert artifact.read_text() == "field"
+    assert _statuses(tmp_path) == {"surface": "cached", "shell": "cached", "field": "ran", "remesh": "cached"}
+
+
 def test_until_and_only(tmp_path):
     calls: list[str] = []
     run_project(_project(), tmp_path, _stages(calls), until="shell")

@@ -157,6 +157,36 @@ def test_bare_metres_and_lengths_with_units_are_taken_as_given(section):
     parse_project(tomllib.loads(f'[surface]\ntemplate = "cap"\n[section]\n{section}\n'))
 
 
+@pytest.mark.parametrize("toml, line", [
+    ('[section]\ndiameter = "50 m"\nthickness = "3 mm"',
+     "section.diameter = 50 m is far outside the usual 5 mm to 1 m"),
+    ('[material]\nE = "2100 GPa"', "material.E = 2100 GPa is far outside the usual 500 MPa to 500 GPa"),
+    ('[loads.cases.snow]\narea_plan = [0, 0, "-800 kN/m^2"]',
+     "loads.cases.snow.area_plan = 800 kN/m^2 is far outside"),
+])
+def test_a_quantity_far_outside_its_usual_range_is_a_warning_naming_the_key(capsys, tmp_path, toml, line):
+    """validate passes (exit 0) and says so; run says the same before its first stage."""
+    project = _project(tmp_path, f'[surface]\ntemplate = "cap"\n{toml}\n')
+    code, out, err = _cli(capsys, "validate", str(project))
+    assert code == 0 and "valid" in out, err
+    assert err.count("warning:") == 1 and f"warning: {line}" in err and "check its value and unit" in err, err
+    code, _, run_err = _cli(capsys, "run", str(project), "--out", str(tmp_path / "out"), "--until", "surface",
+                            "--quiet")
+    assert code == 0 and run_err == err, run_err
+
+
+def test_the_templates_and_the_defaults_give_no_warning():
+    from workflow.config import load_project, unusual_values
+
+    from .conftest import small_project
+
+    templates = sorted((Path(__file__).resolve().parents[1] / "templates").glob("*.toml"))
+    assert len(templates) >= 5
+    assert {t.stem: unusual_values(load_project(t)) for t in templates} == {t.stem: [] for t in templates}
+    assert unusual_values(parse_project({"surface": {"template": "cap"}})) == []
+    assert unusual_values(small_project()) == []
+
+
 def test_a_mesh_in_millimetres_read_as_metres_names_file_units(capsys, tmp_path):
     import trimesh
 
@@ -183,6 +213,37 @@ def test_flagged_supports_on_a_mesh_without_red_vertices(capsys, tmp_path):
     project = _project(tmp_path, '[surface]\nfile = "roof.obj"\n[[supports]]\nselect = "flagged"\n')
     err = _validate_and_run(capsys, tmp_path, project)
     assert 'supports[0]: select = "flagged"' in err and "red" in err and 'select = "boundary"' in err
+
+
+@pytest.mark.parametrize("selection, words", [
+    ('select = "box"\nlower = [100, 100, 100]\nupper = [101, 101, 101]', "matched no node"),
+    ('select = "ids"\nids = [99999]', "outside 0.."),
+    ('select = "loop"\nloop = 3', "loop"),
+])
+def test_a_support_selection_matching_no_node_is_caught_by_validate(capsys, tmp_path, selection, words):
+    """validate builds the surface (milliseconds for a template) and resolves the selections: it
+    stops with the message the run's surface stage gives, before anything is written."""
+    project = _project(tmp_path, f'[surface]\ntemplate = "cap"\n[[supports]]\n{selection}\n')
+    code, out, err = _cli(capsys, "validate", str(project))
+    assert code == 2 and out == "" and "Traceback" not in err and err.count("error:") == 1, err
+    assert err.startswith("error: supports[0]: ") and words in err, err
+    code, _, run_err = _cli(capsys, "run", str(project), "--out", str(tmp_path / "out"), "--quiet")
+    assert code == 2 and run_err.splitlines()[0] == err.splitlines()[0], run_err
+    code, out, err = _cli(capsys, "validate", str(_project(tmp_path, '[surface]\ntemplate = "cap"\n', "ok.toml")))
+    assert code == 0 and "supported nodes" in out, err
+
+
+@pytest.mark.parametrize("template", ["vault", "hypar"])
+@pytest.mark.parametrize("divisions", [-1, 0, 1])
+def test_too_few_divisions_of_a_template_is_one_message(capsys, tmp_path, template, divisions):
+    """-1 divisions gave numpy's "negative dimensions are not allowed" as a traceback, 0 a mesh error."""
+    project = _project(tmp_path, f'[surface]\ntemplate = "{template}"\n[surface.parameters]\n'
+                                 f'divisions = {divisions}\n')
+    code, out, err = _cli(capsys, "validate", str(project))
+    assert code == 2 and "Traceback" not in err and err.count("error:") == 1, err
+    assert f"divisions = {divisions} must be >= 2" in err
+    code, _, run_err = _cli(capsys, "run", str(project), "--out", str(tmp_path / "out"), "--quiet")
+    assert code == 2 and run_err.splitlines()[0] == err.splitlines()[0], run_err
 
 
 # --- 4. the quick start speaks of its options, not of a project file ------------------------------
@@ -336,6 +397,26 @@ def test_the_heartbeat_prints_the_current_step_when_no_step_comes(capsys):
     assert err.rstrip().splitlines()[-1].split()[:2] == ["fabrication", "ran"], err
 
 
+def test_plain_lines_through_a_pipe_and_the_live_line_on_a_terminal():
+    """What a run chooses by itself: stderr a pipe (CI, `make demo | tee`) gives the plain lines,
+    stderr a terminal the rich live line."""
+    import subprocess
+    import sys
+
+    script = "import sys; from workflow.progress import Progress; print(Progress().live, file=sys.__stdout__)"
+    root = Path(__file__).resolve().parents[1]
+    piped = subprocess.run([sys.executable, "-c", script], cwd=root, capture_output=True, text=True, check=True)
+    assert piped.stdout.strip() == "False"
+    main, terminal = os.openpty()
+    try:
+        on_terminal = subprocess.run([sys.executable, "-c", script], cwd=root, stdout=subprocess.PIPE,
+                                     stderr=terminal, text=True, check=True)
+    finally:
+        os.close(main)
+        os.close(terminal)
+    assert on_terminal.stdout.strip() == "True"
+
+
 def test_no_plain_lines_when_quiet_or_live(capsys):
     from workflow.progress import Progress
 
@@ -485,6 +566,11 @@ def test_the_same_input_gives_the_same_analysis_files(tmp_path):
         run_project(project, out, STAGES, until="analysis", progress=Progress(enabled=False))
     for name in ("members.csv", "response.csv"):
         assert (outs[0] / "06-analysis" / name).read_bytes() == (outs[1] / "06-analysis" / name).read_bytes(), name
+    # every file but the pictures, byte for byte: no seconds in remesh.json or analysis.json (the
+    # manifest holds them), no clock anywhere
+    files = sorted(p.relative_to(outs[0]) for p in outs[0].glob("0*/**/*") if p.is_file() and p.suffix != ".png")
+    assert {"04-remesh/remesh.json", "06-analysis/analysis.json"} <= {f.as_posix() for f in files}
+    assert [f.as_posix() for f in files if (outs[0] / f).read_bytes() != (outs[1] / f).read_bytes()] == []
     import json
 
     first, second = (json.loads((o / "06-analysis" / "analysis.json").read_text()) for o in outs)

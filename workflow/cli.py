@@ -49,7 +49,7 @@ def _write_json(data: dict, path: str) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .config import check_inputs, load_project, project_from_surface
+    from .config import check_inputs, load_project, project_from_surface, unusual_values
     from .progress import Progress
     from .stages import STAGES
 
@@ -76,6 +76,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         default_out = Path("out") / (project_path.stem if args.project else "mockup")
         project_file = str(project_path.resolve())
     check_inputs(project, quick_start=bool(args.surface))   # what validate checks, before any stage runs
+    for line in unusual_values(project):
+        print(f"warning: {line}", file=sys.stderr)
     out_dir = Path(args.out) if args.out else default_out
     progress = Progress(enabled=not args.quiet)
     progress.message(f"gridshell: {project.project.name} -> {out_dir}")
@@ -105,15 +107,20 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from .config import check_inputs, load_project
+    from .config import check_inputs, load_project, unusual_values
+    from .stages.surface import check_selections
 
     project = load_project(args.project)
     across = check_inputs(project)
+    supported = check_selections(project)  # the selections match nodes of the surface
+    for line in unusual_values(project):
+        print(f"warning: {line}", file=sys.stderr)
     source = project.surface.file or f"template {project.surface.template}"
     if across is not None:
         source += f", {across:.3g} m across"
     print(f"{args.project}: valid ({project.project.name}; surface {source}; "
-          f"{len(project.supports)} support selection(s); {len(project.loads.cases)} load case(s))")
+          f"{len(project.supports)} support selection(s), {supported} supported nodes; "
+          f"{len(project.loads.cases)} load case(s))")
     return 0
 
 

@@ -26,7 +26,7 @@ from engine.supports import restraint_flags
 from .units import AreaLoad, Density, Force, Length, Stress
 
 __all__ = ["ConfigError", "Project", "load_project", "parse_project", "read_toml", "project_from_surface",
-           "check_inputs", "STAGE_SECTIONS"]
+           "check_inputs", "unusual_values", "STAGE_SECTIONS"]
 
 
 class ConfigError(GridshellError):
@@ -809,3 +809,56 @@ def check_inputs(project: Project, *, quick_start: bool = False) -> float | None
                 raise ConfigError(f'supports[{index}]: select = "flagged", but {path.name} has no red (255, 0, 0) '
                                   "vertices", hint='use select = "boundary", or select the supports by plane or box')
     return across
+
+
+def _quantity(value: float, kind: str) -> str:
+    """``value`` (SI) in the unit a project file would use for ``kind``."""
+    def digits(x: float) -> str:  # three significant digits, never in scientific notation
+        return np.format_float_positional(x, precision=3, unique=True, fractional=False, trim="-")
+
+    if kind == "length":
+        return f"{digits(value / 1000)} km" if value >= 1000 else _distance(value)
+    if kind == "stress":
+        return f"{digits(value / 1e9)} GPa" if abs(value) >= 1e9 else f"{digits(value / 1e6)} MPa"
+    if kind == "density":
+        return f"{digits(value)} kg/m^3"
+    return f"{digits(value / 1e3)} kN/m^2"  # area load
+
+
+#: The usual range of the quantities a project gives (SI; area loads: the largest component's
+#: size). A value outside it is allowed but most likely a slip of unit or of digits (a "50 m" tube,
+#: "2100 GPa"), so validate and run warn, naming the key. Loose bounds: tubes of a 5 mm model to a
+#: metre, walls of 0.5 to 50 mm, from foams and plastics to steel and carbon fibre.
+USUAL_RANGES: dict[str, tuple[str, float, float]] = {
+    "section.diameter": ("length", 0.005, 1.0), "section.height": ("length", 0.005, 1.0),
+    "section.width": ("length", 0.005, 1.0), "section.thickness": ("length", 0.0005, 0.05),
+    "material.E": ("stress", 0.5e9, 500e9), "material.G": ("stress", 0.1e9, 200e9),
+    "material.density": ("density", 100.0, 20_000.0), "material.yield_strength": ("stress", 5e6, 2000e6),
+    "shell.thickness": ("length", 0.001, 2.0), "fabrication.panels.thickness": ("length", 0.0005, 0.1),
+    "loads.cases.*.area_true": ("area load", 0.0, 50e3), "loads.cases.*.area_plan": ("area load", 0.0, 50e3),
+}
+
+
+def unusual_values(project: Project) -> list[str]:
+    """One line per quantity of ``project`` outside USUAL_RANGES: the key, the value and the range."""
+    values: list[tuple[str, str, float]] = []  # key, its USUAL_RANGES key, value
+    for pattern in USUAL_RANGES:
+        if pattern.startswith("loads.cases.*."):
+            field = pattern.rsplit(".", 1)[1]
+            for name, case in project.loads.cases.items():
+                load = getattr(case, field)
+                size = max((abs(v) for v in load), default=0.0) if isinstance(load, list) else abs(load)
+                values.append((f"loads.cases.{name}.{field}", pattern, size))
+            continue
+        value = project
+        for part in pattern.split("."):
+            value = getattr(value, part)
+        if value is not None:
+            values.append((pattern, pattern, value))
+    lines = []
+    for key, pattern, value in values:
+        kind, low, high = USUAL_RANGES[pattern]
+        if not low <= value <= high:
+            lines.append(f"{key} = {_quantity(value, kind)} is far outside the usual {_quantity(low, kind)} to "
+                         f"{_quantity(high, kind)}; check its value and unit")
+    return lines

@@ -37,7 +37,8 @@ from ..config import Project, SupportSpec
 from ..surface_io import read_surface, write_surface_ply
 from ..units import to_si
 
-__all__ = ["SurfaceResult", "build_surface", "resolve_supports", "resolve_loads", "run", "load", "external"]
+__all__ = ["SurfaceResult", "build_surface", "resolve_supports", "resolve_loads", "check_selections", "run", "load",
+           "external"]
 
 _UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
 _COUNT_PARAMETERS = {"divisions", "rings"}
@@ -154,6 +155,17 @@ def resolve_loads(mesh: TriMesh, project: Project) -> tuple[dict[str, LoadCase],
         combinations["ULS"] = LoadCombination(name="ULS", limit_state=LimitState.ULS,
                                               factors={n: (1.35 if c.self_weight else 1.5) for n, c in cases.items()})
     return cases, combinations
+
+
+def check_selections(project: Project) -> int:
+    """What the surface stage rejects before it writes anything, for ``validate``: the surface
+    builds (a template in milliseconds; a file read and cleaned), every support selection matches
+    a node and every point load finds its node. Returns the number of supported nodes. Raises the
+    stage's GridshellError, with the same message."""
+    mesh, _ = build_surface(project)
+    supports = resolve_supports(mesh, project.supports)
+    resolve_loads(mesh, project)
+    return int(len(supports.nodes))
 
 
 def _loads_json(cases: dict[str, LoadCase], combinations: dict[str, LoadCombination]) -> dict:
