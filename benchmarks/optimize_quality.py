@@ -47,22 +47,10 @@ SURFACES = Path(os.environ.get("GRIDSHELL_SURFACES", ROOT.parent / "shared" / "d
 PLANARITY_TARGET, CLOSENESS_TARGET = 0.005, 0.005
 
 
-class _Context:
-    """Just enough of the runner's stage context to load a stage's cached result."""
-
-    def __init__(self, project, out_dir: Path, stage):
-        self.project, self.out_dir, self.folder = project, out_dir, out_dir / stage.folder
-
-    def result(self, name: str):
-        return _load(self.project, self.out_dir, name)
-
-    def step(self, *_args) -> None:
-        pass
-
-
 def _load(project, out_dir: Path, name: str):
+    """A stage's result, loaded from its files in ``out_dir``."""
     stage = next(s for s in STAGES if s.name == name)
-    return stage.load(out_dir / stage.folder, _Context(project, out_dir, stage))
+    return stage.load(out_dir / stage.folder, project)
 
 
 def _jobs(only: list[str]) -> list[tuple[str, object]]:

@@ -143,7 +143,7 @@ def test_a_grid_too_fine_for_its_joints_is_remeshed_with_fewer_cells(tmp_path):
     from workflow.progress import Progress
     from workflow.runner import run_project
     from workflow.stages import STAGES
-    from workflow.stages.fabrication import build_limits_of
+    from workflow.stages.build_limits import build_limits_of
     from workflow.stages.polymesh_io import read_polymesh_obj
     from workflow.stages.remesh import COARSEN_SHARE
 

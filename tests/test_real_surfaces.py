@@ -47,7 +47,7 @@ def test_stages_run_on_real_surfaces(path, tmp_path):
     # the optimised grid, read back from its file, has no beam shorter than its joints and the
     # shortest cut take (what no optimisation lengthens is removed or collapsed, and said)
     from fabrication.limits import required_beam_lengths_m
-    from workflow.stages.fabrication import build_limits_of
+    from workflow.stages.build_limits import build_limits_of
     from workflow.stages.polymesh_io import read_polymesh_obj
 
     grid = read_polymesh_obj(out / "05-optimize" / "gridshell.obj")

@@ -2,20 +2,24 @@
 
 from __future__ import annotations
 
+import dataclasses
+import inspect
 import json
 
 import pytest
 
 from workflow.config import parse_project
-from workflow.runner import Stage, StageNotAvailable, run_project
+from workflow.runner import Stage, run_project
 
 
-def _stages(calls: list[str], fail: str | None = None, missing: str | None = None):
+def _stages(calls: list[str], fail: str | None = None, seen: dict | None = None):
+    """Four stages, each writing its name and returning it with its upstream results (``seen``
+    records what each was called with)."""
     def make(name):
-        def run(ctx):
+        def run(*, project, ctx, **upstream):
             calls.append(name)
-            if name == missing:
-                raise StageNotAvailable(f"stage '{name}' is not available")
+            if seen is not None:
+                seen[name] = upstream
             (ctx.folder / f"{name}.txt").write_text(name)
             if name == fail:
                 (ctx.folder / "half.txt").write_text("half")
@@ -24,8 +28,8 @@ def _stages(calls: list[str], fail: str | None = None, missing: str | None = Non
 
         return run
 
-    def load(folder, ctx):
-        return (folder / f"{folder.name.split('-')[1]}.txt").read_text()
+    def load(folder, project):
+        return (folder / f"{folder.name.split('-')[1]}.txt").read_text() + " (loaded)"
 
     names = [("surface", ()), ("shell", ("surface",)), ("field", ("shell",)), ("remesh", ("field",))]
     return [Stage(name=n, folder=f"0{i + 1}-{n}", run=make(n), load=load, depends=d) for i, (n, d) in enumerate(names)]
@@ -125,13 +129,35 @@ def test_failed_stage_leaves_no_half_written_folder(tmp_path):
     assert statuses["field"] == "failed" and statuses["remesh"] == "not run"
 
 
-def test_unavailable_stage_stops_the_run_and_is_named(tmp_path):
-    calls: list[str] = []
-    summary = run_project(_project(), tmp_path, _stages(calls, missing="field"))
-    assert calls == ["surface", "shell", "field"]
-    assert summary.stopped_at == "field" and "field" in summary.message
-    assert _statuses(tmp_path)["field"] == "not available"
-    assert not (tmp_path / "03-field").exists()
+def test_a_stage_is_called_with_its_upstream_results_run_or_loaded(tmp_path):
+    seen: dict = {}
+    run_project(_project(), tmp_path, _stages([], seen=seen))
+    assert seen == {"surface": {}, "shell": {"surface": "surface"}, "field": {"shell": "shell"},
+                    "remesh": {"field": "field"}}
+    seen.clear()
+    run_project(_project(ratio=3.0), tmp_path, _stages([], seen=seen))
+    assert seen == {"field": {"shell": "shell (loaded)"}, "remesh": {"field": "field"}}
+
+
+def test_a_stage_takes_some_of_the_stages_it_depends_on(tmp_path):
+    seen: dict = {}
+    stages = _stages([], seen=seen)
+    stages[3] = dataclasses.replace(stages[3], depends=("shell", "field"), takes=("field",))
+    run_project(_project(), tmp_path, stages)
+    assert seen["remesh"] == {"field": "field"}
+
+
+def test_the_stages_take_what_their_run_functions_ask_for():
+    """Each registered stage's run has one keyword per stage it takes, named after it, and those
+    stages come before it and are among the stages in its key."""
+    from workflow.stages import STAGES
+
+    names = [s.name for s in STAGES]
+    for index, stage in enumerate(STAGES):
+        parameters = list(inspect.signature(stage.run).parameters)
+        assert parameters == [*stage.inputs, "project", "ctx"], stage.name
+        assert set(stage.inputs) <= set(stage.depends) <= set(names[:index]), stage.name
+        assert list(inspect.signature(stage.load).parameters) == ["folder", "project"], stage.name
 
 
 def test_manifest_records_artifacts_config_and_versions(tmp_path):

@@ -131,9 +131,7 @@ def _separate_check(project, out):
     from workflow.stages.surface import load as load_surface
 
     polymesh = read_polymesh_obj(out / "05-optimize" / "gridshell.obj")
-    from types import SimpleNamespace
-
-    surface = load_surface(out / "01-surface", SimpleNamespace(project=project))
+    surface = load_surface(out / "01-surface", project)
     members = pd.read_csv(out / "06-analysis" / "members.csv")
     D, t = members["diameter_mm"].to_numpy() / 1000, members["thickness_mm"].to_numpy() / 1000
     p = chs_properties(D, t)

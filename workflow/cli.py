@@ -138,19 +138,15 @@ def cmd_init(args: argparse.Namespace) -> int:
 
 
 def cmd_shell(args: argparse.Namespace) -> int:
-    try:
-        from engine.shell import solve_shell_json
-    except ImportError:
-        raise GridshellError("the shell solver is not available in this version of gridshell") from None
+    from engine.shell import solve_shell_json
+
     _write_json(solve_shell_json(_read_json(args.model)), args.out)
     return 0
 
 
 def cmd_frame(args: argparse.Namespace) -> int:
-    try:
-        from engine.frame import solve_frame_json
-    except ImportError:
-        raise GridshellError("the frame solver is not available in this version of gridshell") from None
+    from engine.frame import solve_frame_json
+
     control = None
     if args.control:
         node, dof = args.control
@@ -167,10 +163,8 @@ def cmd_frame(args: argparse.Namespace) -> int:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    try:
-        from .compare import run_compare
-    except ImportError:
-        raise GridshellError("'gridshell compare' is not available in this version of gridshell") from None
+    from .compare import run_compare
+
     return run_compare(args)
 
 

@@ -217,7 +217,7 @@ def run_compare(args: argparse.Namespace) -> int:
         print(f"stopped: {summary.message}", file=sys.stderr)
         return 1
     surface = _load_stage(project, out_dir, "surface")
-    voronoi = _load_stage(project, out_dir, "optimize")
+    voronoi = _load_stage(project, out_dir, "optimize").polymesh
     progress.stage_start("compare")
     results = compare_grids(project, surface, voronoi, progress=progress.step)
     folder = out_dir / "compare"
@@ -271,16 +271,4 @@ def _load_stage(project: Project, out_dir: Path, name: str):
     from .stages import STAGES
 
     stage = next(s for s in STAGES if s.name == name)
-
-    class _Context:
-        def __init__(self) -> None:
-            self.project, self.out_dir = project, out_dir
-            self.folder = out_dir / stage.folder
-
-        def result(self, other: str):
-            return _load_stage(project, out_dir, other)
-
-        def step(self, *_args) -> None:
-            pass
-
-    return stage.load(out_dir / stage.folder, _Context())
+    return stage.load(out_dir / stage.folder, project)

@@ -2,7 +2,9 @@
 
 Each stage declares its folder, the project sections it reads and the stages it needs.
 Its cache key hashes the product version, its config sections, the keys of the stages
-it depends on and any external input (the surface file's bytes). A stage whose key and
+it depends on and any external input (the surface file's bytes). A stage is called with the
+typed results of the stages it takes (run, or loaded from their artifacts when cached), the
+project and a :class:`StageContext`; it returns its own result. A stage whose key and
 artifacts are unchanged since the last run is skipped ("cached"). A stage writes into a
 temporary folder that replaces ``OUT/NN-stage`` only when the stage succeeds, so an
 interrupted or failed run never leaves half-written artifacts under the real name.
@@ -30,15 +32,10 @@ from .config import STAGE_SECTIONS, Project
 from .outdir import remove_leftovers, run_lock
 from .progress import Progress
 
-__all__ = ["Stage", "StageContext", "RunSummary", "StageNotAvailable", "run_project", "product_version",
-           "STATUS_RAN", "STATUS_CACHED", "STATUS_FAILED", "STATUS_NOT_AVAILABLE", "STATUS_NOT_RUN"]
+__all__ = ["Stage", "StageContext", "RunSummary", "run_project", "product_version",
+           "STATUS_RAN", "STATUS_CACHED", "STATUS_FAILED", "STATUS_NOT_RUN"]
 
-STATUS_RAN, STATUS_CACHED, STATUS_FAILED = "ran", "cached", "failed"
-STATUS_NOT_AVAILABLE, STATUS_NOT_RUN = "not available", "not run"
-
-
-class StageNotAvailable(GridshellError):
-    """Raised by a stage whose implementation is not in this version of gridshell."""
+STATUS_RAN, STATUS_CACHED, STATUS_FAILED, STATUS_NOT_RUN = "ran", "cached", "failed", "not run"
 
 
 def product_version() -> str:
@@ -76,26 +73,19 @@ def file_digest(path: Path) -> str:
 
 @dataclass
 class StageContext:
-    """What a stage sees: the project, its folder to write into, upstream results, progress, and the
-    findings of the stages before it (``earlier_findings``, run or cached). A stage puts the seconds
-    of its steps in ``timings``: they go into the manifest (``step_seconds``), never into an
-    artifact, so that the same input gives the same bytes."""
+    """Where a stage writes and what it reports: its folder to write into (a temporary one until
+    the stage succeeds), the run's output folder, progress, and the findings of the stages before
+    it (``earlier_findings``, run or cached). A stage puts the seconds of its steps in
+    ``timings``: they go into the manifest (``step_seconds``), never into an artifact, so that the
+    same input gives the same bytes. Upstream results and the project are the stage's arguments,
+    not the context's."""
 
-    project: Project
     folder: Path
     out_dir: Path
     progress: Progress
-    _results: dict[str, Any]
-    _loader: Callable[[str], Any]
     findings: list[dict] = field(default_factory=list)
     earlier_findings: list[dict] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
-
-    def result(self, stage: str) -> Any:
-        """The in-memory result of an earlier stage (reloaded from its artifacts if cached)."""
-        if stage not in self._results:
-            self._results[stage] = self._loader(stage)
-        return self._results[stage]
 
     def step(self, text: str, fraction: float | None = None) -> None:
         """Report the current step of the stage (and optionally its completed fraction)."""
@@ -111,8 +101,12 @@ class StageContext:
 class Stage:
     """A registered stage.
 
-    run(ctx) -> result writes its artifacts into ctx.folder and returns the in-memory result;
-    load(folder, ctx) -> result rebuilds that result from the artifacts of a cached run.
+    run(**upstream, project=..., ctx=...) -> result writes its artifacts into ctx.folder and
+    returns the stage's result; ``upstream`` is the result of each stage in ``takes``, passed as
+    the keyword named after that stage (``run(surface=..., shell=..., project=..., ctx=...)``).
+    load(folder, project) -> result rebuilds that result from the artifacts of a cached run.
+    depends: the stages whose keys go into this stage's key (what it reads, as results or as
+    files); takes: those whose results it is called with (default: all of ``depends``).
     external(project) -> bytes digests of inputs outside the project file (e.g. a mesh file).
     published: files the stage writes outside its folder (relative to OUT, e.g. report.html),
     recorded and checked like its artifacts.
@@ -120,11 +114,17 @@ class Stage:
 
     name: str
     folder: str
-    run: Callable[[StageContext], Any]
-    load: Callable[[Path, StageContext], Any]
+    run: Callable[..., Any]
+    load: Callable[[Path, Project], Any]
     depends: tuple[str, ...] = ()
+    takes: tuple[str, ...] | None = None
     external: Callable[[Project], str] | None = None
     published: tuple[str, ...] = ()
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        """The stages whose results ``run`` is called with."""
+        return self.depends if self.takes is None else self.takes
 
 
 @dataclass
@@ -198,9 +198,9 @@ def run_project(project: Project, out_dir: Path, stages: list[Stage], *, until: 
     """Run (or skip when cached) the stages of a project in order; write OUT/manifest.json.
 
     until: stop after this stage; only: run just this stage (its inputs must be available);
-    force: ignore the cache. A stage raising ``StageNotAvailable`` ends the run there. The run
-    holds OUT's lock (another run on OUT raises ``workflow.outdir.RunInProgress``) and first removes
-    what a killed run left there (workflow.outdir).
+    force: ignore the cache. The run holds OUT's lock (another run on OUT raises
+    ``workflow.outdir.RunInProgress``) and first removes what a killed run left there
+    (workflow.outdir).
     """
     names = [s.name for s in stages]
     for option, value in (("--until", until), ("--only", only)):
@@ -227,19 +227,21 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
     records: dict[str, dict] = {}
     summary = RunSummary(out_dir=out_dir)
 
-    def loader(name: str) -> Any:
+    def result_of(name: str) -> Any:
+        """The result of an earlier stage: this run's, or loaded from the artifacts of a cached one."""
+        if name in results:
+            return results[name]
         stage = by_name[name]
-        folder = out_dir / stage.folder
         entry = records.get(name) or previous.get(name)
         if not entry or entry.get("status") not in (STATUS_RAN, STATUS_CACHED) or entry.get("key") != keys.get(name):
             raise GridshellError(f"stage '{name}' has no up-to-date results in {out_dir}",
                                  hint=f"run the earlier stages first: gridshell run ... --until {name}")
-        return stage.load(folder, context(stage, folder))
+        results[name] = stage.load(out_dir / stage.folder, project)
+        return results[name]
 
     def context(stage: Stage, folder: Path) -> StageContext:
         earlier = names[:names.index(stage.name)]
-        return StageContext(project=project, folder=folder, out_dir=out_dir, progress=progress,
-                            _results=results, _loader=loader,
+        return StageContext(folder=folder, out_dir=out_dir, progress=progress,
                             earlier_findings=[f for n in earlier for f in (records.get(n) or {}).get("findings", [])])
 
     def write_manifest() -> None:
@@ -278,16 +280,8 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
         tmp = atomic_folder(out_dir, stage.folder)
         ctx = context(stage, tmp)
         try:
-            results[stage.name] = stage.run(ctx)
-        except StageNotAvailable as exc:
-            shutil.rmtree(tmp, ignore_errors=True)
-            records[stage.name] = {"name": stage.name, "folder": stage.folder, "status": STATUS_NOT_AVAILABLE,
-                                   "message": str(exc), "key": keys[stage.name], "artifacts": []}
-            summary.stages.append(records[stage.name])
-            summary.stopped_at, summary.message = stage.name, str(exc)
-            progress.stage_done(stage.name, STATUS_NOT_AVAILABLE, time.perf_counter() - started)
-            write_manifest()
-            return summary
+            upstream = {name: result_of(name) for name in stage.inputs}
+            results[stage.name] = stage.run(**upstream, project=project, ctx=ctx)
         except BaseException as exc:
             shutil.rmtree(tmp, ignore_errors=True)
             shutil.rmtree(folder, ignore_errors=True)

@@ -1,55 +1,42 @@
-"""The registered stages, in order. Each stage module has ``run(ctx)`` and ``load(folder, ctx)``."""
+"""The registered stages, in order.
+
+Each stage module has ``run(<upstream results>, project, ctx) -> <its result>`` and
+``load(folder, project) -> <its result>``; the upstream results are keyword arguments named after
+the stages that made them (workflow.runner.Stage):
+
+- surface: () -> surface.SurfaceResult
+- shell: (surface) -> engine.shell.ShellResult
+- field: (surface, shell) -> engine.field.GuidingField
+- remesh: (surface, field) -> engine.mesh.PolyMesh
+- optimize: (surface, field, remesh) -> optimize.OptimizedGrid
+- analysis: (surface, optimize) -> analysis.AnalysisSummary
+- fabrication: (surface, optimize, analysis) -> fabrication.FabricationResult
+- report: (surface, optimize, analysis, fabrication, and the files of every stage) -> report.ReportResult
+"""
 
 from __future__ import annotations
 
-import importlib
-
-from ..runner import Stage, StageNotAvailable
+from ..runner import Stage
+from . import analysis, fabrication, field, optimize, remesh, report, shell, surface
 
 __all__ = ["STAGES", "stage_names"]
 
-_ORDER = [
-    # name, folder, depends
-    ("surface", "01-surface", ()),
-    ("shell", "02-shell", ("surface",)),
-    ("field", "03-field", ("surface", "shell")),
-    ("remesh", "04-remesh", ("surface", "field")),
-    ("optimize", "05-optimize", ("surface", "field", "remesh")),
-    ("analysis", "06-analysis", ("surface", "optimize")),
-    ("fabrication", "07-fabrication", ("surface", "optimize", "analysis")),
-    ("report", "report", ("surface", "shell", "field", "remesh", "optimize", "analysis", "fabrication")),
+STAGES: list[Stage] = [
+    Stage(name="surface", folder="01-surface", run=surface.run, load=surface.load, external=surface.external),
+    Stage(name="shell", folder="02-shell", run=shell.run, load=shell.load, depends=("surface",)),
+    Stage(name="field", folder="03-field", run=field.run, load=field.load, depends=("surface", "shell")),
+    Stage(name="remesh", folder="04-remesh", run=remesh.run, load=remesh.load, depends=("surface", "field")),
+    Stage(name="optimize", folder="05-optimize", run=optimize.run, load=optimize.load,
+          depends=("surface", "field", "remesh")),
+    Stage(name="analysis", folder="06-analysis", run=analysis.run, load=analysis.load,
+          depends=("surface", "optimize")),
+    Stage(name="fabrication", folder="07-fabrication", run=fabrication.run, load=fabrication.load,
+          depends=("surface", "optimize", "analysis")),
+    # the report reads every earlier stage's files (figures, JSON, CSV): all of them are in its key
+    Stage(name="report", folder="report", run=report.run, load=report.load,
+          depends=("surface", "shell", "field", "remesh", "optimize", "analysis", "fabrication"),
+          takes=("surface", "optimize", "analysis", "fabrication"), published=report.published),
 ]
-
-
-def _not_available(name: str):
-    def run(ctx):
-        raise StageNotAvailable(f"stage '{name}' is not available in this version of gridshell; "
-                                f"the run stopped before it (results up to the previous stage are in {ctx.out_dir})")
-
-    def load(folder, ctx):
-        raise StageNotAvailable(f"stage '{name}' is not available in this version of gridshell")
-
-    return run, load
-
-
-def _build() -> list[Stage]:
-    stages = []
-    for name, folder, depends in _ORDER:
-        try:
-            module = importlib.import_module(f"{__name__}.{name}")
-            run, load = module.run, module.load
-            external = getattr(module, "external", None)
-            published = tuple(getattr(module, "published", ()))
-        except ModuleNotFoundError as exc:
-            if exc.name != f"{__name__}.{name}":
-                raise
-            (run, load), external, published = _not_available(name), None, ()
-        stages.append(Stage(name=name, folder=folder, run=run, load=load, depends=depends, external=external,
-                            published=published))
-    return stages
-
-
-STAGES: list[Stage] = _build()
 
 
 def stage_names() -> list[str]:

@@ -11,23 +11,35 @@ from __future__ import annotations
 
 import json
 import os
+from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 
+from engine.checks import member_checks
 from engine.en1993 import CHECKED, NOT_CHECKED
-from engine.errors import MechanismError
+from engine.errors import ConvergenceError, MechanismError
 from engine.findings import Finding
+from engine.frame import FrameModel, factor_stiffness, linear_buckling, linear_static, nonlinear_static
 from engine.loads import LoadCombination, combine
+from engine.mesh import PolyMesh
 from engine.parts import beam_id, node_id
+from engine.protocol import ProtocolSettings, run_protocol
+from engine.sections import Material, Section, section_from_spec
+from engine.sections import material as material_by_name
+from engine.sizing import size_sections
 from engine.structure import BeamProperties, beam_up_vectors, gridshell_loads, node_normals, support_restraints
 from engine.supports import Supports
 from fabrication.files import atomic_path, write_text_atomic
+from fabrication.workers import exit_with_parent
 
 from ..config import Project
-from ._require import require
+from ..plots.analysis import plot_axial_forces, plot_buckling_modes, plot_response, plot_sections, plot_utilisation
+from ..runner import StageContext
+from .optimize import OptimizedGrid
 from .sizing import (
     BeamSections,
     checks_method,
@@ -38,6 +50,7 @@ from .sizing import (
     sized_checks,
     start_tubes,
 )
+from .surface import SurfaceResult
 
 __all__ = ["run", "load", "beam_properties", "build_frame", "pick_combination", "AnalysisSummary"]
 
@@ -52,16 +65,13 @@ class AnalysisSummary:
     sections: BeamSections | None = None
 
 
-def beam_properties(project: Project):
+def beam_properties(project: Project) -> tuple[BeamProperties, Section, Material]:
     """(BeamProperties, section object, material object) from the project's material and section."""
-    material_by_name, section_from_spec = require("analysis", "engine.sections", "material", "section_from_spec")
     material = material_by_name(project.material.name)
     overrides = {k: v for k, v in (("E", project.material.E), ("G", project.material.G),
                                    ("density", project.material.density),
                                    ("fy", project.material.yield_strength)) if v is not None}
     if overrides:
-        from dataclasses import replace
-
         material = replace(material, **overrides)
     section = section_from_spec(project.section.kind, **project.section.dimensions())
     props = BeamProperties(E=material.E, G=material.G, A=section.A, Iy=section.Iy, Iz=section.Iz, J=section.J,
@@ -69,7 +79,7 @@ def beam_properties(project: Project):
     return props, section, material
 
 
-def pick_combination(project: Project, surface, limit_state: str) -> LoadCombination:
+def pick_combination(project: Project, surface: SurfaceResult, limit_state: str) -> LoadCombination:
     name = project.analysis.uls_combination if limit_state == "ULS" else project.analysis.sls_combination
     combos = surface.combinations
     if name is None:
@@ -82,9 +92,9 @@ def pick_combination(project: Project, surface, limit_state: str) -> LoadCombina
     return LoadCombination(name=limit_state, limit_state=limit_state, factors={n: 1.0 for n in surface.load_cases})
 
 
-def build_frame(polymesh, surface, props: BeamProperties, elements_per_beam: int):
+def build_frame(polymesh: PolyMesh, surface: SurfaceResult, props: BeamProperties,
+                elements_per_beam: int) -> tuple[FrameModel, Supports, np.ndarray]:
     """(FrameModel, Supports, node normals) of the grid-shell."""
-    FrameModel = require("analysis", "engine.frame", "FrameModel")
     normals = node_normals(polymesh, surface.mesh)
     up = beam_up_vectors(polymesh, normals)
     n_beams = len(polymesh.edges)
@@ -106,10 +116,6 @@ def path_pool(workers: int | None):
     """A process pool of ``workers`` (default: one per core) for the non-linear paths, or None
     with one worker (the paths then run here, one after another). Its workers end with this
     process (fabrication.workers)."""
-    from concurrent.futures import ProcessPoolExecutor
-
-    from fabrication.workers import exit_with_parent
-
     count = workers or os.cpu_count() or 1
     if count < 2:
         yield None
@@ -123,13 +129,9 @@ def _plan_span(polymesh) -> float:
     return float(extent.min())
 
 
-def run(ctx):
-    project: Project = ctx.project
+def run(surface: SurfaceResult, optimize: OptimizedGrid, project: Project, ctx: StageContext) -> AnalysisSummary:
     config = project.analysis
-    surface = ctx.result("surface")
-    polymesh = ctx.result("optimize")
-    ProtocolSettings = require("analysis", "engine.protocol", "ProtocolSettings")
-    member_checks = require("analysis", "engine.checks", "member_checks")
+    polymesh = optimize.polymesh
     props, section, material = beam_properties(project)
     lengths = polymesh.beam_lengths
     sections = project_sections(project, len(lengths))
@@ -243,8 +245,6 @@ def run(ctx):
     ctx.step("drawing")
     _draw(ctx, polymesh, result, utilisation, axial, project)
     if design is not None:
-        from workflow.plots.analysis import plot_sections
-
         plot_sections(polymesh.nodes, polymesh.edges, sections.names, sections.diameter, ctx.folder / "sections.png",
                       title=f"{project.project.name}: sized sections ({figures['design']['catalogue']})")
     if config.control_points and config.nonlinear:
@@ -252,16 +252,13 @@ def run(ctx):
         figures["load_test"] = _load_test(ctx, project, surface, polymesh, model, supports, props, sls_combo)
         write_text_atomic(ctx.folder / "analysis.json", json.dumps(figures, indent=1, default=float))
     # what the artifacts say, as a cached run reads it: the later stages see the same either way
-    return load(ctx.folder, ctx)
+    return load(ctx.folder, project)
 
 
 def _load_test(ctx, project: Project, surface, polymesh, model, supports, props, combination) -> dict:
     """The mock-up's incremental load test (METHOD.md 7): the permanent cases of the SLS
     combination (those with self-weight) held, the others scaled by the load factor; the vertical
     deflection of each named control point's nearest node against the load factor."""
-    from scipy.spatial import cKDTree
-
-    nonlinear_static = require("analysis", "engine.frame", "nonlinear_static")
     import pandas as pd
 
     permanent = {n: f for n, f in combination.factors.items() if surface.load_cases[n].self_weight}
@@ -287,8 +284,7 @@ def _load_test(ctx, project: Project, surface, polymesh, model, supports, props,
         table[f"{name}_uz_mm"] = 1000 * column
     with atomic_path(ctx.folder / "loadtest.csv") as tmp:
         table.to_csv(tmp, index=False, float_format="%.6g")
-    plot_response = require("analysis", "workflow.plots.analysis", "plot_response")
-    curves = {f"{name} (N{int(n) + 1:04d})": np.c_[run.path[:, 0], column]
+    curves = {f"{name} ({node_id(n)})": np.c_[run.path[:, 0], column]
               for name, n, column in zip(names, nodes, run.monitored.T)}
     plot_response(curves, ctx.folder / "loadtest.png", required=project.analysis.required_load_factor,
                   title=f"{project.project.name}: load test, {', '.join(permanent) or 'no'} load held, "
@@ -300,9 +296,6 @@ def _load_test(ctx, project: Project, surface, polymesh, model, supports, props,
 
 
 def _draw(ctx, polymesh, result, utilisation, axial, project: Project) -> None:
-    plots = require("analysis", "workflow.plots.analysis", "plot_utilisation", "plot_axial_forces",
-                    "plot_buckling_modes", "plot_response")
-    plot_utilisation, plot_axial_forces, plot_buckling_modes, plot_response = plots
     name = project.project.name
     plot_utilisation(polymesh.nodes, polymesh.edges, utilisation, ctx.folder / "utilisation.png",
                      title=f"{name}: member utilisation (ULS)")
@@ -318,7 +311,7 @@ def _draw(ctx, polymesh, result, utilisation, axial, project: Project) -> None:
                       title=f"{name}: load factor against control-node deflection")
 
 
-def load(folder: Path, ctx):
+def load(folder: Path, project: Project) -> AnalysisSummary:
     figures = json.loads((folder / "analysis.json").read_text())
     import pandas as pd
 
@@ -364,8 +357,6 @@ def protocol_with_design(ctx, project: Project, polymesh, surface, material, met
     and sized again for a higher lambda_LB (up to ``nonlinear_rounds`` times) where
     lambda_NL_worst misses its limit. ``ctx`` needs ``step(text, fraction=None)``; ``executor``
     runs the paths (default: a pool of ``[analysis] workers``)."""
-    from engine.protocol import run_protocol
-
     config = project.analysis
     cases = [combine(surface.load_cases, c) for c in combos]
     props = beam_properties(project)[0]
@@ -431,9 +422,6 @@ class _Sizer:
         self.required = project.analysis.required_load_factor  # lambda_LB asked of the design
 
     def _solve(self, sections: BeamSections):
-        from engine.errors import ConvergenceError
-        from engine.frame import factor_stiffness, linear_buckling, linear_static
-
         model, supports, (uls, sls) = frame_and_loads(self.polymesh, self.surface,
                                                       sections.frame_properties(self.material), self.cases,
                                                       self.project.analysis.elements_per_beam)
@@ -452,8 +440,6 @@ class _Sizer:
     def size(self, previous, *, stiffness_factor: float = 1.0, buckling_target: float | None = None):
         """A design from the start tubes, or from ``previous`` with every I raised by
         ``stiffness_factor`` or with lambda_LB at least ``buckling_target``."""
-        from engine.sizing import size_sections
-
         cat, design = self.catalogue, self.project.design
         start = start_tubes(self.project, cat, len(self.lengths)) if previous is None else previous.tube
         floor = None if previous is None or buckling_target is not None else stiffness_factor * cat.I[previous.tube]

@@ -10,59 +10,69 @@ go into the manifest, ``step_seconds``). Lengths in mm.
 from __future__ import annotations
 
 import json
+import os
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from engine.findings import Finding
 from engine.mesh import PolyMesh
+from engine.parts import joint_id
+from engine.sections import material
 from engine.structure import node_normals
-from fabrication.files import write_text_atomic
+from fabrication.assembly import plan_assembly, write_assembly
+from fabrication.clearance import joint_clashes_parallel
+from fabrication.drawings import write_plan_drawings
+from fabrication.files import atomic_path, write_text_atomic
+from fabrication.ifc import IfcBeam, IfcJoint, IfcPanel, write_gridshell_ifc
+from fabrication.joints import (
+    JointSettings,
+    JointsInBackground,
+    joint_geometry,
+    joint_hub_radius_mm,
+    joint_setback_mm,
+    joint_sleeve_mm,
+    smallest_angle,
+)
+from fabrication.limits import BuildLimits, default_min_cut_length_mm
+from fabrication.model3d import write_gridshell_3dm, write_gridshell_step
+from fabrication.nesting_bars import nest_bars
 
 from ..config import Project
-from ._require import require
-from .sizing import profile_name, project_sections
+from ..runner import StageContext
+from .analysis import AnalysisSummary, beam_properties
+from .build_limits import MM, beam_outer_size_mm, build_limits_of, joint_settings_of
+from .optimize import OptimizedGrid
+from .sizing import BeamSections, profile_name, project_sections
+from .surface import SurfaceResult
 
-__all__ = ["run", "load", "beam_outer_size_mm", "joint_settings_of", "build_limits_of", "sheet_stock"]
+# fabrication.beams and fabrication.nc1 (pandas), fabrication.panels and fabrication.nesting_sheets
+# (shapely) are imported where they are used: a run whose stages are all cached does not load them
 
-MM = 1000.0
-
-
-def beam_outer_size_mm(project: Project) -> float:
-    """The beam's largest outer dimension in mm (tube or rod diameter, or the section height)."""
-    s = project.section
-    return MM * (s.diameter if s.diameter is not None else max(s.height or 0.0, s.width or 0.0))
-
-
-def joint_settings_of(project: Project):
-    """The project's joint settings in fabrication's terms (mm)."""
-    from fabrication.joints import JointSettings
-
-    j = project.fabrication.joints
-    return JointSettings(**{k: v for k, v in {
-        "kind": j.kind, "clearance_mm": MM * j.clearance, "wall_mm": MM * j.wall, "min_wall_mm": MM * j.min_wall,
-        "pin_hole_mm": MM * j.pin_hole, "engrave": j.engrave,
-        "hub_radius_mm": None if j.hub_radius is None else MM * j.hub_radius,
-        "sleeve_length_mm": None if j.sleeve_length is None else MM * j.sleeve_length,
-        "plate_thickness_mm": MM * j.plate_thickness, "bolt_hole_mm": MM * j.bolt_hole}.items() if v is not None})
+__all__ = ["FabricationResult", "run", "load", "sheet_stock"]
 
 
-def build_limits_of(project: Project):
-    """The shortest buildable beam and smallest angle at a joint that the project's joints, tube
-    and fabrication settings give (fabrication.limits.BuildLimits)."""
-    from fabrication.limits import BuildLimits
+@dataclass(frozen=True, kw_only=True)
+class FabricationResult:
+    """The fabrication stage's result: how many joints and panels (None where [fabrication.panels]
+    is off) it made, and ``summary``, its fabrication.json (counts, limits, joint problems and
+    clashes, findings)."""
 
-    b = project.fabrication.beams
-    return BuildLimits.of(joint_settings_of(project), beam_outer_size_mm(project),
-                          min_cut_length_mm=None if b.min_cut_length is None else MM * b.min_cut_length,
-                          min_angle_deg=project.fabrication.joints.min_angle)
+    joints: int
+    panels: int | None
+    summary: dict
+
+    @classmethod
+    def of_summary(cls, summary: dict) -> "FabricationResult":
+        return cls(joints=summary["joints"], panels=summary.get("panels"), summary=summary)
 
 
 class _StepClock:
     """Seconds per named step of the stage: each ``start`` ends the step before."""
 
-    def __init__(self, ctx) -> None:
+    def __init__(self, ctx: StageContext) -> None:
         self._ctx = ctx
         self.seconds: dict[str, float] = {}
         self._name: str | None = None
@@ -79,13 +89,12 @@ class _StepClock:
             self._name = None
 
 
-def run(ctx):
-    project: Project = ctx.project
+def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSummary, project: Project,
+        ctx: StageContext) -> FabricationResult:
     clock = _StepClock(ctx)
     config = project.fabrication
-    surface = ctx.result("surface")
-    polymesh = ctx.result("optimize")
-    sections = getattr(ctx.result("analysis"), "sections", None)
+    polymesh = optimize.polymesh
+    sections = analysis.sections
     folder: Path = ctx.folder
     normals = node_normals(polymesh, surface.mesh)
     # one outer size, or one per beam where the analysis sized the tubes
@@ -94,17 +103,14 @@ def run(ctx):
     summary: dict = {"nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
                      "limits": limits.to_dict()}
     findings: list[Finding] = []
-
-    from fabrication.joints import JointsInBackground
-
     joint_settings = joint_settings_of(project)
     summary.update({"joints": 0, "joint_problems": []})
     # the joints take both cores in worker processes; the other steps run here meanwhile
     clock.start("joints: start")
     with JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
                             workers=config.workers) as joints:
-        _beams_panels_drawings_assembly(ctx, clock, polymesh, normals, joint_settings, limits, summary, findings,
-                                        sections)
+        _beams_panels_drawings_assembly(project, ctx, clock, optimize, normals, joint_settings, limits, summary,
+                                        findings, sections)
         clock.start("joints: waiting")
         joints.wait(ctx.step)
     clock.stop()
@@ -132,7 +138,7 @@ def run(ctx):
     ctx.report_findings(summary["findings"])
     ctx.timings.update(clock.seconds)
     write_text_atomic(folder / "fabrication.json", json.dumps(summary, indent=1, default=_jsonable))
-    return summary
+    return FabricationResult.of_summary(summary)
 
 
 def output_sizes_mb(folder: Path) -> dict[str, float]:
@@ -156,16 +162,12 @@ CLASH_MM3 = 1.0
 def _joint_clashes(folder: Path, names: list[str], workers: int | None = None) -> list[dict]:
     """Pairs of joint solids (as written) that intersect by more than CLASH_MM3, the booleans on
     every core (the joints' workers have ended by then)."""
-    import os
-
-    from fabrication.clearance import joint_clashes_parallel
-
     # boxes from the STL each worker wrote beside the STEP (same solid): only touching joints are read
     return joint_clashes_parallel(folder, names, workers=workers or os.cpu_count() or 1, min_volume_mm3=CLASH_MM3,
                                   stl_boxes=True)
 
 
-def _joint_findings(reports: list[dict], limits) -> list[Finding]:
+def _joint_findings(reports: list[dict], limits: BuildLimits) -> list[Finding]:
     """Joints whose solid failed a check, or whose beams meet at less than the joint takes."""
     out = []
     for r in reports:
@@ -196,18 +198,6 @@ def _joint_findings(reports: list[dict], limits) -> list[Finding]:
     return out
 
 
-def panels_of(ctx, polymesh):
-    """The panels the optimize stage chose (05-optimize/panels.obj: cells and planar pieces)."""
-    from .optimize import panel_pieces_of, read_panels_obj
-
-    path = Path(ctx.out_dir) / "05-optimize" / "panels.obj"
-    if path.is_file():
-        pieces = read_panels_obj(path)
-        if all(len(p.loop) and p.loop.max() < polymesh.n_nodes for p in pieces):
-            return pieces
-    return panel_pieces_of(polymesh, ctx.project)
-
-
 def sheet_stock(project: Project):
     """The stock sheet sizes (SheetSettings, mm) in the order panels are given to them."""
     from fabrication.nesting_sheets import SheetSettings
@@ -218,11 +208,13 @@ def sheet_stock(project: Project):
                           rotations=s.rotations) for w, h in sizes]
 
 
-def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: np.ndarray, joint_settings, limits,
-                                    summary: dict, findings: list[Finding], sections=None) -> None:
+def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: _StepClock, grid: OptimizedGrid,
+                                    normals: np.ndarray, joint_settings: JointSettings, limits: BuildLimits,
+                                    summary: dict, findings: list[Finding],
+                                    sections: BeamSections | None = None) -> None:
     """Every step but the joints (they run meanwhile); fills ``summary`` and ``findings``.
     ``sections``: the analysis's per-beam tubes where it sized them (workflow.stages.sizing)."""
-    project: Project = ctx.project
+    polymesh = grid.polymesh
     config = project.fabrication
     folder: Path = ctx.folder
     size_mm = beam_outer_size_mm(project)
@@ -231,13 +223,9 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     sizes_mm = np.full(len(polymesh.edges), size_mm) if tubes is None else MM * tubes.diameter
     walls_mm = None if tubes is None else MM * tubes.thickness
     clock.start("beams: cut list")
-    beams = require("fabrication", "fabrication.beams",
-                    "BeamSettings", "cut_list", "write_cut_list", "write_beams_step")
-    BeamSettings, cut_list, write_cut_list, write_beams_step = beams
-    nest_bars = require("fabrication", "fabrication.nesting_bars", "nest_bars")
-    b = config.beams
-    from .analysis import beam_properties
+    from fabrication.beams import BeamSettings, cut_list, write_beams_step, write_cut_list
 
+    b = config.beams
     props, section, _ = beam_properties(project)
     beam_settings = BeamSettings(profile_name=profile_name(project), material_name=project.material.name,
                                  density=_density(project), stock_length_mm=MM * b.stock_length, kerf_mm=MM * b.kerf,
@@ -258,8 +246,6 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     # the shortest cut each beam's own tube needs (the setting where given)
     min_cut = np.full(len(cut), limits.min_cut_length_mm)
     if sections is not None and b.min_cut_length is None:
-        from fabrication.limits import default_min_cut_length_mm
-
         min_cut = np.array([default_min_cut_length_mm(joint_settings, s) for s in sizes_mm])
     ids = table["id"].tolist()
     fix_short = ("no valid collapse could remove this beam (its cells or joints would break): fewer cells "
@@ -302,10 +288,8 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     panels = []
     if config.panels.enabled:
         clock.start("panels: flatten and DXFs")
-        (PanelSettings, flatten_panels, write_panel_dxfs, write_panels_csv) = require(
-            "fabrication", "fabrication.panels",
-            "PanelSettings", "flatten_panels", "write_panel_dxfs", "write_panels_csv")
         from fabrication.nesting_sheets import nest_on_stock, sheet_overshoot, write_contact_sheet, write_sheet_dxfs
+        from fabrication.panels import PanelSettings, flatten_panels, write_panel_dxfs, write_panels_csv
 
         p = config.panels
         panel_settings = PanelSettings(thickness_mm=MM * p.thickness, material_name=p.material, density=p.density,
@@ -314,7 +298,7 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
                                        planarity_tolerance_mm=MM * p.planarity_tolerance,
                                        split_nonplanar=p.split_nonplanar)
         problems: list[tuple[str, str]] = []
-        pieces = panels_of(ctx, polymesh)
+        pieces = grid.pieces
         glazing = PolyMesh(nodes=polymesh.nodes, faces=tuple(p.loop for p in pieces))
         panels = flatten_panels(glazing, panel_settings, problems=problems)
         findings += [Finding(kind="panel_outline", parts=[pid], stage="fabrication", message=message,
@@ -351,19 +335,15 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
                                                             if getattr(x, "nonplanar", False)]})
 
     clock.start("drawings")
-    write_plan_drawings = require("fabrication", "fabrication.drawings", "write_plan_drawings")
     write_plan_drawings(polymesh, folder / "drawings", project_name=project.project.name,
                         support_nodes=np.flatnonzero(polymesh.supports))
     clock.start("model: gridshell.step")
-    write_gridshell_step, write_gridshell_3dm = require("fabrication", "fabrication.model3d", "write_gridshell_step",
-                                                        "write_gridshell_3dm")
     joint_radius_mm = getattr(joint_settings, "hub_radius_mm", None) or 1.5 * float(sizes_mm.max())
     write_gridshell_step(polymesh, panels, sizes_mm / 2, joint_radius_mm, folder / "gridshell.step")
     clock.start("model: gridshell.3dm")
     write_gridshell_3dm(polymesh, panels, sizes_mm / 2, joint_radius_mm, folder / "gridshell.3dm")
 
     clock.start("assembly sequence: plan")
-    plan_assembly, write_assembly = require("fabrication", "fabrication.assembly", "plan_assembly", "write_assembly")
     if sections is not None:  # the sized tubes carry the erection stages too
         props = sections.frame_properties(beam_properties(project)[2])
     beam = {"E": props.E, "G": props.G, "A": props.A, "Iy": props.Iy, "Iz": props.Iz, "J": props.J,
@@ -377,28 +357,18 @@ def _beams_panels_drawings_assembly(ctx, clock: _StepClock, polymesh, normals: n
     summary["assembly"] = written
     if tubes is not None:  # while the joints build: it needs their geometry only
         clock.start("model: gridshell.ifc")
-        _write_ifc(ctx, folder, polymesh, normals, table, panels, sizes_mm, walls_mm, joint_settings)
+        _write_ifc(project, folder, polymesh, normals, table, panels, sizes_mm, walls_mm, joint_settings)
         summary["ifc"] = "gridshell.ifc"
 
 
-def _write_ifc(ctx, folder: Path, polymesh, normals: np.ndarray, table, panels: list, sizes: np.ndarray,
-               walls: np.ndarray, joint_settings) -> None:
+def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, normals: np.ndarray, table, panels: list,
+               sizes: np.ndarray, walls: np.ndarray, joint_settings: JointSettings) -> None:
     """gridshell.ifc (fabrication.ifc) from the stage's cut list, panels, panels.csv, sequence.csv
     and the joints' geometry as the joint solids are built from it."""
     import pandas as pd
 
-    from engine.parts import joint_id
-    from fabrication.ifc import IfcBeam, IfcJoint, IfcPanel, write_gridshell_ifc
-    from fabrication.joints import (
-        joint_geometry,
-        joint_hub_radius_mm,
-        joint_setback_mm,
-        joint_sleeve_mm,
-        smallest_angle,
-    )
     from fabrication.nc1 import grade_name
 
-    project: Project = ctx.project
     step_of: dict[str, int] = {}
     sequence = folder / "assembly" / "sequence.csv"
     if sequence.is_file():
@@ -457,7 +427,6 @@ def _jsonable(value):
 def _density(project: Project) -> float:
     if project.material.density is not None:
         return project.material.density
-    material = require("fabrication", "engine.sections", "material")
     return material(project.material.name).density
 
 
@@ -465,8 +434,6 @@ def _write_bars_by_profile(nestings: list, path: Path) -> None:
     """bars.csv of every profile's nesting, bars numbered on from one profile to the next, with a
     profile column."""
     import pandas as pd
-
-    from fabrication.files import atomic_path
 
     rows: list[dict] = []
     for profile, nesting in nestings:
@@ -476,5 +443,5 @@ def _write_bars_by_profile(nestings: list, path: Path) -> None:
         pd.DataFrame(rows, columns=columns).to_csv(tmp, index=False)
 
 
-def load(folder: Path, ctx):
-    return json.loads((folder / "fabrication.json").read_text())
+def load(folder: Path, project: Project) -> FabricationResult:
+    return FabricationResult.of_summary(json.loads((folder / "fabrication.json").read_text()))

@@ -12,18 +12,20 @@ from pathlib import Path
 
 import numpy as np
 
+from engine.field import AnisotropyMap, FieldSettings, GuidingField, SizeMap, guiding_field
+from engine.shell import ShellResult
 from fabrication.files import atomic_path, write_text_atomic
 
 from ..config import Project
-from ._require import require
+from ..plots.field import plot_field
+from ..runner import StageContext
+from .surface import SurfaceResult
 
 __all__ = ["run", "load", "field_settings"]
 
 
-def field_settings(project: Project):
+def field_settings(project: Project) -> FieldSettings:
     """The engine's FieldSettings from the project's [field] section."""
-    FieldSettings, SizeMap, AnisotropyMap = require("field", "engine.field",
-                                                    "FieldSettings", "SizeMap", "AnisotropyMap")
     config = project.field
     return FieldSettings(
         max_size_ratio=config.max_size_ratio, max_aspect=config.max_aspect,
@@ -35,11 +37,8 @@ def field_settings(project: Project):
         symmetry_planes=tuple((tuple(p.point), tuple(p.normal)) for p in config.symmetry_planes))
 
 
-def run(ctx):
-    guiding_field = require("field", "engine.field", "guiding_field")
-    project: Project = ctx.project
-    mesh = ctx.result("surface").mesh
-    shell = ctx.result("shell")
+def run(surface: SurfaceResult, shell: ShellResult, project: Project, ctx: StageContext) -> GuidingField:
+    mesh = surface.mesh
     ctx.step("stress to metric")
     field = guiding_field(mesh, shell.vertex_membrane_forces, field_settings(project))
     with atomic_path(ctx.folder / "field.npz") as tmp:
@@ -54,16 +53,13 @@ def run(ctx):
                "symmetry_planes": len(project.field.symmetry_planes)}
     write_text_atomic(ctx.folder / "field.json", json.dumps(summary, indent=1))
     ctx.step("drawing")
-    from ..plots.field import plot_field
-
     plot_field(mesh, field, ctx.folder / "field.png",
                title=f"{project.project.name}: guiding field Voro({project.field.max_size_ratio:g}, "
                      f"{project.field.max_aspect:g})")
     return field
 
 
-def load(folder: Path, ctx):
-    GuidingField = require("field", "engine.field", "GuidingField")
+def load(folder: Path, project: Project) -> GuidingField:
     with np.load(folder / "field.npz") as data:
         return GuidingField(size=data["size"], anisotropy=data["anisotropy"], direction=data["direction"],
                             normals=data["normals"])

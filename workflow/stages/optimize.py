@@ -9,17 +9,31 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from engine.collapse import collapse_beams, dissolve_kinks, open_narrow_joints, remove_short_beams
+from engine.field import GuidingField
+from engine.findings import Finding
+from engine.mesh import PolyMesh
+from engine.optimize import OptimizeResult, OptimizeSettings, grid_quality, optimize
+from engine.parts import panel_id
 from fabrication.files import write_text_atomic
+from fabrication.limits import required_beam_lengths_m
 
 from ..config import Project
-from ._require import require
-from .fabrication import build_limits_of
+from ..plots.remesh import plot_gridshell
+from ..runner import StageContext
+from .build_limits import build_limits_of
 from .polymesh_io import read_polymesh_obj, write_polymesh_obj
 from .remesh import MAX_COLLAPSE_SHARE, buildable_grid, grid_figures, short_count, short_share, too_fine_finding
+from .surface import SurfaceResult
+
+if TYPE_CHECKING:  # engine.panel_pieces imports shapely: loaded where panels are made or read
+    from engine.panel_pieces import PanelPiece
 
 #: The end game keeps beams this much above the shortest buildable beam between 120-degree joints.
 MIN_LENGTH_MARGIN = 1.05
@@ -33,11 +47,21 @@ BUILDABLE_ROUNDS = 2
 #: Rounds of (remove the beams still short, collapse those the removals freed) at the end.
 LAST_RESORT_ROUNDS = 5
 
-__all__ = ["run", "load", "optimize_settings", "panel_pieces_of", "write_panels_obj", "read_panels_obj"]
+__all__ = ["OptimizedGrid", "run", "load", "optimize_settings", "panel_pieces_of", "write_panels_obj",
+           "read_panels_obj"]
 
 
-def optimize_settings(project: Project):
-    OptimizeSettings = require("optimize", "engine.optimize", "OptimizeSettings")
+@dataclass(frozen=True, kw_only=True)
+class OptimizedGrid:
+    """The optimize stage's result: the grid-shell (05-optimize/gridshell.obj) and its panels'
+    pieces (05-optimize/panels.obj), in panel order: each cell, or the planar convex pieces of a
+    cell that is not planar."""
+
+    polymesh: PolyMesh
+    pieces: list[PanelPiece]
+
+
+def optimize_settings(project: Project) -> OptimizeSettings:
     c = project.optimize
     limits = build_limits_of(project)
     return OptimizeSettings(regularity_weight=c.regularity_weight, planarity_weight=c.planarity_weight,
@@ -53,18 +77,13 @@ def optimize_settings(project: Project):
 def beam_length_limits(project: Project):
     """grid -> (n_beams,) shortest buildable length of each beam (m) at its joints' angles, with the
     end game's margin: what the optimiser holds the beams to."""
-    from fabrication.limits import required_beam_lengths_m
-
     limits = build_limits_of(project)
     return lambda grid: MIN_LENGTH_MARGIN * required_beam_lengths_m(grid, limits)
 
 
-def run(ctx):
-    optimize = require("optimize", "engine.optimize", "optimize")
-    project: Project = ctx.project
-    surface = ctx.result("surface")
-    field = ctx.result("field")
-    polymesh = ctx.result("remesh")
+def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: Project,
+        ctx: StageContext) -> OptimizedGrid:
+    polymesh = remesh
     ctx.step("local/global iterations and the planarity end game")
     settings = optimize_settings(project)
     limits = beam_length_limits(project)
@@ -150,26 +169,21 @@ def run(ctx):
     quality["weights"] = project.optimize.model_dump(mode="json")
     write_text_atomic(ctx.folder / "optimize.json", json.dumps(quality, indent=1, default=float))
     ctx.step("drawing")
-    from ..plots.remesh import plot_gridshell
-
     plot_gridshell(result.polymesh, ctx.folder / "planarity.png", color_by="planarity",
                    title=f"{project.project.name}: optimised grid-shell, planarity of the cells")
     plot_gridshell(result.polymesh, ctx.folder / "degree.png", color_by="degree",
                    title=f"{project.project.name}: optimised grid-shell, cells by number of sides")
-    return result.polymesh
+    return OptimizedGrid(polymesh=result.polymesh, pieces=pieces)
 
 
-def without_unbuildable_beams(result, project: Project, surface, field):
+def without_unbuildable_beams(result: OptimizeResult, project: Project, surface: SurfaceResult,
+                              field: GuidingField) -> tuple[OptimizeResult, int]:
     """(result, removed): ``result`` with the beams still shorter than their joints and the shortest
     cut take removed where their two cells can become one, collapsed where the removals freed their
     end nodes, and one beam of each pair closer than the joint's smallest angle removed
     (engine.collapse: remove_short_beams, collapse_beams, open_narrow_joints), in rounds while that
     changes the grid; its "after" figures are measured again. ``removed`` counts the beams removed
     and collapsed. No node moves but those of the collapses, so nothing is optimised again."""
-    from engine.collapse import collapse_beams, dissolve_kinks, open_narrow_joints, remove_short_beams
-    from engine.optimize import grid_quality
-    from fabrication.limits import required_beam_lengths_m
-
     limits = build_limits_of(project)
     grid, removed = result.polymesh, 0
     for _ in range(LAST_RESORT_ROUNDS):
@@ -187,10 +201,8 @@ def without_unbuildable_beams(result, project: Project, surface, field):
     return dataclasses.replace(result, polymesh=grid, quality={**result.quality, "after": after}), removed
 
 
-def removed_finding(removed: int, grid) -> dict:
+def removed_finding(removed: int, grid: PolyMesh) -> dict:
     """The finding that beams were removed or collapsed after the last optimisation (JSON-ready)."""
-    from engine.findings import Finding
-
     return Finding(kind="beams_removed", parts=["grid"], measure=removed, limit=0, unit="beams", stage="optimize",
                    message=(f"{removed} beams that no optimisation could make as long as their joints take, or as "
                             "wide apart at a joint as it takes, were removed (their two cells are one panel) or "
@@ -201,8 +213,6 @@ def removed_finding(removed: int, grid) -> dict:
 
 def grading_finding(share: float, quality: dict) -> dict:
     """The finding that the joints evened out the field's grading (JSON-ready)."""
-    from engine.findings import Finding
-
     before = quality["before"].get("size_correlation")
     after = quality["after"].get("size_correlation")
     figures = (f" (size correlation with the field {before:.2f} remeshed, {after:.2f} optimised)"
@@ -215,12 +225,12 @@ def grading_finding(share: float, quality: dict) -> dict:
                        "joints or tubes ([fabrication.joints], [section] diameter)").to_dict()
 
 
-def _piece_tolerance(polymesh, project: Project) -> float:
+def _piece_tolerance(polymesh: PolyMesh, project: Project) -> float:
     """Largest node distance from a panel's plane (m): the planarity tolerance times the mean beam."""
     return float(project.optimize.planarity_tolerance * polymesh.beam_lengths.mean())
 
 
-def panel_pieces_of(polymesh, project: Project):
+def panel_pieces_of(polymesh: PolyMesh, project: Project) -> list[PanelPiece]:
     """The panels of the grid: with ``[optimize] planar``, every cell planar and convex within the
     tolerance, else its planar convex pieces; without, the cells as they are."""
     from engine.panel_pieces import PanelPiece, panel_pieces
@@ -230,19 +240,19 @@ def panel_pieces_of(polymesh, project: Project):
     return panel_pieces(polymesh, _piece_tolerance(polymesh, project))
 
 
-def write_panels_obj(polymesh, pieces, path: Path, *, header: str) -> Path:
+def write_panels_obj(polymesh: PolyMesh, pieces: list[PanelPiece], path: Path, *, header: str) -> Path:
     """05-optimize/panels.obj: the grid's nodes and one face per panel (node loop); a comment line
     before each face names its cell and piece (``# panel P0001 cell 1 piece 0``, piece 0: the whole cell)."""
     lines = [f"# {header}", "# units: m; one face per panel (node loop over the grid's nodes)",
              f"# nodes {polymesh.n_nodes} panels {len(pieces)}"]
     lines += [f"v {x!r} {y!r} {z!r}" for x, y, z in polymesh.nodes.tolist()]  # exact: a reload gives the same grid
     for k, p in enumerate(pieces):
-        lines.append(f"# panel P{k + 1:04d} cell {p.cell + 1} piece {p.piece}")
+        lines.append(f"# panel {panel_id(k)} cell {p.cell + 1} piece {p.piece}")
         lines.append("f " + " ".join(str(i + 1) for i in p.loop.tolist()))
     return write_text_atomic(path, "\n".join(lines) + "\n")
 
 
-def read_panels_obj(path: Path):
+def read_panels_obj(path: Path) -> list[PanelPiece]:
     """The pieces (engine.panel_pieces.PanelPiece) of a panels.obj written by :func:`write_panels_obj`."""
     from engine.panel_pieces import PanelPiece
 
@@ -257,5 +267,17 @@ def read_panels_obj(path: Path):
     return pieces
 
 
-def load(folder: Path, ctx):
-    return read_polymesh_obj(folder / "gridshell.obj")
+def load(folder: Path, project: Project) -> OptimizedGrid:
+    polymesh = read_polymesh_obj(folder / "gridshell.obj")
+    return OptimizedGrid(polymesh=polymesh, pieces=panels_of(folder, polymesh, project))
+
+
+def panels_of(folder: Path, polymesh: PolyMesh, project: Project) -> list[PanelPiece]:
+    """The panels in ``folder``/panels.obj where it has them for ``polymesh``, else made again
+    (the optimize stage's panels of a grid written before panels.obj was)."""
+    path = Path(folder) / "panels.obj"
+    if path.is_file():
+        pieces = read_panels_obj(path)
+        if all(len(p.loop) and p.loop.max() < polymesh.n_nodes for p in pieces):
+            return pieces
+    return panel_pieces_of(polymesh, project)

@@ -13,19 +13,27 @@ from pathlib import Path
 
 import numpy as np
 
+from engine.collapse import CollapseReport, collapse_short_beams
+from engine.field import GuidingField
+from engine.findings import Finding
+from engine.mesh import PolyMesh
+from engine.voronoi import RemeshResult, RemeshSettings, polymesh_quality, remesh
 from fabrication.files import write_text_atomic
+from fabrication.limits import node_smallest_angles, required_beam_lengths_m
 
 from ..config import Project
-from ._require import require
+from ..plots.remesh import plot_gridshell
+from ..runner import StageContext
+from .build_limits import build_limits_of
 from .polymesh_io import read_polymesh_obj, write_polymesh_obj
+from .surface import SurfaceResult
 
 __all__ = ["run", "load", "remesh_settings", "buildable_grid"]
 
 DEFAULT_CELLS = 120
 
 
-def remesh_settings(project: Project):
-    RemeshSettings = require("remesh", "engine.voronoi", "RemeshSettings")
+def remesh_settings(project: Project) -> RemeshSettings:
     config = project.remesh
     target = {"n_cells": config.n_cells, "mean_beam_length": config.mean_beam_length,
               "total_length": config.total_length}
@@ -34,11 +42,7 @@ def remesh_settings(project: Project):
     return RemeshSettings(**target, lloyd_iterations=config.lloyd_iterations, seed=config.seed)
 
 
-def run(ctx):
-    remesh = require("remesh", "engine.voronoi", "remesh")
-    project: Project = ctx.project
-    surface = ctx.result("surface")
-    field = ctx.result("field")
+def run(surface: SurfaceResult, field: GuidingField, project: Project, ctx: StageContext) -> PolyMesh:
     support_vertices = np.zeros(surface.mesh.n_vertices, dtype=bool)
     support_vertices[surface.supports.nodes] = True
     settings = remesh_settings(project)
@@ -61,15 +65,12 @@ def run(ctx):
     for key in ("clustering_s", "extraction_s"):  # seconds go into the manifest, not the artifact
         ctx.timings[key.removesuffix("_s")] = round(float(quality.pop(key, 0.0)), 3)
     if buildable["collapsed_beams"] or buildable["flipped_beams"]:  # the figures of the grid as written
-        polymesh_quality = require("remesh", "engine.voronoi", "polymesh_quality")
         quality.update(polymesh_quality(polymesh, mesh=surface.mesh, field=field))
     quality["buildable"] = buildable
     quality["coarsened"] = {"cells_asked": int(asked), "cells_built": int(polymesh.n_faces), "remeshes": remeshes}
     quality.update({"max_size_ratio_D": project.field.max_size_ratio, "max_aspect_A": project.field.max_aspect})
     write_text_atomic(ctx.folder / "remesh.json", json.dumps(quality, indent=1, default=float))
     ctx.step("drawing")
-    from ..plots.remesh import plot_gridshell
-
     plot_gridshell(polymesh, ctx.folder / "degree.png", color_by="degree",
                    title=f"{project.project.name}: remeshed grid-shell, cells by number of sides")
     return polymesh
@@ -93,16 +94,12 @@ COARSEN_TARGET = 0.25
 COARSEN_ATTEMPTS = 4
 
 
-def fitted_to_joints(result, project: Project, remesh_with: Callable[[int], object],
-                     progress: Callable[[str], None] | None = None):
+def fitted_to_joints(result: RemeshResult, project: Project, remesh_with: Callable[[int], RemeshResult],
+                     progress: Callable[[str], None] | None = None) -> tuple[RemeshResult, int]:
     """(result, remeshes): ``result``, or the remesh with fewer cells (``remesh_with(n_cells)``) when more than
     COARSEN_SHARE of its beams are shorter than their joints and the shortest cut take. The count
     scales the beams by the ratio that leaves COARSEN_TARGET of them short (beam lengths go as
     1/sqrt(cells)); at most COARSEN_ATTEMPTS remeshes, each with at most 90 % of the cells before."""
-    from fabrication.limits import required_beam_lengths_m
-
-    from .fabrication import build_limits_of
-
     limits = build_limits_of(project)
     remeshes = 0
     for _ in range(COARSEN_ATTEMPTS):
@@ -119,10 +116,8 @@ def fitted_to_joints(result, project: Project, remesh_with: Callable[[int], obje
     return result, remeshes
 
 
-def coarsened_finding(asked: int, result) -> dict:
+def coarsened_finding(asked: int, result: RemeshResult) -> dict:
     """The finding that the grid has fewer cells than asked, so that its joints fit (JSON-ready)."""
-    from engine.findings import Finding
-
     built = result.polymesh.n_faces
     return Finding(kind="grid_coarsened", parts=["grid"], measure=built, limit=asked, unit="cells",
                    stage="remesh",
@@ -133,17 +128,12 @@ def coarsened_finding(asked: int, result) -> dict:
                        "cells asked for, with joints that clash").to_dict()
 
 
-def buildable_grid(polymesh, project: Project, share: float = 1.0):
+def buildable_grid(polymesh: PolyMesh, project: Project, share: float = 1.0) -> tuple[PolyMesh, dict]:
     """(grid, record): ``polymesh`` with every beam shorter than ``share`` times what its joints and
     the shortest cut take flipped or collapsed where a valid flip or collapse exists
     (engine.collapse); the record (JSON-ready) has the limits, the collapses and flips, the
     shortest beam and the smallest angle between two beams at a node. When more than
     MAX_COLLAPSE_SHARE of the beams are short, nothing is changed and ``too_fine`` is set."""
-    from engine.collapse import CollapseReport, collapse_short_beams
-    from fabrication.limits import required_beam_lengths_m
-
-    from .fabrication import build_limits_of
-
     limits = build_limits_of(project)
     short = short_beams(polymesh, project)
     too_fine = bool(short.mean() > MAX_COLLAPSE_SHARE) if len(short) else False
@@ -157,38 +147,30 @@ def buildable_grid(polymesh, project: Project, share: float = 1.0):
     return grid, record
 
 
-def grid_figures(grid) -> dict:
+def grid_figures(grid: PolyMesh) -> dict:
     """The shortest and mean beam (m) and the smallest angle between two beams at a node (deg)."""
-    from fabrication.limits import node_smallest_angles
-
     return {"shortest_beam_m": float(grid.beam_lengths.min()) if len(grid.edges) else 0.0,
             "mean_beam_m": float(grid.beam_lengths.mean()) if len(grid.edges) else 0.0,
             "smallest_beam_angle_deg": float(np.degrees(node_smallest_angles(grid).min()))}
 
 
-def short_beams(polymesh, project: Project) -> np.ndarray:
+def short_beams(polymesh: PolyMesh, project: Project) -> np.ndarray:
     """(n_beams,) whether each beam of ``polymesh`` is shorter than its joints and the shortest cut take."""
-    from fabrication.limits import required_beam_lengths_m
-
-    from .fabrication import build_limits_of
-
     return polymesh.beam_lengths < required_beam_lengths_m(polymesh, build_limits_of(project))
 
 
-def short_count(polymesh, project: Project) -> int:
+def short_count(polymesh: PolyMesh, project: Project) -> int:
     """Beams of ``polymesh`` shorter than their joints and the shortest cut take."""
     return int(short_beams(polymesh, project).sum())
 
 
-def short_share(polymesh, project: Project) -> float:
+def short_share(polymesh: PolyMesh, project: Project) -> float:
     """Share of the beams of ``polymesh`` shorter than their joints and the shortest cut take."""
     return short_count(polymesh, project) / max(len(polymesh.edges), 1)
 
 
 def too_fine_finding(record: dict, stage: str) -> dict:
     """The finding that the joints are too big for the grid (JSON-ready)."""
-    from engine.findings import Finding
-
     return Finding(kind="grid_too_fine", parts=["grid"], measure=record["shortest_beam_mm_at_120deg"],
                    limit=1000 * record["mean_beam_m"], unit="mm", stage=stage,
                    message=(f"{100 * record['short_share_before']:.0f} % of the beams are shorter than the joints "
@@ -199,5 +181,5 @@ def too_fine_finding(record: dict, stage: str) -> dict:
                        "([fabrication.joints] kind, hub_radius, sleeve_length)").to_dict()
 
 
-def load(folder: Path, ctx):
+def load(folder: Path, project: Project) -> PolyMesh:
     return read_polymesh_obj(folder / "gridshell.obj")

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -19,8 +20,20 @@ from fabrication.files import atomic_path, write_bytes_atomic, write_text_atomic
 from ..config import Project
 from ..labels import column_label, figure_rows, in_unit, label_of
 from ..report import Figure, Section, Table, Viewer, figure_from_file, render_report
+from ..runner import StageContext
+from .analysis import AnalysisSummary
+from .fabrication import FabricationResult
+from .optimize import OptimizedGrid
+from .surface import SurfaceResult
 
-__all__ = ["run", "load", "published"]
+__all__ = ["ReportResult", "run", "load", "published"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class ReportResult:
+    """The report stage's result: where its page is (``OUT/report.html``)."""
+
+    path: Path
 
 #: Files this stage writes outside its own folder (checked by the runner like its artifacts).
 published = ("report.html",)
@@ -98,8 +111,8 @@ def _in_mm(value, limit, unit: str) -> tuple:
     return value, limit, unit
 
 
-def _summary(project: Project, surface, polymesh, analysis: dict, fabrication: dict, shell: dict,
-             findings: list[dict]) -> Section:
+def _summary(project: Project, surface: SurfaceResult, polymesh, analysis: dict, fabrication: FabricationResult,
+             shell: dict, findings: list[dict]) -> Section:
     supports = surface.supports
     loads = ", ".join(surface.load_cases) or "-"
     combos = ", ".join(f"{n} ({c.limit_state.value})" for n, c in surface.combinations.items())
@@ -117,7 +130,7 @@ def _summary(project: Project, surface, polymesh, analysis: dict, fabrication: d
                                  f"; sized from {analysis['design']['catalogue']}: "
                                  + ", ".join(g["profile"] for g in analysis["design"]["groups"])),
         "nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
-        "panels": fabrication.get("panels", "-"), "joints": fabrication.get("joints", "-"),
+        "panels": "-" if fabrication.panels is None else fabrication.panels, "joints": fabrication.joints,
         "total beam length (m)": float(polymesh.total_length),
         "beam mass (kg)": analysis.get("beam_mass_kg"),
     }
@@ -266,21 +279,17 @@ def _safe_name(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "-", text).strip("-") or "table"
 
 
-def run(ctx):
-    project: Project = ctx.project
+def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSummary, fabrication: FabricationResult,
+        project: Project, ctx: StageContext) -> ReportResult:
+    """The page, from these results and the files of every earlier stage in ``ctx.out_dir``."""
     out_dir: Path = ctx.out_dir
-    surface = ctx.result("surface")
-    polymesh = ctx.result("optimize")
-    analysis = ctx.result("analysis")
-    fabrication = ctx.result("fabrication")
+    polymesh = optimize.polymesh
     shell = _json(out_dir / "02-shell/shell.json")
     ctx.step("collecting")
-    summary = _summary(project, surface, polymesh, analysis.figures, fabrication or {}, shell, ctx.earlier_findings)
+    summary = _summary(project, surface, polymesh, analysis.figures, fabrication, shell, ctx.earlier_findings)
     sections = _stage_sections(out_dir, project)
     axial = np.asarray(analysis.axial_forces, dtype=float)
-    from .fabrication import panels_of
-
-    viewer = Viewer(nodes=polymesh.nodes, beams=polymesh.edges, panels=[p.loop for p in panels_of(ctx, polymesh)],
+    viewer = Viewer(nodes=polymesh.nodes, beams=polymesh.edges, panels=[p.loop for p in optimize.pieces],
                     supports=polymesh.supports,
                     beam_values=axial if len(axial) == len(polymesh.edges) else None,
                     beam_value_label="axial force (N), tension +")
@@ -302,8 +311,8 @@ def run(ctx):
     # one page, at OUT/report.html, whose links are relative to OUT (a copy in the stage's own
     # folder had every link broken)
     write_text_atomic(out_dir / "report.html", page)
-    return {"report": str(out_dir / "report.html")}
+    return ReportResult(path=out_dir / "report.html")
 
 
-def load(folder: Path, ctx):
-    return {"report": str(ctx.out_dir / "report.html")}
+def load(folder: Path, project: Project) -> ReportResult:
+    return ReportResult(path=folder.parent / "report.html")  # folder is OUT/report

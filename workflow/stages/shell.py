@@ -14,11 +14,14 @@ import numpy as np
 
 from engine.errors import MechanismError
 from engine.loads import LoadCase, LoadCombination, combine
+from engine.shell import ShellMaterial, ShellResult, analyse_shell, shell_nodal_loads
 from fabrication.files import write_text_atomic
 
 from ..config import Project
+from ..plots.shell import plot_principal_forces
+from ..runner import StageContext
 from ._arrays import load_result, save_result
-from ._require import require
+from .surface import SurfaceResult
 
 __all__ = ["run", "load", "shell_load_case", "notional_thickness"]
 
@@ -46,12 +49,7 @@ def shell_load_case(project: Project, cases: dict[str, LoadCase],
     return combine(cases, LoadCombination(name="all", limit_state="SLS", factors={n: 1.0 for n in cases}))
 
 
-def run(ctx):
-    ShellMaterial, analyse_shell, shell_nodal_loads = require("shell", "engine.shell", "ShellMaterial",
-                                                              "analyse_shell", "shell_nodal_loads")
-
-    project: Project = ctx.project
-    surface = ctx.result("surface")
+def run(surface: SurfaceResult, project: Project, ctx: StageContext) -> ShellResult:
     mesh = surface.mesh
     thickness = notional_thickness(project, mesh)
     case = shell_load_case(project, surface.load_cases, surface.combinations)
@@ -76,14 +74,11 @@ def run(ctx):
                "total_reaction_N": [float(x) for x in result.reactions[:, :3].sum(axis=0)]}
     write_text_atomic(ctx.folder / "shell.json", json.dumps(summary, indent=1))
     ctx.step("drawing")
-    from ..plots.shell import plot_principal_forces
-
     plot_principal_forces(mesh, result.face_principal_forces, result.face_principal_directions,
                           ctx.folder / "stress.png", support_nodes=surface.supports.nodes,
                           title=f"{project.project.name}: principal membrane forces ({case.name})")
     return result
 
 
-def load(folder: Path, ctx):
-    ShellResult = require("shell", "engine.shell", "ShellResult")
+def load(folder: Path, project: Project) -> ShellResult:
     return load_result(ShellResult, folder / "shell.npz")

@@ -34,6 +34,8 @@ from engine.surfaces import clean_mesh, to_z_up
 from fabrication.files import write_text_atomic
 
 from ..config import Project, SupportSpec
+from ..plots.surface import plot_surface
+from ..runner import StageContext
 from ..surface_io import read_surface, write_surface_ply
 from ..units import to_si
 
@@ -47,6 +49,9 @@ _RATIO_PARAMETERS = {"span_to_rise"}
 
 @dataclass(frozen=True, kw_only=True)
 class SurfaceResult:
+    """The clean surface, its supports (vertex ids and restraints), its load cases (point loads on
+    vertex ids) and combinations, and ``info`` (surface.json: what cleaning did, extent, ...)."""
+
     mesh: TriMesh
     supports: Supports
     load_cases: dict[str, LoadCase]
@@ -177,8 +182,7 @@ def _loads_json(cases: dict[str, LoadCase], combinations: dict[str, LoadCombinat
                              for n, c in combinations.items()}}
 
 
-def run(ctx) -> SurfaceResult:
-    project: Project = ctx.project
+def run(project: Project, ctx: StageContext) -> SurfaceResult:
     ctx.step("building the surface")
     mesh, info = build_surface(project)
     ctx.step("selecting supports")
@@ -196,18 +200,14 @@ def run(ctx) -> SurfaceResult:
     write_text_atomic(ctx.folder / "loads.json", json.dumps(_loads_json(cases, combinations), indent=1))
     write_text_atomic(ctx.folder / "surface.json", json.dumps(info, indent=1, default=float))
     ctx.step("drawing")
-    from ..plots.surface import plot_surface
-
     plot_surface(mesh, supports.nodes, ctx.folder / "surface.png", title=f"{project.project.name}: {mesh.name}")
     return SurfaceResult(mesh=mesh, supports=supports, load_cases=cases, combinations=combinations, info=info)
 
 
-def load(folder: Path, ctx) -> SurfaceResult:
-    from ..surface_io import read_surface as read
-
-    vertices, faces, _ = read(folder / "surface.ply")
+def load(folder: Path, project: Project) -> SurfaceResult:
+    vertices, faces, _ = read_surface(folder / "surface.ply")
     mesh = TriMesh(vertices=vertices, faces=faces,
-                   name=ctx.project.surface.template or Path(ctx.project.surface.file).stem)
+                   name=project.surface.template or Path(project.surface.file).stem)
     support_data = json.loads((folder / "supports.json").read_text())["supports"]
     supports = Supports(nodes=np.array([int(k) for k in support_data], dtype=np.int64),
                         restraints=np.array(list(support_data.values()), dtype=bool).reshape(-1, 6))
