@@ -7,8 +7,9 @@ the square roots of the eigenvalues so that the cell's own anisotropy is kept (u
 ``max_cell_stretch``), a regular polygon of the cell's *target* area fitted by a rigid rotation
 (2-D Procrustes), stretched back. The target area is regular relative to the field's size: the
 field's h^2 at the cell, times the area its neighbourhood of cells has per unit of h^2 in the grid
-as given (the remesher's cell count kept, the field followed instead of the remesher's noise;
-:func:`graded_areas`). With each cell's given area instead, the regular targets pulled cells
+as given (the remesher's cell count kept, the field followed instead of the remesher's noise),
+compressed monotonically over the whole grid only as far as the joints' shortest beam demands
+(:func:`graded_areas`). With each cell's given area instead, the regular targets pulled cells
 toward their neighbours' sizes in noise, and the joints' projections lengthened the small cells'
 beams at their neighbours' expense: both lost grading (issue 13); (planarity)
 the nodes projected onto the best-fit plane. Per node: (closeness) the nearest point of the
@@ -89,7 +90,9 @@ class OptimizeSettings:
     displacement (the field's grading stays), or take each cell's current area and smooth the grid
     (sizes even out). The local/global iterations, too, hold beams to min_beam_length and corners
     to min_corner_angle_deg. With keep_grading: follow_field, whether a cell's target area follows
-    the field's size among its neighbours (else it is the cell's given area; see :func:`graded_areas`).
+    the field's size among its neighbours (else it is the cell's given area); grading_quantile, the
+    share of interior cells whose regular side may stay under min_beam_length before the grading
+    is compressed (see :func:`graded_areas`; the iterations' projections lengthen those beams).
     """
 
     regularity_weight: float = 1.0
@@ -106,6 +109,7 @@ class OptimizeSettings:
     max_cell_stretch: float = np.inf
     keep_grading: bool = True
     follow_field: bool = True
+    grading_quantile: float = 0.2
 
     def __post_init__(self) -> None:
         for name in ("regularity_weight", "planarity_weight", "closeness_weight", "fairness_weight"):
@@ -117,6 +121,9 @@ class OptimizeSettings:
             value = getattr(self, name)
             if int(value) != value or value < 0:
                 raise InputError(f"optimize: {name} must be a whole number >= 0, got {value}")
+        if not (0 <= self.grading_quantile < 1):
+            raise InputError(f"optimize: grading_quantile must be in [0, 1), got {self.grading_quantile}",
+                             hint="the share of cells whose regular side may stay under the shortest beam: 0.2")
         if not (np.isfinite(self.planarity_tolerance) and 0 < self.planarity_tolerance < 1):
             raise InputError(f"optimize: planarity_tolerance must be in (0, 1), got {self.planarity_tolerance}",
                              hint="relative to the mean beam length: 0.005 is 0.5 %")
@@ -156,6 +163,8 @@ END_BAND = 0.004
 SPLIT_HOLD = 0.5
 #: Boundary nodes within this share of the planarity tolerance of a line count as on it.
 SPLIT_STRAIGHTNESS = 0.5
+#: Side of the regular hexagon of unit area (a side is this times the square root of the area).
+HEXAGON_SIDE = float(np.sqrt(2.0 / (3.0 * np.sqrt(3.0))))
 #: Rounds in which boundary cells that the end game left beyond the tolerance lose the triangle
 #: at their boundary beam (one new beam each) before the end game resumes.
 REPAIR_ROUNDS = 2
@@ -202,7 +211,8 @@ def _cell_adjacency(faces: tuple[np.ndarray, ...]) -> sp.csr_matrix:
 
 
 def graded_areas(areas: np.ndarray, sizes: np.ndarray | None, interior: np.ndarray,
-                 adjacency: sp.csr_matrix) -> tuple[np.ndarray, float, float]:
+                 adjacency: sp.csr_matrix, *, min_side: float = 0.0,
+                 quantile: float = 0.2) -> tuple[np.ndarray, float, float]:
     """(target areas (f,), the grid's grading slope, the targets' slope): the area each cell's
     regularity target takes.
 
@@ -213,6 +223,13 @@ def graded_areas(areas: np.ndarray, sizes: np.ndarray | None, interior: np.ndarr
     area its neighbourhood (the cells around it and itself) has per unit of h^(2 sigma), so the
     local cell count keeps its area and the size follows the field instead of the remesher's noise.
     Boundary cells (cut by the boundary) keep their area.
+
+    ``min_side``: the shortest beam the joints take (m). Where the smallest interior cells (their
+    ``quantile``) would have a regular hexagon's side shorter than that, the grading is compressed
+    monotonically, sizes going as h^s with s < sigma over the whole grid (total area kept), until
+    they do not: the order of the sizes, which is the field's grading, stays. Where even equal
+    sizes would not do, the grid is too fine for its joints whatever its grading (the remesh
+    coarsens such grids, the optimize stage reports them): the grading is then not compressed.
     """
     areas = np.asarray(areas, dtype=float)
     n = len(areas)
@@ -232,7 +249,25 @@ def graded_areas(areas: np.ndarray, sizes: np.ndarray | None, interior: np.ndarr
         ok = interior & (demand > 0)
         local[ok] = weight[ok] * budget[ok] / demand[ok]
         local[ok] *= areas[ok].sum() / local[ok].sum()  # the interior cells' area as given
-    return local, sigma, sigma
+    total = float(areas.sum())
+    h_ref = float(np.exp(np.mean(log_h)))
+
+    def compressed(slope: float) -> np.ndarray:
+        out = local * (h / h_ref) ** (2 * (slope - sigma))
+        return out * (total / max(float(out.sum()), 1e-300))
+
+    def margin(slope: float) -> float:
+        side = np.sqrt(compressed(slope)[pick]) * HEXAGON_SIDE
+        return float(np.quantile(side, quantile)) - min_side
+
+    slope = sigma
+    if min_side > 0 and margin(sigma) < 0 <= margin(0.0):
+        lo, hi = 0.0, sigma  # margin(lo) >= 0 > margin(hi)
+        for _ in range(30):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if margin(mid) < 0 else (mid, hi)
+        slope = lo
+    return compressed(slope), sigma, slope
 
 
 def cell_areas(points: np.ndarray) -> np.ndarray:
@@ -531,7 +566,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
     "corner_splits", "edge_splits", "repair_splits" (new beams by each rule), "split_beams" (node
     pairs of the new beams, ids of the result), "split_length_m" (their total length), "grading"
     (given_slope: the given grid's log-log slope of cell area against the field's h^2, target_slope:
-    the regularity targets'; None without keep_grading), and
+    the regularity targets', lower where the joints compressed the grading; None without
+    keep_grading), and
     "end_game" (steps, rejected_steps, factorisations, the largest relative planarity weight,
     reached; see :mod:`engine.planarise`), None without it.
     """
@@ -569,7 +605,7 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
 
     def given_areas(groups: dict[int, np.ndarray], grid: PolyMesh) -> dict[int, np.ndarray | None]:
         """The cells' target areas (None: each cell's current area): the grid's grading, following the
-        field among neighbouring cells (graded_areas)."""
+        field among neighbouring cells and compressed as far as the joints demand (graded_areas)."""
         if not settings.keep_grading:
             return {k: None for k in groups}
         ids = _group_ids(grid.faces)
@@ -579,7 +615,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
             centroid[ids[k]] = x0[f].mean(axis=1)
         sizes = field.size[nearest_vertex.query(centroid)[1]] if nearest_vertex is not None else None
         target, grading["given_slope"], grading["target_slope"] = graded_areas(
-            area, sizes, ~grid.face_boundary, _cell_adjacency(grid.faces))
+            area, sizes, ~grid.face_boundary, _cell_adjacency(grid.faces),
+            min_side=settings.min_beam_length, quantile=settings.grading_quantile)
         return {k: target[ids[k]] for k in groups}
 
     areas0 = given_areas(groups, polymesh)

@@ -480,7 +480,8 @@ def test_progress_is_reported_and_zero_iterations_change_nothing(dome):
 def test_user_mistakes_raise_input_errors(dome):
     surface, grid = dome
     for bad in ({"closeness_weight": -1.0}, {"iterations": -5}, {"planarity_iterations": 2.5},
-                {"planarity_tolerance": 0.0}, {"planarity_tolerance": float("nan")}):
+                {"planarity_tolerance": 0.0}, {"planarity_tolerance": float("nan")}, {"grading_quantile": 1.0},
+                {"grading_quantile": -0.1}):
         with pytest.raises(InputError):
             OptimizeSettings(**bad)
     broken = PolyMesh(nodes=np.full((3, 3), np.nan), faces=(np.array([0, 1, 2]),))
@@ -496,9 +497,11 @@ def _chain(n: int) -> sp.csr_matrix:
     return sp.csr_matrix((np.ones(2 * (n - 1)), (np.r_[a, a + 1], np.r_[a + 1, a])), shape=(n, n))
 
 
-def test_graded_areas_follow_the_field():
+def test_graded_areas_follow_the_field_and_compress_it_in_order():
     """Cells in a row whose field size grows 3 times along it (boundary cells at both ends): a grid
-    that follows the field is its own target; a noisy one is taken to the field's sizes."""
+    that follows the field is its own target; a noisy one is taken to the field's sizes; joints
+    larger than the smallest cells compress the grading with the order of the sizes kept and the
+    total area the same; joints that no grading could take leave it."""
     n = 40
     h = np.linspace(1.0, 3.0, n)
     interior = np.ones(n, dtype=bool)
@@ -514,6 +517,18 @@ def test_graded_areas_follow_the_field():
     assert spread[1] < 0.7 * spread[0], "nearer the field's sizes"
     assert target.sum() == pytest.approx(noisy.sum(), rel=1e-9)
     assert np.allclose(target[~interior], noisy[~interior], rtol=1e-12), "cut cells keep their area"
+    side = np.sqrt(2 / (3 * np.sqrt(3)))  # a regular hexagon's side per sqrt(area)
+    for quantile in (0.0, 0.2):
+        joint = 1.2 * side * np.sqrt(np.quantile(exact[interior], quantile))  # the joints' shortest beam
+        target, _, slope = graded_areas(exact, h, interior, adjacency, min_side=joint, quantile=quantile)
+        assert 0.2 < slope < 0.95
+        assert target.sum() == pytest.approx(exact.sum(), rel=1e-9)
+        assert np.all(np.diff(target) > 0), "the order of the sizes stays"
+        assert np.quantile(side * np.sqrt(target[interior]), quantile) == pytest.approx(joint, rel=1e-6)
+        log_h = np.log(h[interior])
+        assert np.polyfit(log_h, 0.5 * np.log(target[interior]), 1)[0] == pytest.approx(slope, abs=1e-6)
+    target, _, slope = graded_areas(exact, h, interior, adjacency, min_side=10 * side * np.sqrt(exact.max()))
+    assert slope == 1.0 and np.allclose(target, exact), "a grid too fine for its joints at any grading"
 
 
 @pytest.mark.parametrize("seed", [2, 5])
