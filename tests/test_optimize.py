@@ -551,3 +551,17 @@ def test_the_optimiser_keeps_the_grading_of_a_graded_grid(dome, seed):
     assert np.mean(result.polymesh.beam_lengths < 0.7 * (1 - 1e-6)) < 0.1
     assert result.quality["grading"]["target_slope"] == result.quality["grading"]["given_slope"]
     assert result.quality["after"]["regularity"] < result.quality["before"]["regularity"]
+
+
+def test_a_grading_compressed_for_the_joints_is_a_finding():
+    from workflow.stages.optimize import compressed_finding, compressed_grading
+
+    kept = {"grading": {"given_slope": 0.98, "target_slope": 0.98}, "before": {}, "after": {}}
+    assert not compressed_grading(kept) and not compressed_grading({"grading": None})
+    assert not compressed_grading({"grading": {"given_slope": None, "target_slope": None}}), "sizes evened"
+    quality = {"grading": {"given_slope": 0.98, "target_slope": 0.44},
+               "before": {"size_rank_correlation": 0.96}, "after": {"size_rank_correlation": 0.76}}
+    assert compressed_grading(quality)
+    finding = compressed_finding(quality)
+    assert finding["kind"] == "grading_compressed" and finding["stage"] == "optimize"
+    assert "0.44" in finding["message"] and "0.76" in finding["message"] and "n_cells" in finding["fix"]
