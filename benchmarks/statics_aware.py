@@ -28,6 +28,9 @@ graded, as before.
 
 Printed: one row per roof and size with each figure and a mark per target missed, then per target
 how many rows meet it; written to OUT/statics_aware.csv. Peak memory is the run's (its max RSS).
+The slopes are the log-log slopes of cell size against the field's (1: the cells follow it),
+remeshed, optimised, and the optimiser's targets' (lower where the joints compressed the grading,
+``optimize.json`` grading).
 """  # noqa: E501 (a Markdown table row, which cannot be wrapped)
 
 from __future__ import annotations
@@ -51,8 +54,9 @@ REAL_SURFACES = Path(os.environ.get("GRIDSHELL_SURFACES", ROOT.parent / "shared"
 TARGETS = {"hexagons": 0.70, "valence3": 0.95, "nonconvex": 0.05, "worst_corner": 200.0, "planarity": 0.005,
            "closeness": 0.005, "correlation": 0.7, "correlation_drop": 0.1, "span": 1.3, "speed": 3.0}
 COLUMNS = ("name", "cells", "hexagons", "valence3", "nonconvex", "worst_corner_deg", "planarity_rel",
-           "closeness_rel", "correlation_remesh", "correlation", "pearson_remesh", "pearson", "field_span",
-           "cells_span", "remesh_s", "optimize_s", "peak_mib", "grading_kept", "short_left", "missed", "status")
+           "closeness_rel", "correlation_remesh", "correlation", "pearson_remesh", "pearson", "slope_remesh", "slope",
+           "slope_target", "field_span", "cells_span", "remesh_s", "optimize_s", "peak_mib", "grading_kept",
+           "short_left", "missed", "status")
 
 
 def panel_figures(path: Path) -> tuple[float, float, float, float]:
@@ -169,6 +173,8 @@ def measure(name: str, cells: int, args: list[str], out: Path, timeout: float) -
         "correlation_remesh": optimize["before"].get("size_rank_correlation"),
         "correlation": after.get("size_rank_correlation"),
         "pearson_remesh": optimize["before"].get("size_correlation"), "pearson": after.get("size_correlation"),
+        "slope_remesh": optimize["before"].get("size_grading_slope"), "slope": after.get("size_grading_slope"),
+        "slope_target": (optimize.get("grading") or {}).get("target_slope"),
         "field_span": remesh.get("field_size_ratio"),
         "cells_span": _cells_span(optimize["before"], after, remesh.get("field_size_ratio")),
         "remesh_s": stages["remesh"].get("duration_s"), "optimize_s": stages["optimize"].get("duration_s"),

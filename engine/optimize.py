@@ -4,8 +4,14 @@ Local/global iterations in the manner of Shape-Up (Bouaziz et al. 2012) and Shap
 
 Local step, per cell: (regularity) the PCA of its nodes in its best-fit plane, un-stretched by
 the square roots of the eigenvalues so that the cell's own anisotropy is kept (up to
-``max_cell_stretch``), a regular polygon of the cell's area *in the grid as given* (the remesher's
-grading under the field) fitted by a rigid rotation (2-D Procrustes), stretched back; (planarity)
+``max_cell_stretch``), a regular polygon of the cell's *target* area fitted by a rigid rotation
+(2-D Procrustes), stretched back. The target area is regular relative to the field's size: the
+field's h^2 at the cell, times the area its neighbourhood of cells has per unit of h^2 in the grid
+as given (the remesher's cell count kept, the field followed instead of the remesher's noise),
+compressed monotonically over the whole grid only as far as the joints' shortest beam demands
+(:func:`graded_areas`). With each cell's given area instead, the regular targets pulled cells
+toward their neighbours' sizes in noise, and the joints' projections lengthened the small cells'
+beams at their neighbours' expense: both lost grading (issue 13); (planarity)
 the nodes projected onto the best-fit plane. Per node: (closeness) the nearest point of the
 reference surface; (fairness) the given position plus the mean of its neighbours' displacements
 (interior nodes): the displacement is smoothed, not the grid, so fairness does not even out the
@@ -83,7 +89,10 @@ class OptimizeSettings:
     whether the regularity targets keep each cell's given area and fairness smooths the
     displacement (the field's grading stays), or take each cell's current area and smooth the grid
     (sizes even out). The local/global iterations, too, hold beams to min_beam_length and corners
-    to min_corner_angle_deg.
+    to min_corner_angle_deg. With keep_grading: follow_field, whether a cell's target area follows
+    the field's size among its neighbours (else it is the cell's given area); grading_quantile, the
+    share of interior cells whose regular side may stay under min_beam_length before the grading
+    is compressed (see :func:`graded_areas`; the iterations' projections lengthen those beams).
     """
 
     regularity_weight: float = 1.0
@@ -99,6 +108,8 @@ class OptimizeSettings:
     min_corner_angle_deg: float = 20.0
     max_cell_stretch: float = np.inf
     keep_grading: bool = True
+    follow_field: bool = True
+    grading_quantile: float = 0.2
 
     def __post_init__(self) -> None:
         for name in ("regularity_weight", "planarity_weight", "closeness_weight", "fairness_weight"):
@@ -110,6 +121,9 @@ class OptimizeSettings:
             value = getattr(self, name)
             if int(value) != value or value < 0:
                 raise InputError(f"optimize: {name} must be a whole number >= 0, got {value}")
+        if not (0 <= self.grading_quantile < 1):
+            raise InputError(f"optimize: grading_quantile must be in [0, 1), got {self.grading_quantile}",
+                             hint="the share of cells whose regular side may stay under the shortest beam: 0.2")
         if not (np.isfinite(self.planarity_tolerance) and 0 < self.planarity_tolerance < 1):
             raise InputError(f"optimize: planarity_tolerance must be in (0, 1), got {self.planarity_tolerance}",
                              hint="relative to the mean beam length: 0.005 is 0.5 %")
@@ -149,6 +163,8 @@ END_BAND = 0.004
 SPLIT_HOLD = 0.5
 #: Boundary nodes within this share of the planarity tolerance of a line count as on it.
 SPLIT_STRAIGHTNESS = 0.5
+#: Side of the regular hexagon of unit area (a side is this times the square root of the area).
+HEXAGON_SIDE = float(np.sqrt(2.0 / (3.0 * np.sqrt(3.0))))
 #: Rounds in which boundary cells that the end game left beyond the tolerance lose the triangle
 #: at their boundary beam (one new beam each) before the end game resumes.
 REPAIR_ROUNDS = 2
@@ -169,6 +185,89 @@ def _groups(faces: tuple[np.ndarray, ...]) -> dict[int, np.ndarray]:
     for face in faces:
         groups.setdefault(len(face), []).append(face)
     return {k: np.array(v, dtype=np.int64) for k, v in sorted(groups.items())}
+
+
+def _group_ids(faces: tuple[np.ndarray, ...]) -> dict[int, np.ndarray]:
+    """Face ids grouped by degree, in the order of :func:`_groups`: {k: (f_k,) face ids}."""
+    ids: dict[int, list[int]] = {}
+    for i, face in enumerate(faces):
+        ids.setdefault(len(face), []).append(i)
+    return {k: np.array(v, dtype=np.int64) for k, v in sorted(ids.items())}
+
+
+def _cell_adjacency(faces: tuple[np.ndarray, ...]) -> sp.csr_matrix:
+    """(f, f) 0/1 matrix of the cells that share a beam."""
+    owner = np.repeat(np.arange(len(faces)), [len(f) for f in faces])
+    directed = np.concatenate([np.stack([f, np.roll(f, -1)], axis=-1) for f in faces])
+    key = np.sort(directed, axis=1)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    key, owner = key[order], owner[order]
+    same = np.all(key[1:] == key[:-1], axis=1)
+    a, b = owner[:-1][same], owner[1:][same]
+    f = len(faces)
+    adjacency = sp.csr_matrix((np.ones(2 * len(a)), (np.r_[a, b], np.r_[b, a])), shape=(f, f))
+    adjacency.data[:] = 1.0
+    return adjacency
+
+
+def graded_areas(areas: np.ndarray, sizes: np.ndarray | None, interior: np.ndarray,
+                 adjacency: sp.csr_matrix, *, min_side: float = 0.0,
+                 quantile: float = 0.2) -> tuple[np.ndarray, float, float]:
+    """(target areas (f,), the grid's grading slope, the targets' slope): the area each cell's
+    regularity target takes.
+
+    ``areas`` are the cells' areas as given (the remesher's grading), ``sizes`` the field's target
+    size h at each cell (None: the cells' own sqrt(area)). The grid's grading slope sigma is the
+    log-log slope of sqrt(area) against h over the interior cells (1 where the remesher follows the
+    field). An interior cell's target follows the field among its neighbours: h^(2 sigma) times the
+    area its neighbourhood (the cells around it and itself) has per unit of h^(2 sigma), so the
+    local cell count keeps its area and the size follows the field instead of the remesher's noise.
+    Boundary cells (cut by the boundary) keep their area.
+
+    ``min_side``: the shortest beam the joints take (m). Where the smallest interior cells (their
+    ``quantile``) would have a regular hexagon's side shorter than that, the grading is compressed
+    monotonically, sizes going as h^s with s < sigma over the whole grid (total area kept), until
+    they do not: the order of the sizes, which is the field's grading, stays. Where even equal
+    sizes would not do, the grid is too fine for its joints whatever its grading (the remesh
+    coarsens such grids, the optimize stage reports them): the grading is then not compressed.
+    """
+    areas = np.asarray(areas, dtype=float)
+    n = len(areas)
+    h = np.sqrt(areas) if sizes is None else np.asarray(sizes, dtype=float)
+    interior = np.asarray(interior, dtype=bool)
+    pick = interior if interior.sum() >= 4 else np.ones(n, dtype=bool)
+    log_h = np.log(h[pick])
+    sigma = 1.0
+    if sizes is not None and np.ptp(log_h) > 1e-6:
+        sigma = float(np.clip(0.5 * np.polyfit(log_h, np.log(areas[pick]), 1)[0], 0.0, 1.0))
+    local = areas.copy()
+    if sizes is not None and interior.sum() >= 2:
+        inner = interior.astype(float)
+        ring = adjacency + sp.eye(n, format="csr")
+        weight = h ** (2 * sigma)
+        budget, demand = ring @ (areas * inner), ring @ (weight * inner)
+        ok = interior & (demand > 0)
+        local[ok] = weight[ok] * budget[ok] / demand[ok]
+        local[ok] *= areas[ok].sum() / local[ok].sum()  # the interior cells' area as given
+    total = float(areas.sum())
+    h_ref = float(np.exp(np.mean(log_h)))
+
+    def compressed(slope: float) -> np.ndarray:
+        out = local * (h / h_ref) ** (2 * (slope - sigma))
+        return out * (total / max(float(out.sum()), 1e-300))
+
+    def margin(slope: float) -> float:
+        side = np.sqrt(compressed(slope)[pick]) * HEXAGON_SIDE
+        return float(np.quantile(side, quantile)) - min_side
+
+    slope = sigma
+    if min_side > 0 and margin(sigma) < 0 <= margin(0.0):
+        lo, hi = 0.0, sigma  # margin(lo) >= 0 > margin(hi)
+        for _ in range(30):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if margin(mid) < 0 else (mid, hi)
+        slope = lo
+    return compressed(slope), sigma, slope
 
 
 def cell_areas(points: np.ndarray) -> np.ndarray:
@@ -450,7 +549,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
     """Regularise and (with ``settings.planar``) planarise the cells of ``polymesh`` on the
     reference surface ``mesh``; corners and supports stay put, boundary nodes on the boundary.
 
-    ``field`` is accepted for the workflow's sake (cells keep their own anisotropy).
+    ``field`` (or None) gives each cell's target size: the regularity targets' areas follow it among
+    neighbouring cells (``settings.follow_field``; cells keep their own anisotropy).
     ``progress(text, fraction)`` is called once per iteration (fraction None in the end game).
     ``beam_length_limits(grid)`` gives each beam's shortest length (m) on the grid as it stands
     (the joints' set-backs grow as their angles close); the iterations hold every beam to the larger
@@ -464,7 +564,10 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
     step of the end game), "planar", "accelerated_steps", "rejected_steps" (Anderson),
     "planarity_tolerance_rel", "planarity_reached" (largest planarity error within the tolerance),
     "corner_splits", "edge_splits", "repair_splits" (new beams by each rule), "split_beams" (node
-    pairs of the new beams, ids of the result), "split_length_m" (their total length), and
+    pairs of the new beams, ids of the result), "split_length_m" (their total length), "grading"
+    (given_slope: the given grid's log-log slope of cell area against the field's h^2, target_slope:
+    the regularity targets', lower where the joints compressed the grading; None without
+    keep_grading), and
     "end_game" (steps, rejected_steps, factorisations, the largest relative planarity weight,
     reached; see :mod:`engine.planarise`), None without it.
     """
@@ -497,11 +600,27 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
     groups = _groups(polymesh.faces)
     x0 = x.copy()
 
-    def given_areas(groups: dict[int, np.ndarray]) -> dict[int, np.ndarray | None]:
-        """The cells' areas in the grid as given: the grading (None: each cell's current area)."""
-        return {k: cell_areas(x0[f]) if settings.keep_grading else None for k, f in groups.items()}
+    nearest_vertex = cKDTree(mesh.vertices) if field is not None and settings.follow_field else None
+    grading: dict = {"given_slope": None, "target_slope": None}
 
-    areas0 = given_areas(groups)
+    def given_areas(groups: dict[int, np.ndarray], grid: PolyMesh) -> dict[int, np.ndarray | None]:
+        """The cells' target areas (None: each cell's current area): the grid's grading, following the
+        field among neighbouring cells and compressed as far as the joints demand (graded_areas)."""
+        if not settings.keep_grading:
+            return {k: None for k in groups}
+        ids = _group_ids(grid.faces)
+        area, centroid = np.zeros(grid.n_faces), np.zeros((grid.n_faces, 3))
+        for k, f in groups.items():
+            area[ids[k]] = cell_areas(x0[f])
+            centroid[ids[k]] = x0[f].mean(axis=1)
+        sizes = field.size[nearest_vertex.query(centroid)[1]] if nearest_vertex is not None else None
+        target, grading["given_slope"], grading["target_slope"] = graded_areas(
+            area, sizes, ~grid.face_boundary, _cell_adjacency(grid.faces),
+            min_side=settings.min_beam_length, quantile=settings.grading_quantile)
+        return {k: target[ids[k]] for k in groups}
+
+    areas0 = given_areas(groups, polymesh)
+    grading_record = dict(grading)
     C = _centering(groups, n)
     neighbours = _neighbour_mean(polymesh.edges, n)
     shape, plan = _schedule(settings)
@@ -617,7 +736,7 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
                                          min_beam_length=settings.min_beam_length,
                                          min_angle_deg=settings.min_corner_angle_deg)
 
-        def regular(x: np.ndarray, groups: dict = groups, areas: dict = given_areas(groups)) -> np.ndarray:
+        def regular(x: np.ndarray, groups: dict = groups, areas: dict = given_areas(groups, polymesh)) -> np.ndarray:
             return _stack(groups, {k: regular_targets(x[faces], settings.max_cell_stretch, areas[k])
                                    for k, faces in groups.items()})
 
@@ -661,6 +780,6 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
                "planarity_tolerance_rel": settings.planarity_tolerance,
                "planarity_reached": bool(after["planarity_max_rel"] <= settings.planarity_tolerance),
                "corner_splits": corner_splits, "edge_splits": edge_splits, "repair_splits": repair_splits,
-               "split_beams": new_beams.tolist(), "split_length_m": split_length,
+               "split_beams": new_beams.tolist(), "split_length_m": split_length, "grading": grading_record,
                "end_game": end if ran_end_game else None}
     return OptimizeResult(polymesh=result, quality=quality)

@@ -42,6 +42,8 @@ STRETCH_MARGIN = 1.5
 #: Above this share of beams left too short for their joints with the field's grading kept, the
 #: optimiser tries again with the sizes evened out (engine.optimize.OptimizeSettings.keep_grading).
 GRADED_SHORT_SHARE = 0.02
+#: A grading slope lowered by more than this for the joints is a finding (grading_compressed).
+COMPRESSED_SLOPE = 0.05
 #: Rounds of (collapse the beams the optimiser left too short, optimise again).
 BUILDABLE_ROUNDS = 2
 #: Rounds of (remove the beams still short, collapse those the removals freed) at the end.
@@ -121,8 +123,8 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
                  f"optimising {when}")
         again = optimize(grid, surface.mesh, field, dataclasses.replace(settings, split_cells=False),
                          progress=ctx.step, beam_length_limits=limits)
-        return dataclasses.replace(result, polymesh=again.polymesh,
-                                   quality={**again.quality, "before": result.quality["before"]})
+        return dataclasses.replace(result, polymesh=again.polymesh, quality={
+            **again.quality, "before": result.quality["before"], "grading": result.quality.get("grading")})
 
     while changed(buildable) and rounds < BUILDABLE_ROUNDS:
         rounds += 1
@@ -152,6 +154,8 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
         ctx.report_findings([too_fine_finding(buildable, "optimize")])
     elif not grading_kept:
         ctx.report_findings([grading_finding(share_kept, result.quality)])
+    elif compressed_grading(result.quality):
+        ctx.report_findings([compressed_finding(result.quality)])
     write_polymesh_obj(result.polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: optimised grid-shell")
     ctx.step("panels: planar convex pieces of the cells that are not")
@@ -221,6 +225,30 @@ def grading_finding(share: float, quality: dict) -> dict:
                    unit="% of beams", stage="optimize",
                    message=(f"at the field's grading {100 * share:.0f} % of the beams are too short for their "
                             f"joints, so the optimiser evened out the cell sizes{figures}"),
+                   fix="fewer cells ([remesh] n_cells), less grading ([field] max_size_ratio), or smaller "
+                       "joints or tubes ([fabrication.joints], [section] diameter)").to_dict()
+
+
+def compressed_grading(quality: dict) -> bool:
+    """Whether the optimiser compressed the field's grading for the joints (engine.optimize.graded_areas)."""
+    grading = quality.get("grading") or {}
+    given, target = grading.get("given_slope"), grading.get("target_slope")
+    return given is not None and target is not None and target < given - COMPRESSED_SLOPE
+
+
+def compressed_finding(quality: dict) -> dict:
+    """The finding that the joints compressed the field's grading (JSON-ready)."""
+    from engine.findings import Finding
+
+    given, target = quality["grading"]["given_slope"], quality["grading"]["target_slope"]
+    before, after = quality["before"].get("size_rank_correlation"), quality["after"].get("size_rank_correlation")
+    figures = (f"; size rank correlation with the field {before:.2f} remeshed, {after:.2f} optimised"
+               if before is not None and after is not None else "")
+    return Finding(kind="grading_compressed", parts=["grid"], measure=target, limit=given, unit="slope",
+                   stage="optimize",
+                   message=(f"the smallest cells are too small for their joints, so the optimiser compressed the "
+                            f"field's grading in order: cell size as the field's to the power {target:.2f} instead "
+                            f"of {given:.2f}{figures}"),
                    fix="fewer cells ([remesh] n_cells), less grading ([field] max_size_ratio), or smaller "
                        "joints or tubes ([fabrication.joints], [section] diameter)").to_dict()
 
