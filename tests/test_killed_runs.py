@@ -237,3 +237,25 @@ def test_a_run_killed_during_its_nonlinear_paths_leaves_no_worker_and_heals(tmp_
     assert not [p.name for p in out.iterdir() if p.name.startswith(".") and p.name != LOCK_NAME]
     for name in ("analysis.json", "members.csv", "response.csv"):
         assert (out / "06-analysis" / name).read_bytes() == (reference / "06-analysis" / name).read_bytes(), name
+
+
+@pytest.mark.parametrize("damage", ["truncated", "same size"])
+def test_the_cli_reruns_the_stage_of_a_damaged_artifact_and_only_it(tmp_path, damage):
+    """Two `gridshell run` processes on the default job with an artifact of the field stage damaged
+    between them (cut short, or changed in place at the same size): the second run makes the field
+    again, byte for byte as before, and keeps the stages before and after it cached."""
+    out = tmp_path / "out"
+    command = [*GRIDSHELL, "run", "--out", str(out), "--until", "remesh", "--quiet"]
+    subprocess.run(command, cwd=ROOT, check=True, timeout=600, capture_output=True)
+    artifact = out / "03-field" / "field.npz"
+    original = artifact.read_bytes()
+    if damage == "truncated":
+        artifact.write_bytes(original[: len(original) // 2])
+    else:
+        artifact.write_bytes(original[:-1] + bytes([original[-1] ^ 0xFF]))
+    done = subprocess.run(command, cwd=ROOT, timeout=600, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    statuses = {s["name"]: s["status"] for s in json.loads((out / "manifest.json").read_text())["stages"]}
+    assert {k: statuses[k] for k in ("surface", "shell", "field", "remesh")} == {
+        "surface": "cached", "shell": "cached", "field": "ran", "remesh": "cached"}
+    assert artifact.read_bytes() == original

@@ -196,4 +196,4 @@ def test_the_modes_caption_gives_the_amplitude_the_picture_draws_with_its_colour
     assert drawn_mm == pytest.approx(share / 100 * span_mm, abs=0.5)
     assert any(ax.get_ylabel() == "displacement / the mode's largest" for ax in figure.axes), "a colour bar"
     assert [ax.get_title() for ax in figure.axes if ax.get_title()] == [
-        "mode 1: lambda = 4.2", "mode 2: lambda = 5.1", "mode 3: lambda = 6.3"]
+        "mode 1: load factor 4.2", "mode 2: load factor 5.1", "mode 3: load factor 6.3"]

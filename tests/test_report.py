@@ -184,6 +184,13 @@ def test_the_report_reads_like_an_engineers_no_raw_keys_no_e_notation_and_its_li
     assert raw == [], f"raw keys in the report: {raw}"
     scientific = [c for c in parser.cells if re.search(r"\d[eE][+-]?\d", c)]
     assert scientific == []
+    assert [c for c in parser.cells if "lambda_" in c] == [], "a symbol written as its key"
+    # a column of zeros that stand for "not classified" (the simplified checks) is left out
+    import pandas as pd
+
+    classes = pd.read_csv(out / "06-analysis" / "members.csv").get("section_class")
+    if classes is not None and not classes.any():
+        assert not any(c.startswith("section class") for c in parser.cells)
     assert parser.hrefs and all((out / href).is_file() for href in parser.hrefs), parser.hrefs
     assert not (out / "report" / "report.html").exists(), "one report page"
 

@@ -65,9 +65,9 @@ LABELS: dict[str, tuple[str, str, float]] = {
     "deflection_limit_m": ("deflection limit", "mm", 1e3),
     "max_utilisation": ("largest member utilisation (ULS)", "", 1.0),
     "governing_member": ("governing member", "", 1.0),
-    "lambda_LB": ("linear buckling factor lambda_LB", "", 1.0),
-    "lambda_NL_perfect": ("non-linear limit factor, perfect", "", 1.0),
-    "lambda_NL_worst": ("non-linear limit factor, worst imperfection", "", 1.0),
+    "lambda_LB": ("linear buckling load factor", "", 1.0),
+    "lambda_NL_perfect": ("non-linear limit load factor, perfect", "", 1.0),
+    "lambda_NL_worst": ("non-linear limit load factor, worst imperfection", "", 1.0),
     "worst_imperfection": ("worst imperfection", "", 1.0),
     "knock_down": ("knock-down (worst / perfect)", "", 1.0),
     "imperfection_amplitude_m": ("imperfection amplitude", "mm", 1e3),
@@ -102,7 +102,8 @@ _COLUMNS = {"length_m": "length (m)", "axial_force_kN": "axial force (kN)", "are
             "mass_kg": "mass (kg)", "cut_length_m": "cut length (m)",
             "largest_deflection_mm": "largest deflection (mm)", "vertex_count": "corners",
             "start_node": "start node", "end_node": "end node",
-            "governing_check": "governing check", "lambda_NL": "lambda_NL"}
+            "governing_check": "governing check", "lambda_NL": "non-linear limit load factor",
+            "section_class": "section class (EN 1993-1-1)"}
 
 
 def label_of(key: str) -> tuple[str, str, float]:

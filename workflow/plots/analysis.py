@@ -127,7 +127,7 @@ def plot_buckling_modes(nodes: np.ndarray, beams: np.ndarray, modes: np.ndarray,
         ax.add_collection3d(lines)
         frame_3d(ax, np.vstack([nodes, moved]))
         ax.set_axis_off()
-        ax.set_title(f"mode {k + 1}: lambda = {factors[k]:.3g}", fontsize=11)
+        ax.set_title(f"mode {k + 1}: load factor {factors[k]:.3g}", fontsize=11)
     fig.subplots_adjust(left=0.0, right=0.88, bottom=0.02, top=0.9, wspace=0.0, hspace=0.08)
     mappable = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
     fig.colorbar(mappable, ax=fig.axes, shrink=0.6, pad=0.02,

@@ -15,7 +15,7 @@ from ._common import pyplot
 __all__ = ["sweep_html", "pareto_front", "PLOTTED"]
 
 #: Figures plotted against the parameters, with their axis labels.
-PLOTTED = {"lambda_NL_worst": "worst non-linear load factor", "lambda_LB": "linear buckling factor",
+PLOTTED = {"lambda_NL_worst": "worst non-linear load factor", "lambda_LB": "linear buckling load factor",
            "delta_L_m": "SLS deflection (m)", "max_utilisation": "max utilisation",
            "beam_mass_kg": "beam mass (kg)", "total_beam_length_m": "total beam length (m)"}
 

@@ -170,19 +170,20 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, project: Project, ctx: 
          "fix": f"{stiffer}; or [analysis] deflection_limit_ratio if the limit is not the project's"},
     ]
     if result.buckling_error is not None:
-        verdicts.append({"check": "linear buckling factor lambda_LB (not solved)", "kind": "buckling_not_solved",
+        verdicts.append({"check": "linear buckling load factor (not solved)", "kind": "buckling_not_solved",
                          "value": None, "limit": config.required_load_factor, "part": "mode 1",
                          "pass": False, "error": result.buckling_error,
                          "fix": "check the supports ([[supports]]) for a near-mechanism, or fewer [analysis] n_modes; "
                                 "the non-linear paths ran without mode-shaped imperfections"})
     if result.lambda_LB is not None:
-        verdicts.append({"check": "linear buckling factor lambda_LB", "kind": "buckling", "value": result.lambda_LB,
+        verdicts.append({"check": "linear buckling load factor", "kind": "buckling", "value": result.lambda_LB,
                          "limit": config.required_load_factor, "part": "mode 1",
                          "pass": bool(result.lambda_LB >= config.required_load_factor), "fix": stiffer})
     if worst is not None:
         value = worst.capacity
-        label = "limit factor" if worst.limit_load_factor is not None else "load factor carried (no limit point found)"
-        verdicts.append({"check": f"worst non-linear {label} lambda_NL ({worst.name})", "kind": "nonlinear_buckling",
+        label = ("limit load factor" if worst.limit_load_factor is not None
+                 else "load factor carried (no limit point found)")
+        verdicts.append({"check": f"worst non-linear {label} ({worst.name})", "kind": "nonlinear_buckling",
                          "value": float(value), "limit": config.required_load_factor, "part": worst.name,
                          "pass": bool(value >= config.required_load_factor), "fix": stiffer})
     axial = np.asarray(checks.axial_force)

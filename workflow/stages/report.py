@@ -79,12 +79,16 @@ def _figures(out_dir: Path, key: str) -> list[Figure]:
     return figures
 
 
-def _csv_table(path: Path, name: str, caption: str, max_rows: int = 12, sort_by: str | None = None) -> Table | None:
+def _csv_table(path: Path, name: str, caption: str, max_rows: int = 12, sort_by: str | None = None,
+               drop_when_zero: tuple[str, ...] = ()) -> Table | None:
+    """The first ``max_rows`` rows of a CSV (largest ``sort_by`` first), with human headings; the
+    columns ``drop_when_zero`` are left out where every value is 0 (no figure, not a measured 0)."""
     import pandas as pd
 
     if not path.is_file():
         return None
     frame = pd.read_csv(path)
+    frame = frame.drop(columns=[c for c in drop_when_zero if c in frame.columns and not frame[c].fillna(0).any()])
     if sort_by in frame.columns:
         frame = frame.sort_values(sort_by, ascending=False)
     shown = frame.head(max_rows)
@@ -216,7 +220,8 @@ def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
             columns=["profile", "beams", "length (m)", "mass (kg)", "largest utilisation", "governing check"],
             rows=[[g["profile"], g["beams"], round(g["length_m"], 1), round(g["mass_kg"], 1),
                    round(g["max_utilisation"], 3), g["governing"]] for g in design["groups"]]))
-    members = _csv_table(out_dir / "06-analysis/members.csv", "members", "Most utilised members", sort_by="utilisation")
+    members = _csv_table(out_dir / "06-analysis/members.csv", "members", "Most utilised members", sort_by="utilisation",
+                         drop_when_zero=("section_class",))
     if members:
         tables.append(members)
     checks = analysis.get("checks") or {}
