@@ -21,8 +21,8 @@ from fabrication.files import atomic_path, file_date, save_dxf
 __all__ = ["write_plan_drawings", "node_id", "beam_id", "panel_id", "joint_id", "PLAN_LAYERS"]
 
 #: DXF layers of the plan: name -> ACI colour
-PLAN_LAYERS = {"BEAMS": 7, "LABELS_NODES": 3, "LABELS_BEAMS": 4, "LABELS_PANELS": 6, "SUPPORTS": 1,
-               "DIMENSIONS": 2, "TITLE": 7}
+PLAN_LAYERS = {"BEAMS": 7, "LABELS_NODES": 3, "LABELS_BEAMS": 4, "LABELS_PANELS": 6, "LABELS_LEADERS": 8,
+               "SUPPORTS": 1, "DIMENSIONS": 2, "TITLE": 7}
 _A3_MM = (420, 297)
 _A3_LANDSCAPE_IN = (_A3_MM[0] / 25.4, _A3_MM[1] / 25.4)
 #: The scales a plan is drawn at (1:n), as an architect's or engineer's drawing states them.
@@ -97,7 +97,6 @@ def drawing_date() -> str:
 def _write_dxf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, supports: np.ndarray,
                height: float, title: list[str]) -> Path:
     import ezdxf
-    from ezdxf.enums import TextEntityAlignment
 
     doc = ezdxf.new("R2010", setup=True)
     doc.header["$INSUNITS"] = 4
@@ -108,27 +107,20 @@ def _write_dxf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.nd
     msp = doc.modelspace()
     for a, b in beams:
         msp.add_line(tuple(plan[a]), tuple(plan[b]), dxfattribs={"layer": "BEAMS"})
-    for i, p in enumerate(plan):
-        t = msp.add_text(node_id(i), height=height, dxfattribs={"layer": "LABELS_NODES"})
-        t.set_placement((float(p[0] + 0.3 * height), float(p[1] + 0.3 * height)),
-                        align=TextEntityAlignment.BOTTOM_LEFT)
-    mid = 0.5 * (plan[beams[:, 0]] + plan[beams[:, 1]])
-    direction = plan[beams[:, 1]] - plan[beams[:, 0]]
-    angle = np.degrees(np.arctan2(direction[:, 1], direction[:, 0]))
-    angle = np.where(angle > 90, angle - 180, np.where(angle < -90, angle + 180, angle))  # readable
-    for k, (p, a) in enumerate(zip(mid, angle)):
-        t = msp.add_text(beam_id(k), height=0.8 * height, rotation=float(a), dxfattribs={"layer": "LABELS_BEAMS"})
-        t.set_placement((float(p[0]), float(p[1])), align=TextEntityAlignment.BOTTOM_CENTER)
-    for f, p in enumerate(centres):
-        t = msp.add_text(panel_id(f), height=1.2 * height, dxfattribs={"layer": "LABELS_PANELS"})
-        t.set_placement((float(p[0]), float(p[1])), align=TextEntityAlignment.MIDDLE_CENTER)
+    lo, hi = plan.min(axis=0), plan.max(axis=0)
+    gap = 6 * height
+    crowded = _dxf_labels(msp, plan, beams, centres, height, obstacles=np.array([
+        [lo[0], lo[1] - gap - 2.5 * height, hi[0], lo[1] - gap + 2.5 * height],
+        [lo[0] - gap - 2.5 * height, lo[1], lo[0] - gap + 2.5 * height, hi[1]]]))
+    if crowded:
+        title = [*title, f"{crowded} ids drawn at their parts without room (they may overlap)"]
+    if not len(msp.query('LINE[layer=="LABELS_LEADERS"]')):
+        doc.layers.remove("LABELS_LEADERS")
     size = 2.0 * height
     for i in supports:
         x, y = plan[i]
         msp.add_lwpolyline([(x, y), (x - size / 2, y - size), (x + size / 2, y - size)], close=True,
                            dxfattribs={"layer": "SUPPORTS"})
-    lo, hi = plan.min(axis=0), plan.max(axis=0)
-    gap = 6 * height
     # drawing units are mm: the text is the measurement itself (ezdxf's own style scales by 100)
     override = {"dimtxt": height * 1.5, "dimasz": height, "dimexe": height * 0.5, "dimexo": height * 0.5,
                 "dimdec": 0, "dimlfac": 1.0}
@@ -147,6 +139,36 @@ def _write_dxf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.nd
                      dxfattribs={"layer": "TITLE", "insert": (x0 + 0.5 * line_h, y0 + (len(title) - j) * line_h)})
     save_dxf(doc, target)
     return target
+
+
+DXF_CAP_HEIGHT = 0.7
+"""A TEXT entity's height (its capitals) as a share of the type's em, which the label boxes use."""
+
+DXF_SMALLEST_LABEL = 0.15
+"""The plan.dxf's ids step down to this share of their first height to find room; what has none
+then is drawn at its part and counted in the title block."""
+
+
+def _dxf_labels(msp, plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, height: float,
+                obstacles: np.ndarray) -> int:
+    """Node, beam and panel ids of plan.dxf placed without overlap (beside their part, or farther with
+    a leader line on LABELS_LEADERS), at ``height`` mm or smaller; returns how many found no room
+    and are drawn at their part."""
+    from ezdxf.enums import TextEntityAlignment
+
+    pt = 25.4 / 72.0
+    em = height / DXF_CAP_HEIGHT / pt            # the first height as a type size in pt at scale 1
+    texts, points, anchor, placement = _label_places(
+        plan, beams, centres, em, 1.0, None, obstacles, min_font=DXF_SMALLEST_LABEL * em,
+        far_rings=(1.2, 1.8, 2.6, 3.6, 5.0), gap=0.15 * em * pt)
+    layers = np.repeat(["LABELS_NODES", "LABELS_BEAMS", "LABELS_PANELS"], [len(plan), len(beams), len(centres)])
+    where = np.where(placement.placed[:, None], placement.centre, anchor)
+    for i, text in enumerate(texts):
+        t = msp.add_text(text, height=float(DXF_CAP_HEIGHT * points[i] * pt), dxfattribs={"layer": str(layers[i])})
+        t.set_placement((float(where[i, 0]), float(where[i, 1])), align=TextEntityAlignment.MIDDLE_CENTER)
+    for i in np.flatnonzero(placement.leader):
+        msp.add_line(tuple(anchor[i]), tuple(placement.centre[i]), dxfattribs={"layer": "LABELS_LEADERS"})
+    return placement.left_out
 
 
 def _text_box_mm(texts: list[str], points: float) -> np.ndarray:
@@ -168,12 +190,15 @@ MIN_LABEL_POINTS = 3.0
 """The smallest type the plan's ids are set in (pt); ids that find no room at it are left out."""
 
 
-def _label_places(plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, font: float, scale: int,
-                  bounds: tuple[float, float, float, float], obstacles: np.ndarray):
+def _label_places(plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, font: float, scale: float,
+                  bounds: tuple[float, float, float, float] | None, obstacles: np.ndarray, *,
+                  min_font: float = MIN_LABEL_POINTS, far_rings: tuple[float, ...] = (1.2, 1.8, 2.6),
+                  gap: float | None = None):
     """Node, beam and panel ids placed without overlap (model mm), nodes choosing first, then beams,
     then panels: at ``font`` pt (beams at 0.8 of it), or smaller by steps of 0.8 down to
-    MIN_LABEL_POINTS until every id has room. Returns texts, point sizes, anchors and the placement
-    (fabrication.label_placement)."""
+    ``min_font`` until every id has room; ``far_rings`` are the leader lines' reaches in typical
+    label widths, ``gap`` the clear space round a label (model mm; 0.3 mm of paper by default).
+    Returns texts, point sizes, anchors and the placement (fabrication.label_placement)."""
     from .label_placement import place_labels, ring_offsets
 
     nn, nb = len(plan), len(beams)
@@ -202,11 +227,12 @@ def _label_places(plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, font
         # panels: the centre, then round it
         near[nn + nb:, 1:] = ring_offsets(1.0, k - 1)[None, :, :] * h[nn + nb:, None, :]
         typical = float(np.median(w)) if len(w) else 1.0
-        far = np.concatenate([ring_offsets(r * typical, 12, phase=0.26) for r in (1.2, 1.8, 2.6)])
-        placement = place_labels(anchor, size, near, far, bounds=bounds, obstacles=obstacles, gap=0.3 * scale)
-        if not placement.left_out or font <= MIN_LABEL_POINTS:
+        far = np.concatenate([ring_offsets(r * typical, 12, phase=0.26) for r in far_rings])
+        placement = place_labels(anchor, size, near, far, bounds=bounds, obstacles=obstacles,
+                                 gap=0.3 * scale if gap is None else gap)
+        if not placement.left_out or font <= min_font:
             return texts, points, anchor, placement
-        font = max(0.8 * font, MIN_LABEL_POINTS)
+        font = max(0.8 * font, min_font)
 
 
 def _write_pdf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, supports: np.ndarray,

@@ -46,11 +46,12 @@ def test_plan_dxf_and_pdf(tmp_path):
     assert "N0001" in node_labels and len(node_labels) == mesh.n_nodes
     beam_labels = [t for t in msp.query('TEXT[layer=="LABELS_BEAMS"]')]
     assert sorted(t.dxf.text for t in beam_labels) == [beam_id(k) for k in range(len(mesh.edges))]
-    # beam label k sits at the middle of beam k
+    # beam label k sits by the middle of beam k: within two of its heights' reach of it
     for t in beam_labels:
         k = int(t.dxf.text[1:]) - 1
         a, b = mesh.edges[k]
-        assert np.allclose(np.asarray(t.dxf.align_point, float)[:2], 0.5 * (plan[a] + plan[b]))
+        reach = np.linalg.norm(np.asarray(t.dxf.align_point, float)[:2] - 0.5 * (plan[a] + plan[b]))
+        assert reach <= 2.0 * t.dxf.height
     assert len(msp.query('LWPOLYLINE[layer=="SUPPORTS"]')) == supports.size
     # overall dimensions equal the plan extents
     dims = msp.query('DIMENSION[layer=="DIMENSIONS"]')
@@ -150,3 +151,51 @@ def test_plan_pdf_labels_do_not_overlap(tmp_path, rows, cols):
         assert f"of {total} ids left out for space" in text
     else:
         assert "left out" not in text
+
+
+def _jittered(rows: int, cols: int, share: float, seed: int):
+    """hex_polymesh with its nodes moved at random by up to ``share`` of the cell radius: short
+    beams and crowded nodes, as a remeshed grid has."""
+    mesh = hex_polymesh(rows, cols)
+    rng = np.random.default_rng(seed)
+    nodes = mesh.nodes.copy()
+    nodes[:, :2] += rng.uniform(-1, 1, (len(nodes), 2)) * share * 0.18 * np.ptp(mesh.nodes[:, 0]) / 2.4
+    return type(mesh)(nodes=nodes, faces=mesh.faces, boundary=mesh.boundary, supports=mesh.supports)
+
+
+@pytest.mark.parametrize("rows, cols, jitter", [(3, 4, 0.0), (8, 10, 0.0), (6, 8, 0.45),
+                                                pytest.param(16, 20, 0.45, marks=pytest.mark.slow)])
+def test_plan_dxf_labels_do_not_overlap(tmp_path, rows, cols, jitter):
+    """The plan.dxf's ids as ezdxf measures them (its own font metrics, not the writer's): no two
+    overlap, each part's id is there once, and an id away from its part has a leader line from it."""
+    from ezdxf import bbox
+
+    mesh = _jittered(rows, cols, jitter, seed=rows) if jitter else hex_polymesh(rows, cols)
+    dxf_path, _ = write_plan_drawings(mesh, tmp_path, project_name="Labels")
+    msp = ezdxf.readfile(dxf_path).modelspace()
+    texts = [t for t in msp.query("TEXT") if t.dxf.layer in ("LABELS_NODES", "LABELS_BEAMS", "LABELS_PANELS")]
+    expected = ([node_id(i) for i in range(mesh.n_nodes)] + [beam_id(k) for k in range(len(mesh.edges))]
+                + [panel_id(f) for f in range(mesh.n_faces)])
+    assert sorted(t.dxf.text for t in texts) == sorted(expected)
+    boxes = np.array([[b.extmin.x, b.extmin.y, b.extmax.x, b.extmax.y]
+                      for b in (bbox.extents([t]) for t in texts)])
+    a, b = np.triu_indices(len(boxes), 1)
+    overlap = ((boxes[a, 0] < boxes[b, 2]) & (boxes[b, 0] < boxes[a, 2])
+               & (boxes[a, 1] < boxes[b, 3]) & (boxes[b, 1] < boxes[a, 3]))
+    pairs = [(texts[i].dxf.text, texts[j].dxf.text) for i, j in zip(a[overlap], b[overlap])]
+    title = " ".join(t.dxf.text for t in msp.query('TEXT[layer=="TITLE"]'))
+    assert pairs == [] or f"{len(pairs)} ids drawn at their parts" in title, pairs[:5]
+    assert pairs == []
+    # where each id's part is, in plan mm
+    plan = mesh.nodes[:, :2] * 1e3
+    parts = {**{node_id(i): plan[i] for i in range(mesh.n_nodes)},
+             **{beam_id(k): plan[e].mean(axis=0) for k, e in enumerate(mesh.edges)},
+             **{panel_id(f): plan[face].mean(axis=0) for f, face in enumerate(mesh.faces)}}
+    leaders = [(np.asarray(line.dxf.start, float)[:2], np.asarray(line.dxf.end, float)[:2])
+               for line in msp.query('LINE[layer=="LABELS_LEADERS"]')]
+    for t, box in zip(texts, boxes):
+        centre = 0.5 * (box[:2] + box[2:])
+        size = max(box[2] - box[0], box[3] - box[1])
+        if np.linalg.norm(centre - parts[t.dxf.text]) > 1.5 * size:
+            assert any(np.allclose(start, parts[t.dxf.text]) and np.linalg.norm(end - centre) < 0.5 * size
+                       for start, end in leaders), t.dxf.text
