@@ -193,16 +193,18 @@ MIN_LABEL_POINTS = 3.0
 def _label_places(plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, font: float, scale: float,
                   bounds: tuple[float, float, float, float] | None, obstacles: np.ndarray, *,
                   min_font: float = MIN_LABEL_POINTS, far_rings: tuple[float, ...] = (1.2, 1.8, 2.6),
-                  gap: float | None = None):
+                  gap: float | None = None, keep: np.ndarray | None = None):
     """Node, beam and panel ids placed without overlap (model mm), nodes choosing first, then beams,
     then panels: at ``font`` pt (beams at 0.8 of it), or smaller by steps of 0.8 down to
     ``min_font`` until every id has room; ``far_rings`` are the leader lines' reaches in typical
     label widths, ``gap`` the clear space round a label (model mm; 0.3 mm of paper by default).
-    Returns texts, point sizes, anchors and the placement (fabrication.label_placement)."""
+    ``keep`` (nodes + beams + panels,) bool: place only these ids (a tile of the plan).
+    Returns texts, point sizes, anchors and the placement (fabrication.label_placement) of the ids
+    placed (all, or those of ``keep``)."""
     from .label_placement import place_labels, ring_offsets
 
     nn, nb = len(plan), len(beams)
-    texts = ([node_id(i) for i in range(nn)] + [beam_id(k) for k in range(nb)]
+    every = ([node_id(i) for i in range(nn)] + [beam_id(k) for k in range(nb)]
              + [panel_id(f) for f in range(len(centres))])
     mid = 0.5 * (plan[beams[:, 0]] + plan[beams[:, 1]]) if nb else np.zeros((0, 2))
     anchor = np.concatenate([plan, mid, centres.reshape(-1, 2)])
@@ -212,10 +214,12 @@ def _label_places(plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, font
     # the eight places round a node, the first again to make nine, as the beams and panels have
     node_unit = np.array([[1, 1], [-1, 1], [1, -1], [-1, -1], [1, 0], [-1, 0], [0, 1], [0, -1], [1, 1]], float)
     k = len(node_unit)
+    kept = np.arange(len(every)) if keep is None else np.flatnonzero(keep)
+    texts = [every[i] for i in kept]
     while True:
         points = np.repeat([font, 0.8 * font, font], [nn, nb, len(centres)])
-        size = np.concatenate([_text_box_mm(texts[:nn], font), _text_box_mm(texts[nn:nn + nb], 0.8 * font),
-                               _text_box_mm(texts[nn + nb:], font)]) * scale
+        size = np.concatenate([_text_box_mm(every[:nn], font), _text_box_mm(every[nn:nn + nb], 0.8 * font),
+                               _text_box_mm(every[nn + nb:], font)]) * scale
         w, h = size[:, :1], size[:, 1:]
         near = np.zeros((len(anchor), k, 2))
         # nodes: the eight places round the node, touching it
@@ -228,46 +232,54 @@ def _label_places(plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, font
         near[nn + nb:, 1:] = ring_offsets(1.0, k - 1)[None, :, :] * h[nn + nb:, None, :]
         typical = float(np.median(w)) if len(w) else 1.0
         far = np.concatenate([ring_offsets(r * typical, 12, phase=0.26) for r in far_rings])
-        placement = place_labels(anchor, size, near, far, bounds=bounds, obstacles=obstacles,
+        placement = place_labels(anchor[kept], size[kept], near[kept], far, bounds=bounds, obstacles=obstacles,
                                  gap=0.3 * scale if gap is None else gap)
         if not placement.left_out or font <= min_font:
-            return texts, points, anchor, placement
+            return texts, points[kept], anchor[kept], placement
         font = max(0.8 * font, min_font)
 
 
-def _write_pdf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, supports: np.ndarray,
-               title: list[str]) -> Path:
+_FRAME = (0.04, 0.12, 0.92, 0.84)
+"""The plan's frame on an A3 sheet, as fractions of the sheet (left, bottom, width, height)."""
+
+TILE_POINTS = 5.0
+"""The type size the plan's tile sheets set the ids in; they step down to TILE_MIN_POINTS."""
+
+TILE_MIN_POINTS = 4.0
+
+MAX_TILE_SHEETS = 64
+"""The most tile sheets a plan is split into; ids still without room are counted."""
+
+
+def _sheet(title_lines: list[str]):
+    """An A3 landscape figure with the plan's axes in its frame and the title block at its foot."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.collections import LineCollection
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=_A3_LANDSCAPE_IN)
     FigureCanvasAgg(fig)
-    box = (0.04, 0.12, 0.92, 0.84)  # the plan's frame on the sheet, as fractions of A3
-    ax = fig.add_axes(box)
+    ax = fig.add_axes(_FRAME)
     ax.axis("off")
-    lo, hi = plan.min(axis=0), plan.max(axis=0)
-    span = hi - lo
-    gap = 0.06 * span.max()
-    # a true scale: the frame shows scale x its paper size of the plan, centred
-    paper = np.array([_A3_MM[0] * box[2], _A3_MM[1] * box[3]])
-    scale = drawing_scale(span + 3 * gap, paper)
-    centre = 0.5 * (lo + hi) - 0.5 * gap  # the dimensions take 2 gaps left of and under the plan, 1 beyond
-    x_lim = (centre[0] - 0.5 * scale * paper[0], centre[0] + 0.5 * scale * paper[0])
-    y_lim = (centre[1] - 0.5 * scale * paper[1], centre[1] + 0.5 * scale * paper[1])
-    ax.set_xlim(*x_lim)
-    ax.set_ylim(*y_lim)
+    fig.text(0.96, 0.03, "\n".join(title_lines), ha="right", va="bottom", fontsize=9,
+             bbox={"boxstyle": "square", "facecolor": "white", "edgecolor": "black"})
+    return fig, ax
+
+
+def _window(centre: np.ndarray, scale: int) -> tuple[float, float, float, float]:
+    """The model window (x0, y0, x1, y1, mm) the frame shows at 1:``scale`` round ``centre``."""
+    paper = np.array([_A3_MM[0] * _FRAME[2], _A3_MM[1] * _FRAME[3]])
+    lo, hi = centre - 0.5 * scale * paper, centre + 0.5 * scale * paper
+    return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
+
+
+def _draw_plan(ax, window, plan: np.ndarray, beams: np.ndarray, supports: np.ndarray, labels) -> None:
+    """Beams, supports and placed ids (texts, points, anchors, placement, colours) in ``window``."""
+    from matplotlib.collections import LineCollection
+
+    ax.set_xlim(window[0], window[2])
+    ax.set_ylim(window[1], window[3])
     ax.add_collection(LineCollection(plan[beams], colors="k", linewidths=0.6))
-    font = float(np.clip(240 / np.sqrt(max(len(plan), 1)), 1.0, 7.0))
-    # no label outside the frame, on the dimensions or on the scale bar
-    text = 12.0 * scale      # 8 pt dimension text with room
-    obstacles = np.array([
-        [lo[0], lo[1] - gap - 0.2 * text, hi[0], lo[1] - gap + text],
-        [lo[0] - gap - text, lo[1], lo[0] - gap + 0.2 * text, hi[1]],
-        [x_lim[0], y_lim[0], x_lim[0] + 90.0 * scale, y_lim[0] + 16.0 * scale]])
-    texts, points, anchor, placement = _label_places(plan, beams, centres, font, scale,
-                                                     (x_lim[0], y_lim[0], x_lim[1], y_lim[1]), obstacles)
-    colours = np.repeat(["tab:green", "tab:blue", "tab:purple"], [len(plan), len(beams), len(centres)])
+    texts, points, anchor, placement, colours = labels
     leaders = np.flatnonzero(placement.leader)
     if len(leaders):
         ax.add_collection(LineCollection(np.stack([anchor[leaders], placement.centre[leaders]], axis=1),
@@ -277,18 +289,148 @@ def _write_pdf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.nd
                 va="center_baseline")
     if len(supports):
         ax.plot(plan[supports, 0], plan[supports, 1], "^", color="tab:red", markersize=6, linestyle="none")
+
+
+def _label_colours(plan, beams, centres) -> np.ndarray:
+    return np.repeat(["tab:green", "tab:blue", "tab:purple"], [len(plan), len(beams), len(centres)])
+
+
+def _write_pdf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, supports: np.ndarray,
+               title: list[str]) -> Path:
+    """plan.pdf: the whole plan on its first A3 sheet, with the overall dimensions and the ids that
+    have room; where some have none, the plan again in tiles, one sheet each at a larger scale,
+    each id on the sheet of the tile its part's anchor is in (with a key plan of the tiles)."""
+    from matplotlib.backends.backend_pdf import PdfPages
+
+    lo, hi = plan.min(axis=0), plan.max(axis=0)
+    span = hi - lo
+    gap = 0.06 * span.max()
+    # a true scale: the frame shows scale x its paper size of the plan, centred
+    paper = np.array([_A3_MM[0] * _FRAME[2], _A3_MM[1] * _FRAME[3]])
+    scale = drawing_scale(span + 3 * gap, paper)
+    window = _window(0.5 * (lo + hi) - 0.5 * gap, scale)  # the dimensions take 2 gaps left and under, 1 beyond
+    font = float(np.clip(240 / np.sqrt(max(len(plan), 1)), 1.0, 7.0))
+    # no label outside the frame, on the dimensions or on the scale bar
+    text = 12.0 * scale      # 8 pt dimension text with room
+    obstacles = np.array([
+        [lo[0], lo[1] - gap - 0.2 * text, hi[0], lo[1] - gap + text],
+        [lo[0] - gap - text, lo[1], lo[0] - gap + 0.2 * text, hi[1]],
+        [window[0], window[1], window[0] + 90.0 * scale, window[1] + 16.0 * scale]])
+    texts, points, anchor, placement = _label_places(plan, beams, centres, font, scale, window, obstacles)
+    colours = _label_colours(plan, beams, centres)
+    tiles = _tiles(plan, beams, centres, lo, hi, len(texts), int(placement.placed.sum())) \
+        if placement.left_out else []
+    notes = [f"Scale 1:{scale} on A3 ({_A3_MM[0]} x {_A3_MM[1]} mm)"]
+    if tiles:
+        sheets = f"sheet 1 of {len(tiles) + 1}"
+        notes.append(f"{placement.left_out} of {len(texts)} ids left out here: each id is on one of sheets "
+                     f"2-{len(tiles) + 1}")
+        left_out = sum(t["placement"].left_out for t in tiles)
+        if left_out:
+            notes.append(f"{left_out} ids left out for space on those too (plan.dxf and the lists have every part)")
+    elif placement.left_out:
+        sheets = "sheet 1 of 1"
+        notes.append(f"{placement.left_out} of {len(texts)} ids left out for space (plan.dxf and the lists "
+                     "have every part)")
+    else:
+        sheets = "sheet 1 of 1"
+    fig, ax = _sheet([*title, *notes, sheets])
+    _draw_plan(ax, window, plan, beams, supports, (texts, points, anchor, placement, colours))
     ax.annotate("", xy=(lo[0], lo[1] - gap), xytext=(hi[0], lo[1] - gap), arrowprops={"arrowstyle": "<->", "lw": 0.8})
     ax.text(0.5 * (lo[0] + hi[0]), lo[1] - gap, f"{span[0]:.0f}", ha="center", va="bottom", fontsize=8)
     ax.annotate("", xy=(lo[0] - gap, lo[1]), xytext=(lo[0] - gap, hi[1]), arrowprops={"arrowstyle": "<->", "lw": 0.8})
     ax.text(lo[0] - gap, 0.5 * (lo[1] + hi[1]), f"{span[1]:.0f}", ha="right", va="center", rotation=90, fontsize=8)
+    for tile in tiles:   # the tiles' edges; their sheets' key plans say which is which
+        ax.add_patch(_outline(tile["core"], "tab:red", zorder=5))
     _scale_bar(ax, scale)
-    notes = [f"Scale 1:{scale} on A3 ({_A3_MM[0]} x {_A3_MM[1]} mm)"]
-    if placement.left_out:
-        notes.append(f"{placement.left_out} of {len(texts)} ids left out for space (plan.dxf and the lists "
-                     "have every part)")
-    fig.text(0.96, 0.03, "\n".join([*title, *notes]),
-             ha="right", va="bottom", fontsize=9,
-             bbox={"boxstyle": "square", "facecolor": "white", "edgecolor": "black"})
     with atomic_path(target) as tmp:
-        fig.savefig(tmp, format="pdf", metadata={"CreationDate": file_date()})
+        with PdfPages(tmp, metadata={"CreationDate": file_date()}) as pdf:
+            pdf.savefig(fig)
+            for k, tile in enumerate(tiles):
+                pdf.savefig(_tile_sheet(tile, k + 2, len(tiles) + 1, plan, beams, supports, colours, title,
+                                        [t["core"] for t in tiles]))
     return target
+
+
+def _outline(box, colour: str, zorder: float = 1.0):
+    """A dashed rectangle round ``box`` (x0, y0, x1, y1)."""
+    from matplotlib.patches import Rectangle
+
+    x0, y0, x1, y1 = box
+    return Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, edgecolor=colour, linewidth=0.8, linestyle="--",
+                     zorder=zorder)
+
+
+def _tiles(plan, beams, centres, lo, hi, n_ids: int, n_placed: int) -> list[dict]:
+    """The plan cut into tiles of the frame's shape, as few as give every id room at TILE_POINTS
+    (down to TILE_MIN_POINTS), at most MAX_TILE_SHEETS: each tile's core (x0, y0, x1, y1, mm),
+    scale, window and the placement of the ids whose anchor is in its core. Empty tiles are dropped."""
+    mid = 0.5 * (plan[beams[:, 0]] + plan[beams[:, 1]])
+    anchor = np.concatenate([plan, mid, centres.reshape(-1, 2)])
+    paper = np.array([_A3_MM[0] * _FRAME[2], _A3_MM[1] * _FRAME[3]])
+    span = np.maximum(hi - lo, 1e-9)
+
+    def rows_for(columns: int) -> int:
+        return max(1, int(np.ceil(span[1] / (span[0] / columns * paper[1] / paper[0]) - 1e-9)))
+
+    def cut(columns: int) -> list[dict]:
+        rows = rows_for(columns)
+        width, height = span[0] / columns, span[1] / rows
+        column = np.minimum(((anchor[:, 0] - lo[0]) / width).astype(int), columns - 1)
+        row = np.minimum(((anchor[:, 1] - lo[1]) / height).astype(int), rows - 1)
+        tiles = []
+        for r in range(rows - 1, -1, -1):          # top row first, as a drawing set is read
+            for c in range(columns):
+                keep = (column == c) & (row == r)
+                if not keep.any():
+                    continue
+                core = (lo[0] + c * width, lo[1] + r * height, lo[0] + (c + 1) * width, lo[1] + (r + 1) * height)
+                scale = drawing_scale(1.25 * np.array([width, height]), paper)
+                window = _window(0.5 * (np.array(core[:2]) + np.array(core[2:])), scale)
+                obstacles = np.array([[window[0], window[1], window[0] + 90.0 * scale, window[1] + 16.0 * scale]])
+                labels = _label_places(plan, beams, centres, TILE_POINTS, scale, window, obstacles,
+                                       min_font=TILE_MIN_POINTS, keep=keep)
+                tiles.append({"core": core, "scale": scale, "window": window, "keep": keep, "labels": labels,
+                              "placement": labels[3]})
+        return tiles
+
+    # the area the ids need grows as the type's square: from the first sheet's share, a first guess
+    columns = max(2, int(np.ceil(np.sqrt(n_ids / max(n_placed, 1) * 1.5))))
+    while columns > 2 and columns * rows_for(columns) > MAX_TILE_SHEETS:
+        columns -= 1
+    while True:
+        tiles = cut(columns)
+        if not sum(t["placement"].left_out for t in tiles) or (columns + 1) * rows_for(columns + 1) > MAX_TILE_SHEETS:
+            return tiles
+        columns += 1
+
+
+def _tile_sheet(tile: dict, number: int, count: int, plan, beams, supports, colours, title: list[str], cores):
+    """One tile of the plan on an A3 sheet, its core's edges dashed, with a key plan of the tiles."""
+    texts, points, where, placement = tile["labels"]
+    notes = [f"Part of the plan: tile {number - 1} of {count - 1}, scale 1:{tile['scale']} on A3 "
+             f"({_A3_MM[0]} x {_A3_MM[1]} mm)", f"sheet {number} of {count}"]
+    if placement.left_out:
+        notes.insert(1, f"{placement.left_out} of {len(texts)} ids of this tile left out for space")
+    fig, ax = _sheet([*title, *notes])
+    _draw_plan(ax, tile["window"], plan, beams, supports,
+               (texts, points, where, placement, colours[np.flatnonzero(tile["keep"])]))
+    ax.add_patch(_outline(tile["core"], "tab:red"))
+    _scale_bar(ax, tile["scale"])
+    # the key plan: every tile, this one filled
+    from matplotlib.collections import LineCollection
+
+    key = fig.add_axes((0.04, 0.01, 0.16, 0.10))
+    key.axis("off")
+    key.set_aspect("equal")
+    key.add_collection(LineCollection(plan[beams], colors="0.7", linewidths=0.2))
+    for k, core in enumerate(cores):
+        box = _outline(core, "tab:red" if k + 2 == number else "0.4")
+        if k + 2 == number:
+            box.set_fill(True)
+            box.set_alpha(0.35)
+        key.add_patch(box)
+    lo, hi = plan.min(axis=0), plan.max(axis=0)
+    key.set_xlim(lo[0], hi[0])
+    key.set_ylim(lo[1], hi[1])
+    return fig

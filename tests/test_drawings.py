@@ -83,24 +83,26 @@ def test_plans_are_drawn_at_the_smallest_standard_scale_that_fits(extent, paper,
     assert all(e / scale <= p for e, p in zip(extent, paper))
 
 
-def _pdf_glyphs(path) -> list[tuple[str, tuple[float, float, float, float]]]:
-    """Every character drawn in a PDF with its box (pt), read by pdfminer.six (not by matplotlib)."""
+def _pdf_glyphs(path) -> list[list[tuple[str, tuple[float, float, float, float]]]]:
+    """Every character drawn on each page of a PDF with its box (pt), read by pdfminer.six (not by
+    matplotlib): one list per page."""
     from pdfminer.high_level import extract_pages
     from pdfminer.layout import LTChar, LTComponent
 
-    glyphs = []
+    pages = []
 
-    def walk(item):
+    def walk(item, glyphs):
         if isinstance(item, LTChar):
             if item.get_text().strip():
                 glyphs.append((item.get_text(), item.bbox))
         elif hasattr(item, "__iter__") and isinstance(item, LTComponent) or hasattr(item, "_objs"):
             for child in item:
-                walk(child)
+                walk(child, glyphs)
 
     for page in extract_pages(str(path), laparams=None):   # the characters as drawn, not grouped
-        walk(page)
-    return glyphs
+        pages.append([])
+        walk(page, pages[-1])
+    return pages
 
 
 def _pdf_words(glyphs) -> list[str]:
@@ -121,36 +123,50 @@ def _pdf_words(glyphs) -> list[str]:
     return words
 
 
-@pytest.mark.parametrize("rows, cols", [(3, 4), (8, 10), pytest.param(16, 20, marks=pytest.mark.slow)])
-def test_plan_pdf_labels_do_not_overlap(tmp_path, rows, cols):
-    """No two characters of the plan PDF overlap (so no two ids, dimensions or title lines do), every
-    id that is drawn is drawn once, and an id left out for space is counted in the title block."""
-    pytest.importorskip("pdfminer")
-    mesh = hex_polymesh(rows, cols)
-    _, pdf_path = write_plan_drawings(mesh, tmp_path, project_name="Labels")
-    glyphs = _pdf_glyphs(pdf_path)
-    boxes = np.array([b for _, b in glyphs])
-    assert len(boxes) > 100
-    shrink = 0.15 * np.minimum(boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1])[:, None]
-    inner = np.concatenate([boxes[:, :2] + shrink, boxes[:, 2:] - shrink], axis=1)
+def _overlapping_glyphs(glyphs) -> list:
+    """Pairs of characters whose boxes, shrunk by 15 % of their smaller side, still overlap."""
     from scipy.spatial import cKDTree
 
+    boxes = np.array([b for _, b in glyphs])
+    shrink = 0.15 * np.minimum(boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1])[:, None]
+    inner = np.concatenate([boxes[:, :2] + shrink, boxes[:, 2:] - shrink], axis=1)
     centre, half = 0.5 * (inner[:, :2] + inner[:, 2:]), 0.5 * (inner[:, 2:] - inner[:, :2])
     near = np.array(sorted(cKDTree(centre).query_pairs(2.0 * float(np.linalg.norm(half, axis=1).max()))),
                     dtype=np.int64).reshape(-1, 2)
     a, b = near[:, 0], near[:, 1]
     apart = (np.abs(centre[a] - centre[b]) >= half[a] + half[b]).any(axis=1)
-    pairs = near[~apart]
-    assert len(pairs) == 0, [(glyphs[i], glyphs[j]) for i, j in pairs[:5]]
-    words = _pdf_words(glyphs)
-    ids = [w for w in words if len(w) == 5 and w[0] in "NBP" and w[1:].isdigit()]
-    assert len(ids) == len(set(ids)), "an id drawn twice"
-    total = mesh.n_nodes + len(mesh.edges) + mesh.n_faces
-    text = " ".join(words)
-    if len(ids) < total:
-        assert f"of {total} ids left out for space" in text
+    return [(glyphs[i], glyphs[j]) for i, j in near[~apart]]
+
+
+def _ids(words: list[str]) -> list[str]:
+    return [w for w in words if len(w) == 5 and w[0] in "NBP" and w[1:].isdigit()]
+
+
+@pytest.mark.parametrize("rows, cols", [(3, 4), (8, 10), pytest.param(30, 40, marks=pytest.mark.slow)])
+def test_plan_pdf_labels_do_not_overlap(tmp_path, rows, cols):
+    """No two characters on a page of the plan PDF overlap (so no two ids, dimensions or title lines
+    do), and every id is drawn: on the first sheet, or, where it has no room there, once on the
+    sheets of the plan's tiles, which the first sheet's title block names."""
+    pytest.importorskip("pdfminer")
+    mesh = hex_polymesh(rows, cols)
+    _, pdf_path = write_plan_drawings(mesh, tmp_path, project_name="Labels")
+    pages = _pdf_glyphs(pdf_path)
+    assert sum(len(g) for g in pages) > 100
+    for number, glyphs in enumerate(pages):
+        assert _overlapping_glyphs(glyphs) == [], f"sheet {number + 1}"
+    words = [_pdf_words(glyphs) for glyphs in pages]
+    first = _ids(words[0])
+    assert len(first) == len(set(first)), "an id drawn twice"
+    expected = ([node_id(i) for i in range(mesh.n_nodes)] + [beam_id(k) for k in range(len(mesh.edges))]
+                + [panel_id(f) for f in range(mesh.n_faces)])
+    text = " ".join(words[0])
+    assert f"sheet 1 of {len(pages)}" in text
+    if len(pages) == 1:
+        assert sorted(first) == sorted(expected) and "left out" not in text
     else:
-        assert "left out" not in text
+        assert f"ids left out here: each id is on one of sheets 2-{len(pages)}" in text
+        tiles = [i for w in words[1:] for i in _ids(w)]
+        assert sorted(tiles) == sorted(expected), "each id once on the tile sheets"
 
 
 def _jittered(rows: int, cols: int, share: float, seed: int):
