@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from engine.en1993 import ChecksMethod
+from engine.errors import InputError
 from engine.field import AnisotropyMap, FieldSettings, SizeMap
 from engine.optimize import OptimizeSettings
 from engine.protocol import ImperfectionShape, ProtocolSettings
@@ -202,3 +203,59 @@ def test_choices_are_the_engines_types(tmp_path):
         is SizeMap.LINEAR
     message = _error(tmp_path, '[surface]\ntemplate = "cap"\n[field]\nsize_map = "cubic"\n')
     assert "field.size_map = 'cubic': not allowed; expected one of 'energy' or 'linear'" in message
+
+
+#: (TOML table, its values, the key the error names, settings that refuse the same in their own units):
+#: a project file's mistakes are caught by the schema, naming the key, before the settings' own checks
+#: (which stay for callers of the engine and of fabrication).
+_REFUSED = [
+    ("field", {"max_size_ratio": 0.5}, "field.max_size_ratio", FieldSettings, {"max_size_ratio": 0.5}),
+    ("field", {"max_aspect": 0.9}, "field.max_aspect", FieldSettings, {"max_aspect": 0.9}),
+    ("field", {"opposite_sign_anisotropy": 0.5}, "field.opposite_sign_anisotropy", FieldSettings,
+     {"opposite_sign_anisotropy": 0.5}),
+    ("field", {"clamp_percentiles": [60.0, 40.0]}, "field.clamp_percentiles", FieldSettings,
+     {"clamp_percentiles": (60.0, 40.0)}),
+    ("field", {"smoothing_iterations": -1}, "field.smoothing_iterations", FieldSettings, {"smoothing_iterations": -1}),
+    ("remesh", {"n_cells": 3}, "remesh.n_cells", RemeshSettings, {"n_cells": 3}),
+    ("remesh", {"mean_beam_length": -0.5}, "remesh.mean_beam_length", RemeshSettings, {"mean_beam_length": -0.5}),
+    ("remesh", {"total_length": 0.0}, "remesh.total_length", RemeshSettings, {"total_length": 0.0}),
+    ("remesh", {"lloyd_iterations": -1}, "remesh.lloyd_iterations", RemeshSettings,
+     {"n_cells": 100, "lloyd_iterations": -1}),
+    ("optimize", {"closeness_weight": -1.0}, "optimize.closeness_weight", OptimizeSettings, {"closeness_weight": -1.0}),
+    ("optimize", {"iterations": -5}, "optimize.iterations", OptimizeSettings, {"iterations": -5}),
+    ("optimize", {"planarity_iterations": 2.5}, "optimize.planarity_iterations", OptimizeSettings,
+     {"planarity_iterations": 2.5}),
+    ("optimize", {"planarity_tolerance": 0.0}, "optimize.planarity_tolerance", OptimizeSettings,
+     {"planarity_tolerance": 0.0}),
+    ("fabrication.panels", {"thickness": 0.0}, "fabrication.panels.thickness", PanelSettings, {"thickness_mm": 0.0}),
+    ("fabrication.panels", {"density": -1.0}, "fabrication.panels.density", PanelSettings, {"density": -1.0}),
+    ("fabrication.panels", {"clearance": "-1 mm"}, "fabrication.panels.clearance", PanelSettings,
+     {"clearance_mm": -1.0}),
+    ("fabrication.panels", {"hole_diameter": "-1 mm"}, "fabrication.panels.hole_diameter", PanelSettings,
+     {"hole_diameter_mm": -1.0}),
+    ("fabrication.panels", {"hole_inset": "-1 mm"}, "fabrication.panels.hole_inset", PanelSettings,
+     {"hole_inset_mm": -1.0}),
+    ("fabrication.panels", {"planarity_tolerance": "-1 mm"}, "fabrication.panels.planarity_tolerance", PanelSettings,
+     {"planarity_tolerance_mm": -1.0}),
+    ("fabrication.sheets", {"width": 0.0, "height": 0.6}, "fabrication.sheets.width", SheetSettings,
+     {"width_mm": 0.0}),
+    ("fabrication.sheets", {"spacing": "-1 mm"}, "fabrication.sheets.spacing", SheetSettings, {"spacing_mm": -1.0}),
+    ("fabrication.sheets", {"margin": "-1 mm"}, "fabrication.sheets.margin", SheetSettings, {"margin_mm": -1.0}),
+    ("fabrication.sheets", {"margin": "2 m"}, "fabrication.sheets: margin = 2000 mm leaves no room", SheetSettings,
+     {"margin_mm": 2000.0, "width_mm": 6000.0, "height_mm": 3210.0}),
+]
+
+
+@pytest.mark.parametrize("table, values, key, settings, same", _REFUSED, ids=[r[2].split(":")[0] + str(i)
+                                                                              for i, r in enumerate(_REFUSED)])
+def test_the_schema_refuses_what_the_settings_refuse(table, values, key, settings, same):
+    with pytest.raises(InputError):
+        settings(**same)
+    data: dict = {"surface": {"template": "mockup"}}
+    node = data
+    for part in table.split("."):
+        node = node.setdefault(part, {})
+    node.update(values)
+    with pytest.raises(ConfigError) as info:
+        parse_project(data)
+    assert key in str(info.value)

@@ -11,7 +11,9 @@ The sections of the engine's and fabrication's settings (field, remesh, optimize
 fabrication.joints/beams/panels/sheets) build them with ``to_settings()``: metres become the
 fabrication's millimetres there and nowhere else, and where a setting has a default in its
 dataclass the section's default is read from it (``_default_of``), so the two cannot drift.
-Choices use the engine's own types (SizeMap, JointKind, ...).
+Choices use the engine's own types (SizeMap, JointKind, ...). Every value a project file gives is
+checked here, naming its key; the dataclasses' own checks stay for callers of the engine and of
+fabrication that bypass the project file.
 """
 
 from __future__ import annotations
@@ -299,6 +301,14 @@ class FieldConfig(_Section):
     direction_smoothing_iterations: int = _default_of(FieldSettings, "direction_smoothing_iterations", ge=0)
     symmetry_planes: list[SymmetryPlane] = Field(default_factory=list, max_length=2)
 
+    @field_validator("clamp_percentiles")
+    @classmethod
+    def _percentiles(cls, value: tuple[float, float]) -> tuple[float, float]:
+        low, high = value
+        if not 0.0 <= low < high <= 100.0:
+            raise ValueError("give [low, high] percentiles of the force level with 0 <= low < high <= 100")
+        return value
+
     def to_settings(self) -> FieldSettings:
         """The engine's field settings."""
         return FieldSettings(
@@ -317,8 +327,8 @@ class RemeshConfig(_Section):
     (a grid_coarsened finding says so); false keeps the cells asked for, and the joints clash."""
 
     n_cells: int | None = Field(None, ge=4)
-    mean_beam_length: Length | None = None
-    total_length: Length | None = None
+    mean_beam_length: Length | None = Field(None, gt=0.0)
+    total_length: Length | None = Field(None, gt=0.0)
     lloyd_iterations: int = _default_of(RemeshSettings, "lloyd_iterations", ge=0)
     seed: int = _default_of(RemeshSettings, "seed")
     coarsen_for_joints: bool = True
@@ -490,13 +500,13 @@ class PanelsConfig(_Section):
     printed sockets, 10 mm laminated glass (2500 kg/m^3) with steel joints."""
 
     enabled: bool = True
-    thickness: Length | None = None
+    thickness: Length | None = Field(None, gt=0.0)
     material: str | None = None
-    density: Density | None = None
-    clearance: Length = _default_of(PanelSettings, "clearance_mm", per=MM)
-    hole_diameter: Length = _default_of(PanelSettings, "hole_diameter_mm", per=MM)
-    hole_inset: Length = _default_of(PanelSettings, "hole_inset_mm", per=MM)
-    planarity_tolerance: Length = _default_of(PanelSettings, "planarity_tolerance_mm", per=MM)
+    density: Density | None = Field(None, gt=0.0)
+    clearance: Length = _default_of(PanelSettings, "clearance_mm", per=MM, ge=0.0)
+    hole_diameter: Length = _default_of(PanelSettings, "hole_diameter_mm", per=MM, ge=0.0)
+    hole_inset: Length = _default_of(PanelSettings, "hole_inset_mm", per=MM, ge=0.0)
+    planarity_tolerance: Length = _default_of(PanelSettings, "planarity_tolerance_mm", per=MM, ge=0.0)
     split_nonplanar: bool = _default_of(PanelSettings, "split_nonplanar")
 
     def to_settings(self) -> PanelSettings:
@@ -512,11 +522,11 @@ class SheetsConfig(_Section):
     panel goes on the first size it fits. Unset, they follow the joints: a 1200 x 600 mm laser bed
     with printed sockets; glass from jumbo 6000 x 3210 mm sheets with steel joints."""
 
-    width: Length | None = None
-    height: Length | None = None
+    width: Length | None = Field(None, gt=0.0)
+    height: Length | None = Field(None, gt=0.0)
     sizes: list[Annotated[list[Length], Field(min_length=2, max_length=2)]] = Field(default_factory=list)
-    spacing: Length = _default_of(SheetSettings, "spacing_mm", per=MM)
-    margin: Length = _default_of(SheetSettings, "margin_mm", per=MM)
+    spacing: Length = _default_of(SheetSettings, "spacing_mm", per=MM, ge=0.0)
+    margin: Length = _default_of(SheetSettings, "margin_mm", per=MM, ge=0.0)
     rotations: bool = _default_of(SheetSettings, "rotations")
 
     def to_settings(self) -> list[SheetSettings]:
@@ -607,6 +617,10 @@ class Project(_Section):
             if min(size) <= 0:
                 raise ValueError(f"fabrication.sheets.sizes: {size} must be two positive lengths")
         width, height = (s.width, s.height) if s.width is not None else follow["sheet"]
+        for w, h in [(width, height)] + [tuple(size) for size in s.sizes]:
+            if 2 * (MM * s.margin) >= min(MM * w, MM * h):  # as SheetSettings checks it
+                raise ValueError(f"fabrication.sheets: margin = {_mm(s.margin)} leaves no room on a "
+                                 f"{MM * w:g} x {MM * h:g} mm sheet")
         panels = p.model_copy(update={
             "material": p.material if p.material is not None else follow["material"],
             "thickness": p.thickness if p.thickness is not None else follow["thickness"],
