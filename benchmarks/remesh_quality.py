@@ -36,8 +36,6 @@ from engine.field import guiding_field  # noqa: E402
 from engine.shell import ShellMaterial, analyse_shell, shell_nodal_loads  # noqa: E402
 from engine.voronoi import remesh  # noqa: E402
 from workflow.config import load_project, project_from_surface  # noqa: E402
-from workflow.stages.field import field_settings  # noqa: E402
-from workflow.stages.remesh import remesh_settings  # noqa: E402
 from workflow.stages.shell import notional_thickness, shell_load_case  # noqa: E402
 from workflow.stages.surface import build_surface, resolve_loads, resolve_supports  # noqa: E402
 from workflow.surface_io import read_surface  # noqa: E402
@@ -56,10 +54,10 @@ def prepare(project):
     material = ShellMaterial(E=project.shell.E, nu=project.shell.nu, density=project.shell.density)
     loads = shell_nodal_loads(mesh, case, thickness=thickness, density=project.shell.density)
     shell = analyse_shell(mesh, supports, loads, thickness=thickness, material=material)
-    field = guiding_field(mesh, shell.vertex_membrane_forces, field_settings(project))
+    field = guiding_field(mesh, shell.vertex_membrane_forces, project.field.to_settings())
     support_vertices = np.zeros(mesh.n_vertices, dtype=bool)
     support_vertices[supports.nodes] = True
-    return mesh, field, support_vertices, remesh_settings(project)
+    return mesh, field, support_vertices, project.remesh.to_settings()
 
 
 def run_pipeline(project, seed: int | None = None, prepared=None) -> tuple[dict, float, int]:

@@ -63,21 +63,16 @@ def run_panels(out: Path) -> tuple[list, list]:
     import json
 
     from engine.mesh import PolyMesh
-    from fabrication.panels import PanelSettings
     from workflow.config import Project
-    from workflow.stages.fabrication import MM, sheet_stock
     from workflow.stages.optimize import read_panels_obj
     from workflow.stages.polymesh_io import read_polymesh_obj
 
     project = Project.model_validate(json.loads((out / "manifest.json").read_text())["config"])
     grid = read_polymesh_obj(out / "05-optimize" / "gridshell.obj")
     pieces = read_panels_obj(out / "05-optimize" / "panels.obj")
-    p = project.fabrication.panels
-    settings = PanelSettings(thickness_mm=MM * p.thickness, clearance_mm=MM * p.clearance,
-                             hole_diameter_mm=MM * p.hole_diameter, hole_inset_mm=MM * p.hole_inset,
-                             planarity_tolerance_mm=MM * p.planarity_tolerance, split_nonplanar=p.split_nonplanar)
+    settings = project.fabrication.panels.to_settings()
     panels = flatten_panels(PolyMesh(nodes=grid.nodes, faces=tuple(x.loop for x in pieces)), settings)
-    return panels, sheet_stock(project)
+    return panels, project.fabrication.sheets.to_settings()
 
 
 def _without_bound(self, radius, rebuild, settings):

@@ -29,6 +29,7 @@ interaction factors 1) for other materials and for ``[analysis] checks = "simpli
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -37,7 +38,10 @@ from .checks import buckling_reduction
 from .sections import Material
 
 __all__ = ["EndForces", "TubeChecks", "chs_checks", "simplified_checks", "buckling_alpha", "section_class",
-           "CHECKED", "NOT_CHECKED"]
+           "CHECKED", "NOT_CHECKED", "ChecksMethod"]
+
+#: The member checks: EN 1993-1-1 (:func:`chs_checks`) or the stated simplification (:func:`simplified_checks`).
+ChecksMethod = Literal["en1993", "simplified"]
 
 CHECKED = ("section class (Table 5.2)", "axial force with biaxial bending (6.2.9)", "shear with torsion (6.2.6-6.2.8)",
            "flexural buckling (6.3.1)", "compression with biaxial bending, Annex B (6.3.3)")

@@ -13,13 +13,17 @@ from __future__ import annotations
 from collections.abc import Callable
 from concurrent.futures import Executor
 from dataclasses import dataclass, field, replace
+from typing import Literal
 
 import numpy as np
 
 from .supports import Supports
 
-__all__ = ["ImperfectionCase", "ProtocolSettings", "ProtocolResult", "imperfection_shapes", "nonlinear_path",
-           "run_protocol"]
+__all__ = ["ImperfectionCase", "ImperfectionShape", "ProtocolSettings", "ProtocolResult", "imperfection_shapes",
+           "nonlinear_path", "run_protocol"]
+
+#: The imperfect geometries: the linear (LS) and non-linear (GNL) shapes and the first three buckling modes.
+ImperfectionShape = Literal["linear", "nonlinear", "mode1", "mode2", "mode3"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -29,7 +33,7 @@ class ProtocolSettings:
 
     n_modes: int = 6
     amplitude: float = 0.01
-    shapes: tuple[str, ...] = ("linear", "nonlinear", "mode1", "mode2", "mode3")
+    shapes: tuple[ImperfectionShape, ...] = ("linear", "nonlinear", "mode1", "mode2", "mode3")
     nonlinear: bool = True
     max_load_factor: float = 10.0
     max_steps: int = 80

@@ -8,7 +8,6 @@ to the plane of the beam and the mean of its end nodes' axes (surface normals). 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -19,22 +18,9 @@ from engine.parts import beam_id, node_id
 
 from .files import atomic_path, stamp_step, stamp_zip
 from .joints import JointSettings, joint_geometry, joint_setback_mm, smallest_angle
+from .settings import BeamSettings
 
 __all__ = ["BeamSettings", "cut_list", "write_cut_list", "write_beams_step", "roll_angles_deg"]
-
-
-@dataclass(frozen=True, kw_only=True)
-class BeamSettings:
-    """Profile and material names, density (kg/m^3), stock bar length and saw kerf (mm), section
-    area (m^2) for the mass, and the outer size (mm) for the solids and set-backs."""
-
-    profile_name: str
-    material_name: str
-    density: float
-    stock_length_mm: float = 6000.0
-    kerf_mm: float = 3.0
-    area_m2: float = 0.0
-    outer_size_mm: float = 0.0
 
 
 def roll_angles_deg(polymesh: PolyMesh, normals: np.ndarray) -> np.ndarray:

@@ -25,6 +25,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -36,7 +37,7 @@ from .files import atomic_path, stamp_step
 from .step_assembly import StepAssemblyWriter, step_part, write_step_part
 from .workers import exit_with_parent
 
-__all__ = ["JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "joint_hub_radius_mm",
+__all__ = ["JointKind", "JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "joint_hub_radius_mm",
            "joint_sleeve_mm", "smallest_angle", "build_joint", "build_joints",
            "JointsInBackground", "joint_name"]
 
@@ -47,11 +48,15 @@ STEEL_HUB_RADIUS = 0.75
 STEEL_PLATE_ENGAGEMENT = 1.0
 
 
+#: Printed sockets (small tubes) or steel hub nodes with fin plates.
+JointKind = Literal["socket", "steel"]
+
+
 @dataclass(frozen=True, kw_only=True)
 class JointSettings:
     """Dimensions in mm. hub_radius_mm / sleeve_length_mm None: derived from the beam size."""
 
-    kind: str = "socket"
+    kind: JointKind = "socket"
     clearance_mm: float = 0.3
     wall_mm: float = 2.0
     min_wall_mm: float = 1.5

@@ -41,6 +41,7 @@ from shapely.geometry import MultiPoint, box
 from engine.errors import InputError
 from engine.parts import sheet_id
 from fabrication.files import atomic_path, save_dxf
+from fabrication.settings import SheetSettings
 
 if TYPE_CHECKING:  # pragma: no cover
     from fabrication.panels import Panel, PanelSettings
@@ -51,28 +52,6 @@ __all__ = ["SheetSettings", "Placement", "SheetNesting", "StockNesting", "nest_s
 
 #: buffer arcs are drawn with this many segments per quarter circle
 _QUAD_SEGS = 4
-
-
-@dataclass(frozen=True, kw_only=True)
-class SheetSettings:
-    """Sheet size, gap between parts, border margin (mm) and whether parts may rotate."""
-
-    width_mm: float = 1200.0
-    height_mm: float = 600.0
-    spacing_mm: float = 4.0
-    margin_mm: float = 10.0
-    rotations: bool = True
-
-    def __post_init__(self) -> None:
-        for name in ("width_mm", "height_mm"):
-            if not getattr(self, name) > 0:
-                raise InputError(f"sheet setting {name} = {getattr(self, name)!r} must be positive")
-        for name in ("spacing_mm", "margin_mm"):
-            if not getattr(self, name) >= 0:
-                raise InputError(f"sheet setting {name} = {getattr(self, name)!r} must be zero or positive")
-        if 2 * self.margin_mm >= min(self.width_mm, self.height_mm):
-            raise InputError(f"sheet margin {self.margin_mm} mm leaves no room on a "
-                             f"{self.width_mm} x {self.height_mm} mm sheet")
 
 
 @dataclass(frozen=True)

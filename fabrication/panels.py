@@ -32,6 +32,7 @@ from engine.errors import InputError
 from engine.mesh import PolyMesh
 from engine.parts import panel_id, sheet_id
 from fabrication.files import save_dxf, write_text_atomic
+from fabrication.settings import PanelSettings
 
 if TYPE_CHECKING:  # pragma: no cover
     from fabrication.nesting_sheets import SheetNesting
@@ -44,28 +45,6 @@ __all__ = ["PanelSettings", "Panel", "flatten_panels", "write_panel_dxfs", "writ
 LAYERS = {"CUT": 1, "ENGRAVE": 5, "DRILL": 3, "NOTES": 8}
 #: Text style for engraving: a single-stroke SHX font, as laser and CNC software expect.
 ENGRAVE_STYLE = "SINGLESTROKE"
-
-
-@dataclass(frozen=True, kw_only=True)
-class PanelSettings:
-    """Panel material and cutting settings (lengths in mm, density in kg/m^3)."""
-
-    thickness_mm: float = 3.0
-    material_name: str = "acrylic"
-    density: float = 1190.0
-    clearance_mm: float = 2.0
-    hole_diameter_mm: float = 0.0
-    hole_inset_mm: float = 10.0
-    planarity_tolerance_mm: float = 2.0
-    split_nonplanar: bool = False
-
-    def __post_init__(self) -> None:
-        for name in ("thickness_mm", "density"):
-            if not getattr(self, name) > 0:
-                raise InputError(f"panel setting {name} = {getattr(self, name)!r} must be positive")
-        for name in ("clearance_mm", "hole_diameter_mm", "hole_inset_mm", "planarity_tolerance_mm"):
-            if not getattr(self, name) >= 0:
-                raise InputError(f"panel setting {name} = {getattr(self, name)!r} must be zero or positive")
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -6,6 +6,16 @@ from pathlib import Path
 
 import pytest
 
+from engine.en1993 import ChecksMethod
+from engine.errors import InputError
+from engine.field import AnisotropyMap, FieldSettings, SizeMap
+from engine.optimize import OptimizeSettings
+from engine.protocol import ImperfectionShape, ProtocolSettings
+from engine.voronoi import RemeshSettings
+from fabrication.joints import JointKind, JointSettings
+from fabrication.limits import BuildLimits
+from fabrication.settings import BeamSettings, PanelSettings, SheetSettings
+from workflow import config
 from workflow.config import ConfigError, load_project, parse_project
 from workflow.units import to_si
 
@@ -106,3 +116,146 @@ def test_relative_surface_path_resolves_against_project_file(tmp_path):
     path = tmp_path / "sub" / "p.toml"
     path.write_text('[surface]\nfile = "roof.obj"\n')
     assert Path(load_project(path).surface.file) == (tmp_path / "sub" / "roof.obj").resolve()
+
+
+# ----------------------------------------------------------------------------- one schema per setting
+
+def _socket_project():
+    """The mock-up with printed sockets, whose panels and sheets are fabrication's own defaults."""
+    return parse_project({"surface": {"template": "mockup"}, "fabrication": {"joints": {"kind": "socket"}}})
+
+
+_SPAN = 30.0
+_TUBE = {"profile_name": "CHS 48.3x3.2", "material_name": "steel_s355", "density": 7850.0, "area_m2": 4.5e-4,
+         "outer_size_mm": 48.3}
+
+#: Per section with to_settings: (its class, the default section's settings, the settings' own defaults
+#: with only what to_settings is given or maps on purpose). Beside the defaults: the remesher has no
+#: default size target (the section's is DEFAULT_CELLS); the optimiser's ``planar`` moves nodes, which
+#: the section does with planar and planarise_cells only (off by default); the imperfection amplitude
+#: is L/300 of the span given.
+_DEFAULTS = {
+    "field": (config.FieldConfig, lambda: config.FieldConfig().to_settings(), FieldSettings),
+    "remesh": (config.RemeshConfig, lambda: config.RemeshConfig().to_settings(),
+               lambda: RemeshSettings(n_cells=config.DEFAULT_CELLS)),
+    "optimize": (config.OptimizeConfig,
+                 lambda: config.OptimizeConfig().to_settings(min_beam_length_mm=150.0, min_corner_angle_deg=25.0,
+                                                             max_cell_stretch=3.0),
+                 lambda: OptimizeSettings(min_beam_length=0.15, min_corner_angle_deg=25.0, max_cell_stretch=3.0,
+                                          planar=False)),
+    "analysis": (config.AnalysisConfig, lambda: config.AnalysisConfig().to_settings(_SPAN),
+                 lambda: ProtocolSettings(amplitude=_SPAN / 300.0)),
+    "fabrication.joints": (config.JointsConfig, lambda: config.JointsConfig(kind="socket").to_settings(),
+                           JointSettings),
+    "fabrication.beams": (config.BeamsConfig, lambda: config.BeamsConfig().to_settings(**_TUBE),
+                          lambda: BeamSettings(**_TUBE)),
+    "fabrication.panels": (config.PanelsConfig, lambda: _socket_project().fabrication.panels.to_settings(),
+                           PanelSettings),
+    "fabrication.sheets": (config.SheetsConfig, lambda: _socket_project().fabrication.sheets.to_settings(),
+                           lambda: [SheetSettings()]),
+}
+
+
+@pytest.mark.parametrize("name", list(_DEFAULTS))
+def test_a_default_section_builds_its_settings_with_their_own_defaults(name):
+    """One default per setting: a section's default and its dataclass's may not drift apart."""
+    _, built, own = _DEFAULTS[name]
+    assert built() == own()
+
+
+def test_every_section_that_builds_settings_is_checked():
+    sections = {cls for cls in vars(config).values() if isinstance(cls, type) and issubclass(cls, config._Section)
+                and "to_settings" in vars(cls)}
+    assert sections == {cls for cls, _, _ in _DEFAULTS.values()}
+
+
+def test_build_limits_default_to_the_joints_own():
+    assert config.FabricationConfig().build_limits(12.0) == BuildLimits.of(JointSettings(), 12.0)
+    steel = parse_project({"surface": {"template": "mockup"}})       # a 48.3 mm steel tube: steel joints
+    assert steel.fabrication.joints.kind == "steel"
+    assert steel.fabrication.panels.to_settings().material_name == "laminated glass"
+    assert steel.fabrication.sheets.to_settings() == [SheetSettings(width_mm=6000.0, height_mm=3210.0)]
+
+
+def test_lengths_become_millimetres_in_the_settings():
+    project = parse_project({"surface": {"template": "mockup"},
+                             "fabrication": {"joints": {"kind": "socket", "wall": "2.5 mm", "hub_radius": "20 mm"},
+                                             "beams": {"stock_length": "4 m", "min_cut_length": "120 mm"},
+                                             "panels": {"clearance": "1 mm"},
+                                             "sheets": {"width": "2 m", "height": "1 m", "sizes": [["3 m", "1.5 m"]]}}})
+    f = project.fabrication
+    assert (f.joints.to_settings().wall_mm, f.joints.to_settings().hub_radius_mm) == (2.5, 20.0)
+    assert f.beams.to_settings(**_TUBE).stock_length_mm == 4000.0
+    assert f.build_limits(48.3).min_cut_length_mm == 120.0
+    assert f.panels.to_settings().clearance_mm == 1.0
+    assert [(s.width_mm, s.height_mm) for s in f.sheets.to_settings()] == [(2000.0, 1000.0), (3000.0, 1500.0)]
+    assert project.section.outer_size_mm() == pytest.approx(48.3)
+
+
+def test_choices_are_the_engines_types(tmp_path):
+    fields = {name: cls.model_fields for name, (cls, _, _) in _DEFAULTS.items()}
+    assert fields["field"]["size_map"].annotation is SizeMap
+    assert fields["field"]["anisotropy_map"].annotation is AnisotropyMap
+    assert fields["fabrication.joints"]["kind"].annotation == JointKind | None
+    assert fields["analysis"]["checks"].annotation == ChecksMethod
+    assert fields["analysis"]["imperfection_shapes"].annotation == list[ImperfectionShape]
+    assert parse_project({"surface": {"template": "cap"}, "field": {"size_map": "linear"}}).field.size_map \
+        is SizeMap.LINEAR
+    message = _error(tmp_path, '[surface]\ntemplate = "cap"\n[field]\nsize_map = "cubic"\n')
+    assert "field.size_map = 'cubic': not allowed; expected one of 'energy' or 'linear'" in message
+
+
+#: (TOML table, its values, the key the error names, settings that refuse the same in their own units):
+#: a project file's mistakes are caught by the schema, naming the key, before the settings' own checks
+#: (which stay for callers of the engine and of fabrication).
+_REFUSED = [
+    ("field", {"max_size_ratio": 0.5}, "field.max_size_ratio", FieldSettings, {"max_size_ratio": 0.5}),
+    ("field", {"max_aspect": 0.9}, "field.max_aspect", FieldSettings, {"max_aspect": 0.9}),
+    ("field", {"opposite_sign_anisotropy": 0.5}, "field.opposite_sign_anisotropy", FieldSettings,
+     {"opposite_sign_anisotropy": 0.5}),
+    ("field", {"clamp_percentiles": [60.0, 40.0]}, "field.clamp_percentiles", FieldSettings,
+     {"clamp_percentiles": (60.0, 40.0)}),
+    ("field", {"smoothing_iterations": -1}, "field.smoothing_iterations", FieldSettings, {"smoothing_iterations": -1}),
+    ("remesh", {"n_cells": 3}, "remesh.n_cells", RemeshSettings, {"n_cells": 3}),
+    ("remesh", {"mean_beam_length": -0.5}, "remesh.mean_beam_length", RemeshSettings, {"mean_beam_length": -0.5}),
+    ("remesh", {"total_length": 0.0}, "remesh.total_length", RemeshSettings, {"total_length": 0.0}),
+    ("remesh", {"lloyd_iterations": -1}, "remesh.lloyd_iterations", RemeshSettings,
+     {"n_cells": 100, "lloyd_iterations": -1}),
+    ("optimize", {"closeness_weight": -1.0}, "optimize.closeness_weight", OptimizeSettings, {"closeness_weight": -1.0}),
+    ("optimize", {"iterations": -5}, "optimize.iterations", OptimizeSettings, {"iterations": -5}),
+    ("optimize", {"planarity_iterations": 2.5}, "optimize.planarity_iterations", OptimizeSettings,
+     {"planarity_iterations": 2.5}),
+    ("optimize", {"planarity_tolerance": 0.0}, "optimize.planarity_tolerance", OptimizeSettings,
+     {"planarity_tolerance": 0.0}),
+    ("fabrication.panels", {"thickness": 0.0}, "fabrication.panels.thickness", PanelSettings, {"thickness_mm": 0.0}),
+    ("fabrication.panels", {"density": -1.0}, "fabrication.panels.density", PanelSettings, {"density": -1.0}),
+    ("fabrication.panels", {"clearance": "-1 mm"}, "fabrication.panels.clearance", PanelSettings,
+     {"clearance_mm": -1.0}),
+    ("fabrication.panels", {"hole_diameter": "-1 mm"}, "fabrication.panels.hole_diameter", PanelSettings,
+     {"hole_diameter_mm": -1.0}),
+    ("fabrication.panels", {"hole_inset": "-1 mm"}, "fabrication.panels.hole_inset", PanelSettings,
+     {"hole_inset_mm": -1.0}),
+    ("fabrication.panels", {"planarity_tolerance": "-1 mm"}, "fabrication.panels.planarity_tolerance", PanelSettings,
+     {"planarity_tolerance_mm": -1.0}),
+    ("fabrication.sheets", {"width": 0.0, "height": 0.6}, "fabrication.sheets.width", SheetSettings,
+     {"width_mm": 0.0}),
+    ("fabrication.sheets", {"spacing": "-1 mm"}, "fabrication.sheets.spacing", SheetSettings, {"spacing_mm": -1.0}),
+    ("fabrication.sheets", {"margin": "-1 mm"}, "fabrication.sheets.margin", SheetSettings, {"margin_mm": -1.0}),
+    ("fabrication.sheets", {"margin": "2 m"}, "fabrication.sheets: margin = 2000 mm leaves no room", SheetSettings,
+     {"margin_mm": 2000.0, "width_mm": 6000.0, "height_mm": 3210.0}),
+]
+
+
+@pytest.mark.parametrize("table, values, key, settings, same", _REFUSED, ids=[r[2].split(":")[0] + str(i)
+                                                                              for i, r in enumerate(_REFUSED)])
+def test_the_schema_refuses_what_the_settings_refuse(table, values, key, settings, same):
+    with pytest.raises(InputError):
+        settings(**same)
+    data: dict = {"surface": {"template": "mockup"}}
+    node = data
+    for part in table.split("."):
+        node = node.setdefault(part, {})
+    node.update(values)
+    with pytest.raises(ConfigError) as info:
+        parse_project(data)
+    assert key in str(info.value)

@@ -316,8 +316,6 @@ def wave_roof():
     from engine.field import guiding_field
     from engine.shell import ShellMaterial, analyse_shell, shell_nodal_loads
     from workflow.config import project_from_surface
-    from workflow.stages.field import field_settings
-    from workflow.stages.remesh import remesh_settings
     from workflow.stages.shell import notional_thickness, shell_load_case
     from workflow.stages.surface import build_surface, resolve_loads, resolve_supports
 
@@ -332,8 +330,8 @@ def wave_roof():
     shell = analyse_shell(mesh, supports, loads, thickness=thickness, material=material)
     support_vertices = np.zeros(mesh.n_vertices, dtype=bool)
     support_vertices[supports.nodes] = True
-    return mesh, guiding_field(mesh, shell.vertex_membrane_forces, field_settings(project)), support_vertices, \
-        remesh_settings(project)
+    return mesh, guiding_field(mesh, shell.vertex_membrane_forces, project.field.to_settings()), support_vertices, \
+        project.remesh.to_settings()
 
 
 @pytest.mark.parametrize("seed", [0, 1])

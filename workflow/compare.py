@@ -87,8 +87,6 @@ class _Steps:
 def _protocol(polymesh: PolyMesh, surface, project: Project, progress, executor=None) -> GridRow:
     """The protocol on one grid; with ``[design] size_sections`` its tubes are sized first, as in
     ``gridshell run``, and the row gains the sized mass, its tubes and the member checks."""
-    from engine.protocol import ProtocolSettings
-
     from .stages.analysis import beam_properties, pick_combination, protocol_with_design
     from .stages.sizing import checks_method, project_sections, sized_checks
 
@@ -97,9 +95,7 @@ def _protocol(polymesh: PolyMesh, surface, project: Project, progress, executor=
     sections = project_sections(project, len(polymesh.edges))
     method = checks_method(project, material) if sections is not None else "simplified"
     span = float(np.ptp(polymesh.nodes[:, :2], axis=0).min())
-    settings = ProtocolSettings(n_modes=config.n_modes, amplitude=config.imperfection_amplitude or span / 300.0,
-                                shapes=tuple(config.imperfection_shapes), nonlinear=config.nonlinear,
-                                max_load_factor=config.max_load_factor)
+    settings = config.to_settings(span)
     combos = (pick_combination(project, surface, "ULS"), pick_combination(project, surface, "SLS"))
     run = protocol_with_design(_Steps(progress), project, polymesh, surface, material, method, sections, combos,
                                span / config.deflection_limit_ratio, settings, executor=executor)

@@ -6,10 +6,19 @@ One section per concern: ``project``, ``surface``, ``supports`` (a list), ``load
 ``report``). Quantities may carry units; bare numbers are SI. Unknown keys are errors.
 ``load_project`` raises ``ConfigError`` naming the file, the key, the value and what is
 allowed.
+
+The sections of the engine's and fabrication's settings (field, remesh, optimize, analysis,
+fabrication.joints/beams/panels/sheets) build them with ``to_settings()``: metres become the
+fabrication's millimetres there and nowhere else, and where a setting has a default in its
+dataclass the section's default is read from it (``_default_of``), so the two cannot drift.
+Choices use the engine's own types (SizeMap, JointKind, ...). Every value a project file gives is
+checked here, naming its key; the dataclasses' own checks stay for callers of the engine and of
+fabrication that bypass the project file.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import tomllib
 import types
@@ -20,13 +29,26 @@ from typing import Annotated, Any, Literal, Union
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from engine.en1993 import ChecksMethod
 from engine.errors import GridshellError
+from engine.field import AnisotropyMap, FieldSettings, SizeMap
+from engine.optimize import OptimizeSettings
+from engine.protocol import ImperfectionShape, ProtocolSettings
 from engine.supports import restraint_flags
+from engine.voronoi import RemeshSettings
+from fabrication.joints import JointKind, JointSettings
+from fabrication.limits import BuildLimits
+from fabrication.settings import BeamSettings, PanelSettings, SheetSettings
 
 from .units import AreaLoad, Density, Force, Length, Stress
 
 __all__ = ["ConfigError", "Project", "load_project", "parse_project", "read_toml", "project_from_surface",
-           "check_inputs", "unusual_values", "STAGE_SECTIONS"]
+           "check_inputs", "unusual_values", "STAGE_SECTIONS", "MM", "DEFAULT_CELLS"]
+
+MM = 1000.0
+"""Millimetres per metre: the project is in metres, fabrication's settings in millimetres."""
+DEFAULT_CELLS = 120
+"""The remesher's size target when [remesh] gives none."""
 
 
 class ConfigError(GridshellError):
@@ -35,6 +57,19 @@ class ConfigError(GridshellError):
 
 class _Section(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _default_value(settings: type, name: str, per: float = 1.0) -> Any:
+    """The default of field ``name`` of the settings dataclass ``settings``, divided by ``per``
+    (MM: its millimetres in the project's metres)."""
+    default = next(f.default for f in dataclasses.fields(settings) if f.name == name)
+    return default if per == 1.0 else default / per
+
+
+def _default_of(settings: type, name: str, *, per: float = 1.0, **constraints: Any) -> Any:
+    """A schema field whose default is the one of the settings it becomes (see ``_default_value``),
+    with the schema's ``constraints`` (ge, gt, ...)."""
+    return Field(_default_value(settings, name, per), **constraints)
 
 
 Vector3 = Annotated[list[float], Field(min_length=3, max_length=3)]
@@ -229,6 +264,10 @@ class SectionConfig(_Section):
         return {k: getattr(self, k) for k in ("diameter", "thickness", "height", "width")
                 if getattr(self, k) is not None}
 
+    def outer_size_mm(self) -> float:
+        """The beam's largest outer dimension in mm (tube or rod diameter, or the section height or width)."""
+        return MM * (self.diameter if self.diameter is not None else max(self.height or 0.0, self.width or 0.0))
+
 
 def _mm(value: float) -> str:
     return f"{value * 1000:g} mm"
@@ -252,15 +291,32 @@ class SymmetryPlane(_Section):
 class FieldConfig(_Section):
     """Guiding field (METHOD.md 2): D = max_size_ratio, A = max_aspect."""
 
-    max_size_ratio: float = Field(2.0, ge=1.0, le=20.0)
-    max_aspect: float = Field(2.0, ge=1.0, le=20.0)
-    size_map: Literal["energy", "linear"] = "energy"
-    anisotropy_map: Literal["energy", "linear"] = "energy"
-    opposite_sign_anisotropy: float = Field(1.0, ge=1.0)
-    clamp_percentiles: tuple[float, float] = (1.0, 99.0)
-    smoothing_iterations: int = Field(10, ge=0)
-    direction_smoothing_iterations: int = Field(10, ge=0)
+    max_size_ratio: float = _default_of(FieldSettings, "max_size_ratio", ge=1.0, le=20.0)
+    max_aspect: float = _default_of(FieldSettings, "max_aspect", ge=1.0, le=20.0)
+    size_map: SizeMap = _default_of(FieldSettings, "size_map")
+    anisotropy_map: AnisotropyMap = _default_of(FieldSettings, "anisotropy_map")
+    opposite_sign_anisotropy: float = _default_of(FieldSettings, "opposite_sign_anisotropy", ge=1.0)
+    clamp_percentiles: tuple[float, float] = _default_of(FieldSettings, "clamp_percentiles")
+    smoothing_iterations: int = _default_of(FieldSettings, "smoothing_iterations", ge=0)
+    direction_smoothing_iterations: int = _default_of(FieldSettings, "direction_smoothing_iterations", ge=0)
     symmetry_planes: list[SymmetryPlane] = Field(default_factory=list, max_length=2)
+
+    @field_validator("clamp_percentiles")
+    @classmethod
+    def _percentiles(cls, value: tuple[float, float]) -> tuple[float, float]:
+        low, high = value
+        if not 0.0 <= low < high <= 100.0:
+            raise ValueError("give [low, high] percentiles of the force level with 0 <= low < high <= 100")
+        return value
+
+    def to_settings(self) -> FieldSettings:
+        """The engine's field settings."""
+        return FieldSettings(
+            max_size_ratio=self.max_size_ratio, max_aspect=self.max_aspect, size_map=self.size_map,
+            anisotropy_map=self.anisotropy_map, opposite_sign_anisotropy=self.opposite_sign_anisotropy,
+            clamp_percentiles=tuple(self.clamp_percentiles), smoothing_iterations=self.smoothing_iterations,
+            direction_smoothing_iterations=self.direction_smoothing_iterations,
+            symmetry_planes=tuple((tuple(p.point), tuple(p.normal)) for p in self.symmetry_planes))
 
 
 class RemeshConfig(_Section):
@@ -271,10 +327,10 @@ class RemeshConfig(_Section):
     (a grid_coarsened finding says so); false keeps the cells asked for, and the joints clash."""
 
     n_cells: int | None = Field(None, ge=4)
-    mean_beam_length: Length | None = None
-    total_length: Length | None = None
-    lloyd_iterations: int = Field(80, ge=0)
-    seed: int = 0
+    mean_beam_length: Length | None = Field(None, gt=0.0)
+    total_length: Length | None = Field(None, gt=0.0)
+    lloyd_iterations: int = _default_of(RemeshSettings, "lloyd_iterations", ge=0)
+    seed: int = _default_of(RemeshSettings, "seed")
     coarsen_for_joints: bool = True
 
     @model_validator(mode="after")
@@ -283,6 +339,14 @@ class RemeshConfig(_Section):
         if len(given) > 1:
             raise ValueError(f"give one size target, not {', '.join(given)}")
         return self
+
+    def to_settings(self) -> RemeshSettings:
+        """The engine's remesh settings: the size target given, else DEFAULT_CELLS cells."""
+        target = {"n_cells": self.n_cells, "mean_beam_length": self.mean_beam_length,
+                  "total_length": self.total_length}
+        if all(v is None for v in target.values()):
+            target["n_cells"] = DEFAULT_CELLS
+        return RemeshSettings(**target, lloyd_iterations=self.lloyd_iterations, seed=self.seed)
 
 
 class OptimizeConfig(_Section):
@@ -295,16 +359,30 @@ class OptimizeConfig(_Section):
     where the boundary holds cells out of plane; it closes cell corners and shortens beams, which the
     joints may not take."""
 
-    iterations: int = Field(50, ge=0)
-    regularity_weight: float = Field(1.0, ge=0)
-    planarity_weight: float = Field(1.0, ge=0)
-    closeness_weight: float = Field(1.0, ge=0)
-    fairness_weight: float = Field(0.1, ge=0)
+    iterations: int = _default_of(OptimizeSettings, "iterations", ge=0)
+    regularity_weight: float = _default_of(OptimizeSettings, "regularity_weight", ge=0)
+    planarity_weight: float = _default_of(OptimizeSettings, "planarity_weight", ge=0)
+    closeness_weight: float = _default_of(OptimizeSettings, "closeness_weight", ge=0)
+    fairness_weight: float = _default_of(OptimizeSettings, "fairness_weight", ge=0)
     planar: bool = True
-    planarity_tolerance: float = Field(0.005, gt=0, lt=1)
-    planarity_iterations: int = Field(80, ge=0)
-    split_cells: bool = True
+    planarity_tolerance: float = _default_of(OptimizeSettings, "planarity_tolerance", gt=0, lt=1)
+    planarity_iterations: int = _default_of(OptimizeSettings, "planarity_iterations", ge=0)
+    split_cells: bool = _default_of(OptimizeSettings, "split_cells")
     planarise_cells: bool = False
+
+    def to_settings(self, *, min_beam_length_mm: float, min_corner_angle_deg: float,
+                    max_cell_stretch: float) -> OptimizeSettings:
+        """The engine's optimiser settings. The engine's ``planar`` moves the nodes for planar cells:
+        that is ``planar`` with ``planarise_cells`` here (``planar`` alone glazes cells with planar
+        pieces, no node moved). The shortest beam (mm), the smallest corner angle and the largest
+        cell stretch come from the joints and the field."""
+        return OptimizeSettings(regularity_weight=self.regularity_weight, planarity_weight=self.planarity_weight,
+                                closeness_weight=self.closeness_weight, fairness_weight=self.fairness_weight,
+                                iterations=self.iterations, planar=self.planar and self.planarise_cells,
+                                planarity_tolerance=self.planarity_tolerance,
+                                planarity_iterations=self.planarity_iterations, split_cells=self.split_cells,
+                                min_beam_length=min_beam_length_mm / MM, min_corner_angle_deg=min_corner_angle_deg,
+                                max_cell_stretch=max_cell_stretch)
 
 
 class AnalysisConfig(_Section):
@@ -312,12 +390,12 @@ class AnalysisConfig(_Section):
     workers: processes that run the non-linear paths side by side (default: one per core)."""
 
     elements_per_beam: int = Field(4, ge=1, le=20)
-    n_modes: int = Field(6, ge=1, le=50)
+    n_modes: int = _default_of(ProtocolSettings, "n_modes", ge=1, le=50)
     imperfection_amplitude: Length | None = None
-    imperfection_shapes: list[Literal["linear", "nonlinear", "mode1", "mode2", "mode3"]] = Field(
-        default_factory=lambda: ["linear", "nonlinear", "mode1", "mode2", "mode3"])
-    nonlinear: bool = True
-    max_load_factor: float = Field(10.0, gt=0)
+    imperfection_shapes: list[ImperfectionShape] = Field(
+        default_factory=lambda: list(_default_value(ProtocolSettings, "shapes")))
+    nonlinear: bool = _default_of(ProtocolSettings, "nonlinear")
+    max_load_factor: float = _default_of(ProtocolSettings, "max_load_factor", gt=0)
     required_load_factor: float = Field(1.5, gt=0)
     deflection_limit_ratio: float = Field(250.0, gt=0)
     buckling_length_factor: float = Field(1.0, gt=0)
@@ -325,8 +403,15 @@ class AnalysisConfig(_Section):
     sls_combination: str | None = None
     control_points: dict[str, list[Length]] = Field(default_factory=dict)
     workers: int | None = Field(None, ge=1)
-    checks: Literal["en1993", "simplified"] = "en1993"
+    checks: ChecksMethod = "en1993"
     buckling_length: Literal["node_to_node", "buckling_modes"] = "node_to_node"
+
+    def to_settings(self, span: float) -> ProtocolSettings:
+        """The engine's protocol settings; ``span`` (m), the grid's shorter plan side, gives the
+        imperfection amplitude L/300 where none is set."""
+        return ProtocolSettings(n_modes=self.n_modes, amplitude=self.imperfection_amplitude or span / 300.0,
+                                shapes=tuple(self.imperfection_shapes), nonlinear=self.nonlinear,
+                                max_load_factor=self.max_load_factor)
 
 
 class DesignConfig(_Section):
@@ -369,17 +454,27 @@ class JointsConfig(_Section):
     smallest angle between two beams at a node (degrees; unset, 5 degrees above where the joint's
     own sleeves or fin plates collide, see fabrication.limits)."""
 
-    kind: Literal["socket", "steel"] | None = None
+    kind: JointKind | None = None
     min_angle: float | None = Field(None, gt=0.0, lt=120.0)
     hub_radius: Length | None = None
     sleeve_length: Length | None = None
-    clearance: Length = 0.0003
-    wall: Length = 0.002
-    min_wall: Length = 0.0015
-    pin_hole: Length = 0.003
-    engrave: bool = True
-    plate_thickness: Length = 0.01
-    bolt_hole: Length = 0.018
+    clearance: Length = _default_of(JointSettings, "clearance_mm", per=MM)
+    wall: Length = _default_of(JointSettings, "wall_mm", per=MM)
+    min_wall: Length = _default_of(JointSettings, "min_wall_mm", per=MM)
+    pin_hole: Length = _default_of(JointSettings, "pin_hole_mm", per=MM)
+    engrave: bool = _default_of(JointSettings, "engrave")
+    plate_thickness: Length = _default_of(JointSettings, "plate_thickness_mm", per=MM)
+    bolt_hole: Length = _default_of(JointSettings, "bolt_hole_mm", per=MM)
+
+    def to_settings(self) -> JointSettings:
+        """Fabrication's joint settings (mm). The Project resolves an unset kind; a section on its
+        own leaves it to JointSettings."""
+        return JointSettings(**({} if self.kind is None else {"kind": self.kind}),
+                             clearance_mm=MM * self.clearance, wall_mm=MM * self.wall, min_wall_mm=MM * self.min_wall,
+                             pin_hole_mm=MM * self.pin_hole, engrave=self.engrave,
+                             hub_radius_mm=None if self.hub_radius is None else MM * self.hub_radius,
+                             sleeve_length_mm=None if self.sleeve_length is None else MM * self.sleeve_length,
+                             plate_thickness_mm=MM * self.plate_thickness, bolt_hole_mm=MM * self.bolt_hole)
 
 
 class BeamsConfig(_Section):
@@ -387,9 +482,17 @@ class BeamsConfig(_Section):
     tube plus half its diameter, at least one diameter); remesh and optimize collapse beams shorter
     than it plus their joints' set-backs."""
 
-    stock_length: Length = 6.0
-    kerf: Length = 0.003
+    stock_length: Length = _default_of(BeamSettings, "stock_length_mm", per=MM)
+    kerf: Length = _default_of(BeamSettings, "kerf_mm", per=MM)
     min_cut_length: Length | None = Field(None, gt=0.0)
+
+    def to_settings(self, *, profile_name: str, material_name: str, density: float, area_m2: float,
+                    outer_size_mm: float) -> BeamSettings:
+        """Fabrication's cut-list settings (mm), with the tube's names, density (kg/m^3), section
+        area (m^2) and outer size (mm)."""
+        return BeamSettings(profile_name=profile_name, material_name=material_name, density=density,
+                            stock_length_mm=MM * self.stock_length, kerf_mm=MM * self.kerf, area_m2=area_m2,
+                            outer_size_mm=outer_size_mm)
 
 
 class PanelsConfig(_Section):
@@ -397,14 +500,21 @@ class PanelsConfig(_Section):
     printed sockets, 10 mm laminated glass (2500 kg/m^3) with steel joints."""
 
     enabled: bool = True
-    thickness: Length | None = None
+    thickness: Length | None = Field(None, gt=0.0)
     material: str | None = None
-    density: Density | None = None
-    clearance: Length = 0.002
-    hole_diameter: Length = 0.0
-    hole_inset: Length = 0.01
-    planarity_tolerance: Length = 0.002
-    split_nonplanar: bool = False
+    density: Density | None = Field(None, gt=0.0)
+    clearance: Length = _default_of(PanelSettings, "clearance_mm", per=MM, ge=0.0)
+    hole_diameter: Length = _default_of(PanelSettings, "hole_diameter_mm", per=MM, ge=0.0)
+    hole_inset: Length = _default_of(PanelSettings, "hole_inset_mm", per=MM, ge=0.0)
+    planarity_tolerance: Length = _default_of(PanelSettings, "planarity_tolerance_mm", per=MM, ge=0.0)
+    split_nonplanar: bool = _default_of(PanelSettings, "split_nonplanar")
+
+    def to_settings(self) -> PanelSettings:
+        """Fabrication's panel settings (mm), once the Project has resolved thickness, material and density."""
+        return PanelSettings(thickness_mm=MM * self.thickness, material_name=self.material, density=self.density,
+                             clearance_mm=MM * self.clearance, hole_diameter_mm=MM * self.hole_diameter,
+                             hole_inset_mm=MM * self.hole_inset, planarity_tolerance_mm=MM * self.planarity_tolerance,
+                             split_nonplanar=self.split_nonplanar)
 
 
 class SheetsConfig(_Section):
@@ -412,12 +522,19 @@ class SheetsConfig(_Section):
     panel goes on the first size it fits. Unset, they follow the joints: a 1200 x 600 mm laser bed
     with printed sockets; glass from jumbo 6000 x 3210 mm sheets with steel joints."""
 
-    width: Length | None = None
-    height: Length | None = None
+    width: Length | None = Field(None, gt=0.0)
+    height: Length | None = Field(None, gt=0.0)
     sizes: list[Annotated[list[Length], Field(min_length=2, max_length=2)]] = Field(default_factory=list)
-    spacing: Length = 0.004
-    margin: Length = 0.01
-    rotations: bool = True
+    spacing: Length = _default_of(SheetSettings, "spacing_mm", per=MM, ge=0.0)
+    margin: Length = _default_of(SheetSettings, "margin_mm", per=MM, ge=0.0)
+    rotations: bool = _default_of(SheetSettings, "rotations")
+
+    def to_settings(self) -> list[SheetSettings]:
+        """Fabrication's stock sheets (mm) in the order panels are given to them: width x height,
+        then ``sizes``; once the Project has resolved width and height."""
+        sizes = [(self.width, self.height)] + [tuple(size) for size in self.sizes]
+        return [SheetSettings(width_mm=MM * w, height_mm=MM * h, spacing_mm=MM * self.spacing,
+                              margin_mm=MM * self.margin, rotations=self.rotations) for w, h in sizes]
 
 
 class AssemblyConfig(_Section):
@@ -431,6 +548,27 @@ class FabricationConfig(_Section):
     sheets: SheetsConfig = Field(default_factory=SheetsConfig)
     assembly: AssemblyConfig = Field(default_factory=AssemblyConfig)
     workers: int | None = Field(None, ge=1)
+
+    def build_limits(self, beam_size_mm: float) -> BuildLimits:
+        """The shortest buildable beam and the smallest angle at a joint that the joints and beams
+        give with a tube of outer size ``beam_size_mm``."""
+        b = self.beams
+        return BuildLimits.of(self.joints.to_settings(), beam_size_mm,
+                              min_cut_length_mm=None if b.min_cut_length is None else MM * b.min_cut_length,
+                              min_angle_deg=self.joints.min_angle)
+
+
+#: The panels and stock sheets that [fabrication.panels] and [fabrication.sheets] leave unset follow
+#: the joint kind (m, kg/m^3): with printed sockets fabrication's own defaults (PanelSettings,
+#: SheetSettings: acrylic on a laser bed), with steel joints laminated glass from jumbo sheets.
+_BY_JOINT: dict[str, dict[str, Any]] = {
+    "socket": {"material": _default_value(PanelSettings, "material_name"),
+               "thickness": _default_value(PanelSettings, "thickness_mm", MM),
+               "density": _default_value(PanelSettings, "density"),
+               "sheet": (_default_value(SheetSettings, "width_mm", MM),
+                         _default_value(SheetSettings, "height_mm", MM))},
+    "steel": {"material": "laminated glass", "thickness": 0.010, "density": 2500.0, "sheet": (6.0, 3.21)},
+}
 
 
 class ReportConfig(_Section):
@@ -471,18 +609,22 @@ class Project(_Section):
         if kind is None:
             size = self.section.diameter or max(self.section.height or 0.0, self.section.width or 0.0)
             kind = "steel" if self.material.name.startswith("steel") and size > 0.03 else "socket"
-        glass = kind == "steel"
+        follow = _BY_JOINT[kind]
         p, s = f.panels, f.sheets
         if (s.width is None) != (s.height is None):
             raise ValueError("fabrication.sheets: give both width and height, or neither")
         for size in s.sizes:
             if min(size) <= 0:
                 raise ValueError(f"fabrication.sheets.sizes: {size} must be two positive lengths")
-        width, height = (s.width, s.height) if s.width is not None else ((6.0, 3.21) if glass else (1.2, 0.6))
+        width, height = (s.width, s.height) if s.width is not None else follow["sheet"]
+        for w, h in [(width, height)] + [tuple(size) for size in s.sizes]:
+            if 2 * (MM * s.margin) >= min(MM * w, MM * h):  # as SheetSettings checks it
+                raise ValueError(f"fabrication.sheets: margin = {_mm(s.margin)} leaves no room on a "
+                                 f"{MM * w:g} x {MM * h:g} mm sheet")
         panels = p.model_copy(update={
-            "material": p.material if p.material is not None else ("laminated glass" if glass else "acrylic"),
-            "thickness": p.thickness if p.thickness is not None else (0.010 if glass else 0.003),
-            "density": p.density if p.density is not None else (2500.0 if glass else 1190.0)})
+            "material": p.material if p.material is not None else follow["material"],
+            "thickness": p.thickness if p.thickness is not None else follow["thickness"],
+            "density": p.density if p.density is not None else follow["density"]})
         fabrication = f.model_copy(update={"joints": f.joints.model_copy(update={"kind": kind}), "panels": panels,
                                            "sheets": s.model_copy(update={"width": width, "height": height})})
         return self.model_copy(update={"fabrication": fabrication})
@@ -632,7 +774,7 @@ def _format_errors(error: ValidationError, source: str) -> str:
                 line = f"  {key} = {shown}: unknown key; allowed keys here: {allowed}"
             elif item["type"] == "missing":
                 line = f"  {key}: required key is missing"
-            elif item["type"] == "literal_error":
+            elif item["type"] in ("literal_error", "enum"):
                 expected = item.get("ctx", {}).get("expected", "")
                 line = f"  {key} = {shown}: not allowed; expected one of {expected}"
             else:

@@ -27,7 +27,7 @@ from engine.frame import FrameModel, factor_stiffness, linear_buckling, linear_s
 from engine.loads import LoadCombination, combine
 from engine.mesh import PolyMesh
 from engine.parts import beam_id, node_id
-from engine.protocol import ProtocolSettings, run_protocol
+from engine.protocol import run_protocol
 from engine.sections import Material, Section, section_from_spec
 from engine.sections import material as material_by_name
 from engine.sizing import size_sections
@@ -139,9 +139,7 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, project: Project, ctx: 
     uls_combo, sls_combo = pick_combination(project, surface, "ULS"), pick_combination(project, surface, "SLS")
     span = _plan_span(polymesh)
     deflection_limit = span / config.deflection_limit_ratio
-    amplitude = config.imperfection_amplitude or span / 300.0
-    settings = ProtocolSettings(n_modes=config.n_modes, amplitude=amplitude, shapes=tuple(config.imperfection_shapes),
-                                nonlinear=config.nonlinear, max_load_factor=config.max_load_factor)
+    settings = config.to_settings(span)
     mass_before = float(lengths.sum() * props.mass_per_length)
     design_run = protocol_with_design(ctx, project, polymesh, surface, material, method, sections,
                                       (uls_combo, sls_combo), deflection_limit, settings)
@@ -200,7 +198,7 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, project: Project, ctx: 
         "lambda_NL_worst": None if worst is None else worst.capacity,
         "limit_point_reached": None if worst is None else worst.limit_load_factor is not None,
         "worst_imperfection": None if worst is None else worst.name, "knock_down": result.knock_down,
-        "imperfection_amplitude_m": amplitude, "control_node": node_id(result.control_node),
+        "imperfection_amplitude_m": settings.amplitude, "control_node": node_id(result.control_node),
         "equilibrium_error": result.equilibrium_error,
         "imperfections": [{"shape": c.name, "lambda_NL": c.capacity, "limit_point": c.limit_load_factor is not None,
                            "path_complete": c.converged} for c in result.imperfect],

@@ -40,10 +40,10 @@ from fabrication.limits import BuildLimits, default_min_cut_length_mm
 from fabrication.model3d import write_gridshell_3dm, write_gridshell_step
 from fabrication.nesting_bars import nest_bars
 
-from ..config import Project
+from ..config import MM, Project
 from ..runner import StageContext
 from .analysis import AnalysisSummary, beam_properties
-from .build_limits import MM, beam_outer_size_mm, build_limits_of, joint_settings_of
+from .build_limits import build_limits_of
 from .optimize import OptimizedGrid
 from .sizing import BeamSections, profile_name, project_sections
 from .surface import SurfaceResult
@@ -51,7 +51,7 @@ from .surface import SurfaceResult
 # fabrication.beams and fabrication.nc1 (pandas), fabrication.panels and fabrication.nesting_sheets
 # (shapely) are imported where they are used: a run whose stages are all cached does not load them
 
-__all__ = ["FabricationResult", "run", "load", "sheet_stock"]
+__all__ = ["FabricationResult", "run", "load"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -98,12 +98,12 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     folder: Path = ctx.folder
     normals = node_normals(polymesh, surface.mesh)
     # one outer size, or one per beam where the analysis sized the tubes
-    size_mm = beam_outer_size_mm(project) if sections is None else MM * sections.diameter
+    size_mm = project.section.outer_size_mm() if sections is None else MM * sections.diameter
     limits = build_limits_of(project)
     summary: dict = {"nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
                      "limits": limits.to_dict()}
     findings: list[Finding] = []
-    joint_settings = joint_settings_of(project)
+    joint_settings = config.joints.to_settings()
     summary.update({"joints": 0, "joint_problems": []})
     # the joints take both cores in worker processes; the other steps run here meanwhile
     clock.start("joints: start")
@@ -198,16 +198,6 @@ def _joint_findings(reports: list[dict], limits: BuildLimits) -> list[Finding]:
     return out
 
 
-def sheet_stock(project: Project):
-    """The stock sheet sizes (SheetSettings, mm) in the order panels are given to them."""
-    from fabrication.nesting_sheets import SheetSettings
-
-    s = project.fabrication.sheets
-    sizes = [(s.width, s.height)] + [tuple(size) for size in s.sizes]
-    return [SheetSettings(width_mm=MM * w, height_mm=MM * h, spacing_mm=MM * s.spacing, margin_mm=MM * s.margin,
-                          rotations=s.rotations) for w, h in sizes]
-
-
 def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: _StepClock, grid: OptimizedGrid,
                                     normals: np.ndarray, joint_settings: JointSettings, limits: BuildLimits,
                                     summary: dict, findings: list[Finding],
@@ -217,19 +207,18 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     polymesh = grid.polymesh
     config = project.fabrication
     folder: Path = ctx.folder
-    size_mm = beam_outer_size_mm(project)
+    size_mm = project.section.outer_size_mm()
     # each beam's tube: the sized ones, else the project's one tube (None for other sections)
     tubes = sections if sections is not None else project_sections(project, len(polymesh.edges))
     sizes_mm = np.full(len(polymesh.edges), size_mm) if tubes is None else MM * tubes.diameter
     walls_mm = None if tubes is None else MM * tubes.thickness
     clock.start("beams: cut list")
-    from fabrication.beams import BeamSettings, cut_list, write_beams_step, write_cut_list
+    from fabrication.beams import cut_list, write_beams_step, write_cut_list
 
     b = config.beams
     props, section, _ = beam_properties(project)
-    beam_settings = BeamSettings(profile_name=profile_name(project), material_name=project.material.name,
-                                 density=_density(project), stock_length_mm=MM * b.stock_length, kerf_mm=MM * b.kerf,
-                                 area_m2=section.A, outer_size_mm=size_mm)
+    beam_settings = b.to_settings(profile_name=profile_name(project), material_name=project.material.name,
+                                  density=_density(project), area_m2=section.A, outer_size_mm=size_mm)
     areas_m2 = np.full(len(sizes_mm), section.A) if tubes is None else tubes.properties["A"]
     table = cut_list(polymesh, normals, beam_settings, joint_settings, profiles=None if tubes is None else tubes.names,
                      areas_m2=areas_m2, outer_sizes_mm=sizes_mm)
@@ -258,20 +247,20 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
                                 message=(f"beam {ids[i]} ({a}-{z}) is shorter than its two joints take"
                                          if cut[i] <= 0 else f"beam {ids[i]} ({a}-{z}) cuts to {cut[i]:.1f} mm"),
                                 fix=fix_short))
-    stock = MM * b.stock_length
-    for i in np.flatnonzero(cut + MM * b.kerf > stock):
+    stock, kerf = beam_settings.stock_length_mm, beam_settings.kerf_mm
+    for i in np.flatnonzero(cut + kerf > stock):
         findings.append(Finding(kind="stock_length", parts=[ids[i]], measure=float(cut[i]), limit=stock, unit="mm",
                                 stage="fabrication",
                                 message=f"beam {ids[i]} ({cut[i]:.0f} mm) is longer than a stock bar",
                                 fix="raise [fabrication.beams] stock_length, or more cells ([remesh] n_cells)"))
-    nestable = (cut > 0) & (cut + MM * b.kerf <= stock)
+    nestable = (cut > 0) & (cut + kerf <= stock)
     clock.start("beams: bar nesting")
     # bars of each profile are nested apart: a bar is cut into pieces of its own tube only
     profiles = table["profile"].to_numpy()
     nestings = []
     for profile in sorted(set(profiles.tolist())):
         members = np.flatnonzero(nestable & (profiles == profile))
-        nestings.append((profile, nest_bars(cut[members], [ids[i] for i in members], stock, MM * b.kerf)))
+        nestings.append((profile, nest_bars(cut[members], [ids[i] for i in members], stock, kerf)))
     _write_bars_by_profile(nestings, folder / "beams" / "bars.csv")
     clock.start("beams: beams.step")
     write_beams_step(polymesh, table, folder / "beams" / "beams.step", outer_size_mm=sizes_mm, wall_mm=walls_mm)
@@ -289,14 +278,9 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     if config.panels.enabled:
         clock.start("panels: flatten and DXFs")
         from fabrication.nesting_sheets import nest_on_stock, sheet_overshoot, write_contact_sheet, write_sheet_dxfs
-        from fabrication.panels import PanelSettings, flatten_panels, write_panel_dxfs, write_panels_csv
+        from fabrication.panels import flatten_panels, write_panel_dxfs, write_panels_csv
 
-        p = config.panels
-        panel_settings = PanelSettings(thickness_mm=MM * p.thickness, material_name=p.material, density=p.density,
-                                       clearance_mm=MM * p.clearance, hole_diameter_mm=MM * p.hole_diameter,
-                                       hole_inset_mm=MM * p.hole_inset,
-                                       planarity_tolerance_mm=MM * p.planarity_tolerance,
-                                       split_nonplanar=p.split_nonplanar)
+        panel_settings = config.panels.to_settings()
         problems: list[tuple[str, str]] = []
         pieces = grid.pieces
         glazing = PolyMesh(nodes=polymesh.nodes, faces=tuple(p.loop for p in pieces))
@@ -306,7 +290,7 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
                      for pid, message in problems]
         write_panel_dxfs(panels, folder / "panels", panel_settings)
         clock.start("panels: sheet nesting")
-        stocks = sheet_stock(project)
+        stocks = config.sheets.to_settings()
         stock_nesting = nest_on_stock(panels, stocks)
         largest = max(stocks, key=lambda s: s.width_mm * s.height_mm)
         for i in stock_nesting.unfit:
@@ -392,9 +376,10 @@ def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, normals: np.n
         frame = pd.read_csv(panels_csv)
         sheets = dict(zip(frame["id"], frame["sheet"].astype("string").fillna("")))
         masses = dict(zip(frame["id"], frame["mass_kg"]))
-    p = project.fabrication.panels
+    glazing = project.fabrication.panels.to_settings()
     plates = [IfcPanel(id=panel.id, outline_mm=MM * np.asarray(panel.outline_3d_m), axes=np.asarray(panel.axes),
-                       thickness_mm=MM * p.thickness, material=p.material, mass_kg=float(masses.get(panel.id, 0.0)),
+                       thickness_mm=glazing.thickness_mm, material=glazing.material_name,
+                       mass_kg=float(masses.get(panel.id, 0.0)),
                        sheet=str(sheets.get(panel.id, "")), step=step_of.get(panel.id)) for panel in panels]
     joints = []
     settings = joint_settings

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.field import AnisotropyMap, FieldSettings, GuidingField, SizeMap, guiding_field
+from engine.field import GuidingField, guiding_field
 from engine.shell import ShellResult
 from fabrication.files import atomic_path, write_text_atomic
 
@@ -21,26 +21,13 @@ from ..plots.field import plot_field
 from ..runner import StageContext
 from .surface import SurfaceResult
 
-__all__ = ["run", "load", "field_settings"]
-
-
-def field_settings(project: Project) -> FieldSettings:
-    """The engine's FieldSettings from the project's [field] section."""
-    config = project.field
-    return FieldSettings(
-        max_size_ratio=config.max_size_ratio, max_aspect=config.max_aspect,
-        size_map=SizeMap(config.size_map), anisotropy_map=AnisotropyMap(config.anisotropy_map),
-        opposite_sign_anisotropy=config.opposite_sign_anisotropy,
-        clamp_percentiles=tuple(config.clamp_percentiles),
-        smoothing_iterations=config.smoothing_iterations,
-        direction_smoothing_iterations=config.direction_smoothing_iterations,
-        symmetry_planes=tuple((tuple(p.point), tuple(p.normal)) for p in config.symmetry_planes))
+__all__ = ["run", "load"]
 
 
 def run(surface: SurfaceResult, shell: ShellResult, project: Project, ctx: StageContext) -> GuidingField:
     mesh = surface.mesh
     ctx.step("stress to metric")
-    field = guiding_field(mesh, shell.vertex_membrane_forces, field_settings(project))
+    field = guiding_field(mesh, shell.vertex_membrane_forces, project.field.to_settings())
     with atomic_path(ctx.folder / "field.npz") as tmp:
         with open(tmp, "wb") as handle:
             np.savez_compressed(handle, size=field.size, anisotropy=field.anisotropy,

@@ -64,16 +64,12 @@ class OptimizedGrid:
 
 
 def optimize_settings(project: Project) -> OptimizeSettings:
-    c = project.optimize
+    """The engine's optimiser settings of [optimize], holding the grid to its joints (with the end
+    game's margin) and its cells to the field's aspect bound (with STRETCH_MARGIN)."""
     limits = build_limits_of(project)
-    return OptimizeSettings(regularity_weight=c.regularity_weight, planarity_weight=c.planarity_weight,
-                            closeness_weight=c.closeness_weight, fairness_weight=c.fairness_weight,
-                            iterations=c.iterations, planar=c.planar and c.planarise_cells,
-                            planarity_tolerance=c.planarity_tolerance,
-                            planarity_iterations=c.planarity_iterations, split_cells=c.split_cells,
-                            min_beam_length=MIN_LENGTH_MARGIN * limits.shortest_beam_mm() / 1000,
-                            min_corner_angle_deg=max(20.0, MIN_LENGTH_MARGIN * limits.min_angle_deg),
-                            max_cell_stretch=STRETCH_MARGIN * project.field.max_aspect)
+    return project.optimize.to_settings(min_beam_length_mm=MIN_LENGTH_MARGIN * limits.shortest_beam_mm(),
+                                        min_corner_angle_deg=max(20.0, MIN_LENGTH_MARGIN * limits.min_angle_deg),
+                                        max_cell_stretch=STRETCH_MARGIN * project.field.max_aspect)
 
 
 def beam_length_limits(project: Project):

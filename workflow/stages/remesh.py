@@ -17,7 +17,7 @@ from engine.collapse import CollapseReport, collapse_short_beams
 from engine.field import GuidingField
 from engine.findings import Finding
 from engine.mesh import PolyMesh
-from engine.voronoi import RemeshResult, RemeshSettings, polymesh_quality, remesh
+from engine.voronoi import RemeshResult, polymesh_quality, remesh
 from fabrication.files import write_text_atomic
 from fabrication.limits import node_smallest_angles, required_beam_lengths_m
 
@@ -28,24 +28,13 @@ from .build_limits import build_limits_of
 from .polymesh_io import read_polymesh_obj, write_polymesh_obj
 from .surface import SurfaceResult
 
-__all__ = ["run", "load", "remesh_settings", "buildable_grid"]
-
-DEFAULT_CELLS = 120
-
-
-def remesh_settings(project: Project) -> RemeshSettings:
-    config = project.remesh
-    target = {"n_cells": config.n_cells, "mean_beam_length": config.mean_beam_length,
-              "total_length": config.total_length}
-    if all(v is None for v in target.values()):
-        target["n_cells"] = DEFAULT_CELLS
-    return RemeshSettings(**target, lloyd_iterations=config.lloyd_iterations, seed=config.seed)
+__all__ = ["run", "load", "buildable_grid"]
 
 
 def run(surface: SurfaceResult, field: GuidingField, project: Project, ctx: StageContext) -> PolyMesh:
     support_vertices = np.zeros(surface.mesh.n_vertices, dtype=bool)
     support_vertices[surface.supports.nodes] = True
-    settings = remesh_settings(project)
+    settings = project.remesh.to_settings()
     result = remesh(surface.mesh, field, settings, support_vertices=support_vertices, progress=ctx.step)
     asked, remeshes = settings.n_cells or result.polymesh.n_faces, 0
     if project.remesh.coarsen_for_joints:

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from engine.catalogue import CATALOGUES, Catalogue, catalogue, chs_properties
-from engine.en1993 import EndForces, TubeChecks, buckling_alpha, chs_checks, simplified_checks
+from engine.en1993 import ChecksMethod, EndForces, TubeChecks, buckling_alpha, chs_checks, simplified_checks
 from engine.sections import Material
 from engine.structure import BeamProperties
 
@@ -71,7 +71,7 @@ def project_catalogue(project: Project) -> Catalogue:
     return catalogue(project.design.catalogue).up_to(project.design.max_diameter)
 
 
-def checks_method(project: Project, material: Material) -> str:
+def checks_method(project: Project, material: Material) -> ChecksMethod:
     """en1993 (steel tubes, [analysis] checks = "en1993") or simplified (every other case)."""
     if (project.analysis.checks == "en1993" and project.section.kind == "circular_hollow"
             and material.kind == "steel"):
@@ -92,8 +92,8 @@ def buckling_lengths(project: Project, lengths: np.ndarray, end_forces: np.ndarr
     return np.where(compression > 0, from_modes, node_to_node)
 
 
-def tube_checks(method: str, forces: EndForces, diameter: np.ndarray, thickness: np.ndarray, material: Material,
-                *, process: str | None, buckling_length: np.ndarray) -> TubeChecks:
+def tube_checks(method: ChecksMethod, forces: EndForces, diameter: np.ndarray, thickness: np.ndarray,
+                material: Material, *, process: str | None, buckling_length: np.ndarray) -> TubeChecks:
     """The member checks of ``method`` on tubes (arrays broadcast: one per beam, or candidates)."""
     alpha = buckling_alpha(process, material)
     if method == "en1993":
@@ -103,7 +103,7 @@ def tube_checks(method: str, forces: EndForces, diameter: np.ndarray, thickness:
                              buckling_length=buckling_length)
 
 
-def sized_checks(project: Project, method: str, sections: BeamSections, material: Material, result,
+def sized_checks(project: Project, method: ChecksMethod, sections: BeamSections, material: Material, result,
                  lengths: np.ndarray) -> TubeChecks:
     """The member checks of every beam's own tube under a protocol result's ULS forces
     (engine.protocol.ProtocolResult), with the project's buckling lengths."""
@@ -114,7 +114,7 @@ def sized_checks(project: Project, method: str, sections: BeamSections, material
                                                         material.E, result.lambda_LB))
 
 
-def candidate_utilisation(method: str, end_forces: np.ndarray, cat: Catalogue, material: Material,
+def candidate_utilisation(method: ChecksMethod, end_forces: np.ndarray, cat: Catalogue, material: Material,
                           buckling_length: np.ndarray) -> np.ndarray:
     """(b, s) utilisation of every beam with every catalogue tube under these forces."""
     forces = EndForces.of(end_forces).column()
@@ -129,7 +129,7 @@ def start_tubes(project: Project, cat: Catalogue, n_beams: int) -> np.ndarray:
     return np.full(n_beams, int(stiff[0]) if len(stiff) else len(cat) - 1)
 
 
-def make_analyse(method: str, cat: Catalogue, material: Material, lengths: np.ndarray,
+def make_analyse(method: ChecksMethod, cat: Catalogue, material: Material, lengths: np.ndarray,
                  solve: Callable[[BeamSections], tuple[np.ndarray, float, float | None, tuple]],
                  project: Project):
     """analyse(tube indices) for engine.sizing: ``solve`` gives (ULS end forces, SLS deflection,

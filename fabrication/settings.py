@@ -1,0 +1,73 @@
+"""The settings of the fabrication modules that load pandas or shapely (beams, panels, sheets).
+
+They live apart from those modules so that the project schema (workflow.config), which builds
+them and reads their defaults, loads neither: a run whose stages are all cached does not. The
+modules re-export them (``fabrication.beams.BeamSettings``, ``fabrication.panels.PanelSettings``,
+``fabrication.nesting_sheets.SheetSettings``). Lengths in mm, as in every fabrication module.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from engine.errors import InputError
+
+__all__ = ["BeamSettings", "PanelSettings", "SheetSettings"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class BeamSettings:
+    """Profile and material names, density (kg/m^3), stock bar length and saw kerf (mm), section
+    area (m^2) for the mass, and the outer size (mm) for the solids and set-backs."""
+
+    profile_name: str
+    material_name: str
+    density: float
+    stock_length_mm: float = 6000.0
+    kerf_mm: float = 3.0
+    area_m2: float = 0.0
+    outer_size_mm: float = 0.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class PanelSettings:
+    """Panel material and cutting settings (lengths in mm, density in kg/m^3)."""
+
+    thickness_mm: float = 3.0
+    material_name: str = "acrylic"
+    density: float = 1190.0
+    clearance_mm: float = 2.0
+    hole_diameter_mm: float = 0.0
+    hole_inset_mm: float = 10.0
+    planarity_tolerance_mm: float = 2.0
+    split_nonplanar: bool = False
+
+    def __post_init__(self) -> None:
+        for name in ("thickness_mm", "density"):
+            if not getattr(self, name) > 0:
+                raise InputError(f"panel setting {name} = {getattr(self, name)!r} must be positive")
+        for name in ("clearance_mm", "hole_diameter_mm", "hole_inset_mm", "planarity_tolerance_mm"):
+            if not getattr(self, name) >= 0:
+                raise InputError(f"panel setting {name} = {getattr(self, name)!r} must be zero or positive")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SheetSettings:
+    """Sheet size, gap between parts, border margin (mm) and whether parts may rotate."""
+
+    width_mm: float = 1200.0
+    height_mm: float = 600.0
+    spacing_mm: float = 4.0
+    margin_mm: float = 10.0
+    rotations: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("width_mm", "height_mm"):
+            if not getattr(self, name) > 0:
+                raise InputError(f"sheet setting {name} = {getattr(self, name)!r} must be positive")
+        for name in ("spacing_mm", "margin_mm"):
+            if not getattr(self, name) >= 0:
+                raise InputError(f"sheet setting {name} = {getattr(self, name)!r} must be zero or positive")
+        if 2 * self.margin_mm >= min(self.width_mm, self.height_mm):
+            raise InputError(f"sheet margin {self.margin_mm} mm leaves no room on a "
+                             f"{self.width_mm} x {self.height_mm} mm sheet")
