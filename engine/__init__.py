@@ -3,10 +3,14 @@
 Imports nothing from ``workflow`` or ``fabrication``; heavy optional libraries are imported lazily.
 """
 
+import logging
+
 from .errors import ConvergenceError, GridshellError, InputError, MechanismError, MeshError, SelectionError
 from .loads import LimitState, LoadCase, LoadCombination
 from .mesh import PolyMesh, TriMesh
 from .supports import Supports
+
+logging.getLogger(__name__).addHandler(logging.NullHandler())  # the CLI adds handlers (--verbose)
 
 __all__ = [
     "ConvergenceError",

@@ -115,7 +115,8 @@ def _corner_pass(x: np.ndarray, faces: list[np.ndarray], boundary: np.ndarray, b
         if k > 3 and on.any() and not on.all():
             # runs of boundary nodes joined by boundary beams, starting after an inner node
             start = int(np.flatnonzero(~on)[0])
-            runs, run = [], []
+            runs: list[list[int]] = []
+            run: list[int] = []
             for s in range(1, k + 1):
                 p = (start + s) % k
                 joined = run and _key(int(face[run[-1]]), int(face[p])) in beams
@@ -182,9 +183,9 @@ def _boundary_loops(beams: set[tuple[int, int]]) -> list[list[int]]:
 def _edge_pass(x: np.ndarray, faces: list[np.ndarray], boundary: np.ndarray, corners: np.ndarray,
                hold: float, straightness: float) -> tuple[list[np.ndarray], list[tuple[int, int]]]:
     beams = _boundary_beams(faces)
-    owner = {}
-    for i, face in enumerate(faces):
-        for a, b in zip(face, np.roll(face, -1)):
+    owner: dict[tuple[int, int], int] = {}
+    for i, cell in enumerate(faces):
+        for a, b in zip(cell, np.roll(cell, -1)):
             if _key(int(a), int(b)) in beams:
                 owner[_key(int(a), int(b))] = i
     to_cut: dict[int, set[tuple[int, int]]] = {}

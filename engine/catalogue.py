@@ -9,7 +9,7 @@ project may give its own CSV with at least ``diameter_mm`` and ``thickness_mm`` 
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -52,6 +52,13 @@ class Catalogue:
     thickness: np.ndarray
     process: str | None
     source: str
+    # chs_properties of the tubes, set by __post_init__
+    A: np.ndarray = field(init=False, repr=False)
+    I: np.ndarray = field(init=False, repr=False)
+    J: np.ndarray = field(init=False, repr=False)
+    W_el: np.ndarray = field(init=False, repr=False)
+    W_pl: np.ndarray = field(init=False, repr=False)
+    i: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         for key, value in chs_properties(self.diameter, self.thickness).items():

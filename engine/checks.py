@@ -52,6 +52,7 @@ def member_checks(beam_end_forces: np.ndarray, lengths: np.ndarray, section: Sec
                                section.Wy_el, material, alpha=material.buckling_alpha,
                                buckling_length=buckling_length_factor * np.asarray(lengths, dtype=float),
                                Wz_el=section.Wz_el)
+    assert checks.governing is not None  # one section over the members (b,): the checks are named
     return MemberChecks(utilisation=checks.utilisation, governing=checks.governing,
                         cross_section=checks.cross_section, buckling=checks.buckling,
                         axial_force=checks.axial_force, slenderness=checks.slenderness)

@@ -269,7 +269,7 @@ def collapse_short_beams(polymesh: PolyMesh, required: Callable[[PolyMesh], np.n
             candidates = np.array([b for b, e in zip(order, pairs) if e not in done_flips], dtype=np.int64)
             polymesh, done, new = flip_beams(polymesh, candidates, FLIP_MARGIN * need)
             flips += done
-            done_flips.update(tuple(sorted(map(int, polymesh.edges[b]))) for b in new)
+            done_flips.update((min(e), max(e)) for e in (tuple(map(int, polymesh.edges[b])) for b in new))
         if done:  # the next pass sees the flipped grid, and collapses what could not be flipped
             continue
         polymesh, done = collapse_beams(polymesh, order)

@@ -74,8 +74,8 @@ class CondensedFactor:
             K = assemble_blocks(element_matrices, connectivity, n_nodes)
             self._lu = sparse_lu(K[free][:, free])
             self._beams = None
-            self._block_pivots = np.zeros(0)
-            self._K_ii = None
+            self._block_pivots: np.ndarray | None = np.zeros(0)
+            self._K_ii: np.ndarray | None = None
             return
         m = len(connectivity) // k                      # beams
         g = 6 * (k - 1)
@@ -126,6 +126,7 @@ class CondensedFactor:
         """The pivots of the elimination: the internal blocks' (without row exchanges), then the
         diagonal of S's U (made when asked for: SuperLU builds all of U for it)."""
         if self._block_pivots is None:
+            assert self._K_ii is not None  # beams of several elements: their internal blocks are kept
             self._block_pivots = _block_pivots(self._K_ii).ravel()
         return np.concatenate([self._block_pivots, self._lu.U.diagonal()])
 

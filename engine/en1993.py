@@ -216,8 +216,9 @@ def chs_checks(forces: EndForces, diameter: np.ndarray, thickness: np.ndarray, m
                       axial_force=forces.N.mean(axis=-1), governing=_governing(parts))
 
 
-def simplified_checks(forces: EndForces, A: np.ndarray, I: np.ndarray, W_el: np.ndarray, material: Material, *,
-                      alpha: float, buckling_length: np.ndarray, Wz_el: np.ndarray | None = None) -> TubeChecks:
+def simplified_checks(forces: EndForces, A: float | np.ndarray, I: float | np.ndarray, W_el: float | np.ndarray,
+                      material: Material, *, alpha: float, buckling_length: np.ndarray,
+                      Wz_el: float | np.ndarray | None = None) -> TubeChecks:
     """The stated simplification (engine.checks: linear interaction with elastic moduli, interaction
     factors 1) over arrays of sections (A, the weaker I, W_el about y and ``Wz_el`` about z, default
     the same; SI, broadcasting)."""

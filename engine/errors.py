@@ -38,7 +38,7 @@ class GridshellError(Exception):
         return _rebuild, (type(self), self.args, self.__dict__)
 
 
-def _rebuild(cls: type, args: tuple, state: dict) -> GridshellError:
+def _rebuild(cls: type[GridshellError], args: tuple, state: dict) -> GridshellError:
     """A GridshellError of class ``cls`` from its arguments and attributes (unpickling)."""
     error = Exception.__new__(cls)
     error.args = args

@@ -47,10 +47,12 @@ class LoadCase:
 
     name: str
     self_weight: float = 0.0
-    area_true: np.ndarray = field(default=None)  # type: ignore[assignment]
-    area_plan: np.ndarray = field(default=None)  # type: ignore[assignment]
-    point_nodes: np.ndarray = field(default=None)  # type: ignore[assignment]
-    point_forces: np.ndarray = field(default=None)  # type: ignore[assignment]
+    # the constructor also takes None (no load) or sequences, which __post_init__ turns into read-only
+    # arrays: the attributes are always arrays, and mypy has no field converters to say so
+    area_true: np.ndarray = field(default=None)  # type: ignore[arg-type]
+    area_plan: np.ndarray = field(default=None)  # type: ignore[arg-type]
+    point_nodes: np.ndarray = field(default=None)  # type: ignore[arg-type]
+    point_forces: np.ndarray = field(default=None)  # type: ignore[arg-type]
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "area_true", _vec3(self.area_true))
@@ -108,8 +110,8 @@ def combine(cases: dict[str, LoadCase], combination: LoadCombination) -> LoadCas
         forces.append(factor * case.point_forces)
     return LoadCase(name=combination.name, self_weight=self_weight, area_true=area_true,
                     area_plan=area_plan,
-                    point_nodes=np.concatenate(nodes) if nodes else None,
-                    point_forces=np.concatenate(forces) if forces else None)
+                    point_nodes=np.concatenate(nodes) if nodes else np.zeros(0, dtype=np.int64),
+                    point_forces=np.concatenate(forces) if forces else np.zeros((0, 6)))
 
 
 def lump_area_load(vertices: np.ndarray, triangles: np.ndarray, case: LoadCase) -> np.ndarray:
@@ -128,3 +130,18 @@ def lump_area_load(vertices: np.ndarray, triangles: np.ndarray, case: LoadCase) 
     for k in range(3):
         np.add.at(out, triangles[:, k], resultant / 3.0)
     return out
+
+
+def resultant(points: np.ndarray, forces: np.ndarray) -> np.ndarray:
+    """(6,) resultant force and moment about the origin of nodal forces and moments (n,6) at points (n,3)."""
+    return np.concatenate([forces[:, :3].sum(axis=0), (np.cross(points, forces[:, :3]) + forces[:, 3:]).sum(axis=0)])
+
+
+def equilibrium_error(points: np.ndarray, loads: np.ndarray, reactions: np.ndarray, size: float | None = None) -> float:
+    """|loads + reactions| / |loads|, forces plus moments about the origin divided by ``size`` (a
+    length of the model; default: the points' largest extent), both (n,6) at points (n,3)."""
+    size = max(float(np.ptp(points, axis=0).max()) if size is None else float(size), 1e-300)
+    total = resultant(points, loads)
+    balance = total + resultant(points, reactions)
+    scale = float(np.linalg.norm(total[:3]) + np.linalg.norm(total[3:]) / size)
+    return float((np.linalg.norm(balance[:3]) + np.linalg.norm(balance[3:]) / size) / max(scale, 1e-300))

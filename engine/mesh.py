@@ -87,7 +87,9 @@ class TriMesh:
 
     vertices: np.ndarray
     faces: np.ndarray
-    flagged: np.ndarray = field(default=None)  # type: ignore[assignment]
+    # None (no vertex flagged) or a sequence is welcome too: __post_init__ makes it a read-only bool
+    # array, and mypy has no field converters to say so
+    flagged: np.ndarray = field(default=None)  # type: ignore[arg-type]
     name: str = "surface"
 
     def __post_init__(self) -> None:
@@ -211,9 +213,11 @@ class PolyMesh:
 
     nodes: np.ndarray
     faces: tuple[np.ndarray, ...]
-    boundary: np.ndarray = field(default=None)  # type: ignore[assignment]
-    supports: np.ndarray = field(default=None)  # type: ignore[assignment]
-    corners: np.ndarray = field(default=None)  # type: ignore[assignment]
+    # None (all False) or a sequence is welcome too: __post_init__ makes each a read-only (n_nodes,) bool
+    # array, and mypy has no field converters to say so
+    boundary: np.ndarray = field(default=None)  # type: ignore[arg-type]
+    supports: np.ndarray = field(default=None)  # type: ignore[arg-type]
+    corners: np.ndarray = field(default=None)  # type: ignore[arg-type]
 
     def __post_init__(self) -> None:
         nodes = np.asarray(self.nodes, dtype=np.float64)

@@ -109,7 +109,7 @@ def imperfection_shapes(settings: ProtocolSettings, sls_displacements: np.ndarra
                         nonlinear_displacements: np.ndarray | None,
                         modes: np.ndarray) -> dict[str, np.ndarray]:
     """Named nodal offsets (n, 3), each with largest translation ``settings.amplitude``, both signs."""
-    sources: dict[str, np.ndarray | None] = {}
+    sources: dict[ImperfectionShape, np.ndarray | None] = {}
     for name in settings.shapes:
         if name == "linear":
             sources[name] = sls_displacements

@@ -81,10 +81,11 @@ class Section:
         return float(np.sqrt(min(self.Iy, self.Iz) / self.A))
 
 
-def _positive(**values) -> None:
-    for key, value in values.items():
-        if value is None or not value > 0:
-            raise InputError(f"section: {key} must be positive, got {value}")
+def _positive(key: str, value: float | None) -> float:
+    """The dimension itself once it is given and positive; InputError otherwise."""
+    if value is None or not value > 0:
+        raise InputError(f"section: {key} must be positive, got {value}")
+    return value
 
 
 def section_from_spec(kind: str, *, diameter: float | None = None, thickness: float | None = None,
@@ -93,7 +94,7 @@ def section_from_spec(kind: str, *, diameter: float | None = None, thickness: fl
     thickness), solid_round (diameter) or solid_rectangle (height, width) section, in m."""
     pi = np.pi
     if kind == "circular_hollow":
-        _positive(diameter=diameter, thickness=thickness)
+        diameter, thickness = _positive("diameter", diameter), _positive("thickness", thickness)
         if 2 * thickness >= diameter:
             raise InputError(f"section: wall {thickness} m too thick for diameter {diameter} m")
         inner = diameter - 2 * thickness
@@ -101,7 +102,8 @@ def section_from_spec(kind: str, *, diameter: float | None = None, thickness: fl
         W_el, W_pl = 2 * I / diameter, (diameter**3 - inner**3) / 6
         return Section(kind, pi / 4 * (diameter**2 - inner**2), I, I, 2 * I, W_el, W_el, W_pl, W_pl, diameter, diameter)
     if kind == "rectangular_hollow":
-        _positive(height=height, width=width, thickness=thickness)
+        height, width = _positive("height", height), _positive("width", width)
+        thickness = _positive("thickness", thickness)
         if 2 * thickness >= min(height, width):
             raise InputError("section: wall too thick for the rectangle")
         h, b, t = height, width, thickness
@@ -112,12 +114,12 @@ def section_from_spec(kind: str, *, diameter: float | None = None, thickness: fl
         return Section(kind, h * b - hi * bi, Iy, Iz, J, 2 * Iy / h, 2 * Iz / b, (b * h**2 - bi * hi**2) / 4,
                        (h * b**2 - hi * bi**2) / 4, h, b)
     if kind == "solid_round":
-        _positive(diameter=diameter)
+        diameter = _positive("diameter", diameter)
         d = diameter
         I = pi * d**4 / 64
         return Section(kind, pi * d**2 / 4, I, I, 2 * I, pi * d**3 / 32, pi * d**3 / 32, d**3 / 6, d**3 / 6, d, d)
     if kind == "solid_rectangle":
-        _positive(height=height, width=width)
+        height, width = _positive("height", height), _positive("width", width)
         h, b = height, width
         long, short = max(h, b), min(h, b)
         J = long * short**3 * (1 / 3 - 0.21 * short / long * (1 - short**4 / (12 * long**4)))  # Roark

@@ -18,13 +18,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import InputError, MechanismError
-from .linalg import assemble_blocks, congruent
-from .loads import GRAVITY, LoadCase
+from .linalg import assemble_blocks, block_diagonal, congruent, count_free_rigid_modes, node_dofs
+from .loads import GRAVITY, LoadCase, equilibrium_error, resultant
 from .mesh import TriMesh
 from .supports import Supports
 
-__all__ = ["ShellMaterial", "ShellResult", "shell_nodal_loads", "analyse_shell", "shell_stiffness",
-           "solve_shell_json", "rigid_body_modes", "count_free_rigid_modes"]
+__all__ = ["ShellMaterial", "ShellResult", "shell_nodal_loads", "analyse_shell", "shell_stiffness"]
 
 #: Drilling penalty: k = DRILLING_FACTOR * G t A per node; small enough not to stiffen bending.
 DRILLING_FACTOR = 1e-3
@@ -188,15 +187,11 @@ def _local_stiffness(local: np.ndarray, area: np.ndarray, thickness: float, mate
 
 def _rotation(frames: np.ndarray) -> np.ndarray:
     """(m,18,18) block-diagonal global-to-local transformation."""
-    m = len(frames)
-    T = np.zeros((m, 18, 18))
-    for block in range(6):
-        T[:, 3 * block:3 * block + 3, 3 * block:3 * block + 3] = frames
-    return T
+    return block_diagonal(frames, 6)
 
 
 def _dof_indices(triangles: np.ndarray) -> np.ndarray:
-    return (6 * triangles[:, :, None] + np.arange(6)[None, None, :]).reshape(len(triangles), 18)
+    return node_dofs(triangles)
 
 
 def shell_stiffness(vertices: np.ndarray, triangles: np.ndarray, thickness: float,
@@ -226,32 +221,6 @@ def shell_nodal_loads(mesh: TriMesh, case: LoadCase, *, thickness: float, densit
     for k in range(3):
         np.add.at(loads[:, :3], mesh.faces[:, k], resultant / 3.0)
     return loads
-
-
-# ----------------------------------------------------------------------------- rigid modes
-
-def rigid_body_modes(vertices: np.ndarray) -> np.ndarray:
-    """(6n, 6) the three translations and three rotations (about the centroid) of the nodes."""
-    n = len(vertices)
-    r = vertices - vertices.mean(axis=0)
-    scale = max(float(np.abs(r).max()), 1e-300)
-    modes = np.zeros((n, 6, 6))
-    for axis in range(3):
-        modes[:, axis, axis] = 1.0
-        rotation = np.zeros(3)
-        rotation[axis] = 1.0
-        modes[:, :3, 3 + axis] = np.cross(rotation, r) / scale
-        modes[:, 3 + axis, 3 + axis] = 1.0 / scale
-    return modes.reshape(6 * n, 6)
-
-
-def count_free_rigid_modes(vertices: np.ndarray, restrained: np.ndarray) -> int:
-    """How many rigid-body motions the restrained DOFs (6n,) bool leave free."""
-    constrained = rigid_body_modes(vertices)[restrained]
-    if constrained.size == 0:
-        return 6
-    singular = np.linalg.svd(constrained, compute_uv=False)
-    return int(6 - np.sum(singular > 1e-9 * max(singular.max(), 1e-300)))
 
 
 def _factor(K_free: sp.csc_matrix, library: str = "auto"):
@@ -358,11 +327,8 @@ def analyse_shell(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, thick
     direction = np.cos(angle)[:, None] * frames[:, 0] + np.sin(angle)[:, None] * frames[:, 1]
     vertex_tensors = _vertex_tensors(mesh, frames, membrane, data["area"])
     vertex_values, vertex_directions = _tangent_principal(vertex_tensors, mesh.vertex_normals)
-    total = _resultant(mesh.vertices, loads)
-    balance = total + _resultant(mesh.vertices, reactions)
-    scale = np.linalg.norm(total[:3]) + np.linalg.norm(total[3:]) / max(mesh.diagonal, 1e-300)
-    error = float((np.linalg.norm(balance[:3]) + np.linalg.norm(balance[3:]) / max(mesh.diagonal, 1e-300))
-                  / max(scale, 1e-300))
+    total = resultant(mesh.vertices, loads)
+    error = equilibrium_error(mesh.vertices, loads, reactions, size=mesh.diagonal)
     return ShellResult(displacements=displacements, reactions=reactions, face_frames=frames,
                        face_membrane_forces=membrane, face_moments=moments, face_principal_forces=principal,
                        face_principal_directions=direction, vertex_membrane_forces=vertex_tensors,
@@ -370,73 +336,4 @@ def analyse_shell(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, thick
                        load_total=total, equilibrium_error=error, solver=factor.library)
 
 
-def _resultant(points: np.ndarray, forces: np.ndarray) -> np.ndarray:
-    """(6,) resultant force and moment about the origin of nodal forces and moments (n,6)."""
-    return np.concatenate([forces[:, :3].sum(axis=0), (np.cross(points, forces[:, :3]) + forces[:, 3:]).sum(axis=0)])
-
-
 # ----------------------------------------------------------------------------- JSON interface
-
-def _require(model: dict, key: str):
-    if key not in model:
-        raise InputError(f"shell model: missing key '{key}'",
-                         hint="see docs/formats.md: nodes, triangles, thickness, material, supports, loads")
-    return model[key]
-
-
-def _node_table(table: dict, name: str, n: int) -> tuple[np.ndarray, np.ndarray]:
-    if not isinstance(table, dict):
-        raise InputError(f"shell model: '{name}' must be an object keyed by node index")
-    nodes, values = [], []
-    for key, value in table.items():
-        try:
-            node = int(key)
-        except ValueError:
-            raise InputError(f"shell model: '{name}' key {key!r} is not a node index") from None
-        if not 0 <= node < n:
-            raise InputError(f"shell model: '{name}' node {node} is out of range 0..{n - 1}")
-        if not isinstance(value, (list, tuple)) or len(value) != 6:
-            raise InputError(f"shell model: '{name}' of node {node} must be a list of 6 values")
-        nodes.append(node)
-        values.append(value)
-    return np.array(nodes, dtype=np.int64), np.array(values, dtype=float).reshape(len(nodes), 6)
-
-
-def solve_shell_json(model: dict) -> dict:
-    """Solve a shell model given as a JSON object (docs/formats.md) and return the result object."""
-    try:
-        vertices = np.array(_require(model, "nodes"), dtype=float)
-        triangles = np.array(_require(model, "triangles"), dtype=np.int64)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"shell model: nodes must be [[x,y,z],...] and triangles [[i,j,k],...] ({exc})") from None
-    if vertices.ndim != 2 or vertices.shape[1] != 3 or triangles.ndim != 2 or triangles.shape[1] != 3:
-        raise InputError("shell model: nodes must be [[x,y,z],...] and triangles [[i,j,k],...]")
-    if triangles.size and (triangles.min() < 0 or triangles.max() >= len(vertices)):
-        raise InputError(f"shell model: a triangle refers to a node outside 0..{len(vertices) - 1}")
-    material_data = _require(model, "material")
-    try:
-        material = ShellMaterial(E=float(material_data["E"]), nu=float(material_data["nu"]),
-                                 density=float(material_data.get("density", 0.0)))
-    except (KeyError, TypeError) as exc:
-        raise InputError(f"shell model: material needs E and nu ({exc})") from None
-    thickness = float(_require(model, "thickness"))
-    mesh = TriMesh(vertices=vertices, faces=triangles, name="model")
-    n = len(vertices)
-    support_nodes, flags = _node_table(_require(model, "supports"), "supports", n)
-    supports = Supports(nodes=support_nodes, restraints=flags.astype(bool))
-    load_nodes, forces = _node_table(model.get("loads", {}), "loads", n)
-    loads = np.zeros((n, 6))
-    np.add.at(loads, load_nodes, forces)
-    area_load = np.asarray(model.get("area_load", [0.0, 0.0, 0.0]), dtype=float)
-    if area_load.shape != (3,):
-        raise InputError("shell model: area_load must be [qx, qy, qz]")
-    case = LoadCase(name="model", self_weight=1.0 if model.get("self_weight", False) else 0.0, area_true=area_load)
-    loads += shell_nodal_loads(mesh, case, thickness=thickness, density=material.density)
-    result = analyse_shell(mesh, supports, loads, thickness=thickness, material=material)
-    return {
-        "displacements": result.displacements.tolist(),
-        "membrane_forces": [{"N1": float(a), "N2": float(b), "direction": d.tolist()}
-                            for (a, b), d in zip(result.face_principal_forces, result.face_principal_directions)],
-        "reactions": {str(int(node)): result.reactions[node].tolist() for node in supports.nodes},
-        "equilibrium_error": result.equilibrium_error,
-    }

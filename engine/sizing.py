@@ -159,7 +159,7 @@ def size_sections(analyse: Callable[[np.ndarray], DesignState], catalogue: Catal
         allowed = ((catalogue.I[None, :] >= I_floor[:, None] * (1 - 1e-9))
                    & (np.arange(len(catalogue))[None, :] >= floor_tube[:, None]))
         feasible = allowed & (state.utilisation <= 1.0)
-        has = feasible.any(axis=1)
+        has = np.any(feasible, axis=1)  # an array: ndarray.any's stubs allow a scalar for any axis
         if not has.all():
             # no tube passes these beams under this design's forces: they take their least utilised
             # tube, and the iteration goes on (stiffer neighbours may take load off them)

@@ -17,12 +17,17 @@ on our own matrices (docs/benchmarks.md, "Factorisations"):
 
 from __future__ import annotations
 
+import logging
+import time
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 __all__ = ["SymmetricFactor", "factor_symmetric", "library_for", "pardiso_available", "describe",
            "PARDISO_FROM_DOFS", "SingularMatrix"]
+
+log = logging.getLogger(__name__)
 
 #: Matrices of at least this many rows are factored by PARDISO when it is installed.
 PARDISO_FROM_DOFS = 60_000
@@ -128,10 +133,16 @@ def factor_symmetric(matrix: sp.spmatrix, *, library: str = "auto") -> Symmetric
     """Factor a sparse symmetric matrix with ``library`` ("auto": see library_for). Raises
     SingularMatrix when SuperLU meets an exactly zero pivot."""
     chosen = library_for(matrix.shape[0], library)
+    started = time.perf_counter()
+    factor: SymmetricFactor | None = None
     if chosen == "pardiso":
         try:
-            return _Pardiso(matrix)
+            factor = _Pardiso(matrix)
         except (ImportError, OSError):  # installed, but MKL does not load here
             if library == "pardiso":
                 raise
-    return _SuperLU(matrix)
+            log.info("PARDISO did not load here: SuperLU factors the %d rows instead", matrix.shape[0])
+    factor = factor if factor is not None else _SuperLU(matrix)
+    log.debug("factored %d rows, %d non-zeros with %s in %.2f s", matrix.shape[0], matrix.nnz, factor.library,
+              time.perf_counter() - started)
+    return factor

@@ -9,7 +9,7 @@ notation with engineering shear: [N_xx, N_yy, N_xy] = C [eps_xx, eps_yy, gamma_x
 ``closed_form_stiffness`` evaluates the table of METHOD.md section 6 (thesis chapter 7) with the
 2D bulk and shear moduli K, mu (C11 = K + mu, C12 = K - mu, C66 = mu) and their bending analogues
 K_b, mu_b. ``homogenise`` computes C and D of any periodic cell of beams (the regular tilings of
-``periodic_cell`` or a periodic Voronoi patch) with the frame elements of engine.frame: the
+``periodic_cell`` or a periodic Voronoi patch) with the frame elements of engine.beam_elements: the
 displacement is a macroscopic field (an affine membrane strain, or a quadratic deflection of
 constant curvature with its rotations) plus a periodic fluctuation; the fluctuation minimising
 the strain energy is solved for (one factorisation, six right-hand sides) and the energy per unit
@@ -241,19 +241,30 @@ class Homogenised:
 
 def _frame_stiffness(nodes3: np.ndarray, beams: np.ndarray, EA: float, EI_out: float, EI_in: float,
                      GJ: float, elements_per_beam: int) -> tuple[sp.csr_matrix, int, np.ndarray]:
-    """Global stiffness (6N,6N) of the frame elements of engine.frame for a planar patch with the
+    """Global stiffness (6N,6N) of the frame elements of engine.beam_elements for a planar patch with the
     beams' local z (strong-axis normal) = global z; returns K, N (nodes incl. internal ones) and
     their positions (N,3)."""
-    from . import frame
+    from .beam_elements import (
+        FrameModel,
+        assemble,
+        element_dofs,
+        element_geometry,
+        element_mesh,
+        local_stiffness,
+        transformation,
+    )
     from .linalg import congruent
 
-    model = frame.FrameModel(nodes=nodes3, beams=beams, E=EA, G=GJ, A=1.0, Iy=EI_out / EA, Iz=EI_in / EA, J=1.0,
-                             up=np.array([0.0, 0.0, 1.0]), elements_per_beam=elements_per_beam)
-    el = frame._elements(model)
-    L, R = frame._geometry(el, el.nodes)
-    K_elements = congruent(frame._transformation(R), frame._local_stiffness(L, el))
+    # the rigidities as per-beam properties: E = EA and G = GJ with A = J = 1
+    per_beam = np.ones(len(beams))
+    model = FrameModel(nodes=nodes3, beams=beams, E=EA * per_beam, G=GJ * per_beam, A=per_beam,
+                       Iy=EI_out / EA * per_beam, Iz=EI_in / EA * per_beam, J=per_beam,
+                       up=np.array([0.0, 0.0, 1.0]), elements_per_beam=elements_per_beam)
+    el = element_mesh(model)
+    L, R = element_geometry(el, el.nodes)
+    K_elements = congruent(transformation(R), local_stiffness(L, el))
     n_all = len(el.nodes)
-    return frame._assemble(K_elements, frame._dofs(el.connectivity), 6 * n_all).tocsr(), n_all, el.nodes
+    return assemble(K_elements, element_dofs(el.connectivity), 6 * n_all).tocsr(), n_all, el.nodes
 
 
 def _macro_fields(points: np.ndarray) -> np.ndarray:

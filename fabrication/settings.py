@@ -12,7 +12,20 @@ from dataclasses import dataclass
 
 from engine.errors import InputError
 
-__all__ = ["BeamSettings", "PanelSettings", "SheetSettings"]
+__all__ = ["BeamSettings", "PanelSettings", "SheetSettings", "check_ranges"]
+
+
+def check_ranges(settings: object, what: str, *, positive: tuple[str, ...] = (),
+                 zero_or_positive: tuple[str, ...] = ()) -> None:
+    """Refuse settings whose fields named in ``positive`` are not above zero, or those in
+    ``zero_or_positive`` below it (NaN fails both; None, a setting left unset, passes), with an
+    InputError naming ``what`` ("panel", ...), the field and the fix."""
+    for name, allowed, fix in [*((n, "positive", "above zero") for n in positive),
+                               *((n, "zero or positive", "to zero or more") for n in zero_or_positive)]:
+        value = getattr(settings, name)
+        if value is None or (value > 0 if allowed == "positive" else value >= 0):
+            continue
+        raise InputError(f"{what} setting {name} = {value!r} must be {allowed}", hint=f"set {name} {fix}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -27,6 +40,10 @@ class BeamSettings:
     kerf_mm: float = 3.0
     area_m2: float = 0.0
     outer_size_mm: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_ranges(self, "beam", positive=("density", "stock_length_mm"),
+                     zero_or_positive=("kerf_mm", "area_m2", "outer_size_mm"))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -43,12 +60,8 @@ class PanelSettings:
     split_nonplanar: bool = False
 
     def __post_init__(self) -> None:
-        for name in ("thickness_mm", "density"):
-            if not getattr(self, name) > 0:
-                raise InputError(f"panel setting {name} = {getattr(self, name)!r} must be positive")
-        for name in ("clearance_mm", "hole_diameter_mm", "hole_inset_mm", "planarity_tolerance_mm"):
-            if not getattr(self, name) >= 0:
-                raise InputError(f"panel setting {name} = {getattr(self, name)!r} must be zero or positive")
+        check_ranges(self, "panel", positive=("thickness_mm", "density"),
+                     zero_or_positive=("clearance_mm", "hole_diameter_mm", "hole_inset_mm", "planarity_tolerance_mm"))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -62,12 +75,7 @@ class SheetSettings:
     rotations: bool = True
 
     def __post_init__(self) -> None:
-        for name in ("width_mm", "height_mm"):
-            if not getattr(self, name) > 0:
-                raise InputError(f"sheet setting {name} = {getattr(self, name)!r} must be positive")
-        for name in ("spacing_mm", "margin_mm"):
-            if not getattr(self, name) >= 0:
-                raise InputError(f"sheet setting {name} = {getattr(self, name)!r} must be zero or positive")
+        check_ranges(self, "sheet", positive=("width_mm", "height_mm"), zero_or_positive=("spacing_mm", "margin_mm"))
         if 2 * self.margin_mm >= min(self.width_mm, self.height_mm):
             raise InputError(f"sheet margin {self.margin_mm} mm leaves no room on a "
                              f"{self.width_mm} x {self.height_mm} mm sheet")

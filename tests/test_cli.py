@@ -104,3 +104,37 @@ def test_default_job_surface_stage(capsys, tmp_path, monkeypatch):
 
     mesh = trimesh.load(tmp_path / "out" / "mockup" / "01-surface" / "surface.ply", process=False)
     assert np.ptp(mesh.vertices[:, 0]) == pytest.approx(2.4)
+
+
+def _cli(*args: str, cwd=None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "workflow.cli", *args], capture_output=True, text=True, cwd=cwd)
+
+
+def test_verbose_logs_why_each_stage_runs_or_is_cached(tmp_path):
+    """-v logs each stage's reason to run (first run, a changed artifact) or its cache hit; -vv also
+    its steps; without the flag nothing of it reaches stderr (the library's loggers have a
+    NullHandler only)."""
+    project, out = tmp_path / "job" / "project.toml", tmp_path / "o"
+    assert _cli("init", str(project.parent), "--template", "cap").returncode == 0
+    base = ("run", str(project), "--out", str(out), "--until", "shell", "--quiet")
+    first = _cli("-v", *base)
+    assert first.returncode == 0
+    assert "workflow.runner: stage surface: runs (not run before" in first.stderr
+    assert "stage shell: ran in" in first.stderr
+    (out / "02-shell" / "shell.json").write_text("{}")                  # damaged: only the shell reruns
+    second = _cli("-v", *base)
+    assert "stage surface: cached" in second.stderr
+    assert "stage shell: runs (02-shell/shell.json changed" in second.stderr
+    quiet = _cli(*base, "--force")
+    assert quiet.returncode == 0 and "workflow.runner" not in quiet.stderr and "engine." not in quiet.stderr
+    steps = _cli("-vv", *base, "--force")
+    assert "stage shell: solving" in steps.stderr and "engine.solvers: factored" in steps.stderr
+
+
+def test_the_library_logs_nothing_without_an_application_handler():
+    """A warning from an engine module, with no logging configured, is swallowed by the package's
+    NullHandler instead of Python's last-resort handler printing it."""
+    code = ("import logging, engine.solvers; logging.getLogger('engine.solvers').warning('should not print'); "
+            "import fabrication, workflow; logging.getLogger('workflow.runner').warning('nor this')")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0 and result.stderr == ""

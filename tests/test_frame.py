@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError, MechanismError
-from engine.frame import FrameModel, linear_buckling, linear_static, nonlinear_static, solve_frame_json
+from engine.frame import FrameModel, linear_buckling, linear_static, nonlinear_static
 from engine.supports import Supports
+from workflow.solver_json import solve_frame_json
 
 E, G = 2.0e11, 8.0e10
 A, IY, IZ, J = 1e-3, 2e-6, 1e-6, 3e-6
@@ -394,7 +395,7 @@ def test_condensed_factor_solves_as_a_plain_lu_and_keeps_the_inertia():
 
     import scipy.sparse.linalg as spla
 
-    from engine import frame
+    from engine import beam_elements, frame
     from engine.condensed import CondensedFactor
     from engine.linalg import congruent
 
@@ -403,13 +404,14 @@ def test_condensed_factor_solves_as_a_plain_lu_and_keeps_the_inertia():
         fine = replace(model, elements_per_beam=k)
         state = frame._solve_linear(fine, supports, loads)
         el, free = state.el, state.free
-        K_G = congruent(state.T, frame._geometric_stiffness(state.L, state.local_forces[:, 6], el))
+        dofs = beam_elements.element_dofs(el.connectivity)
+        K_G = congruent(state.T, beam_elements.geometric_stiffness(state.L, state.local_forces[:, 6], el))
         first = linear_buckling(fine, supports, loads, n_modes=3).factors
         rhs = np.random.default_rng(k).normal(size=(len(free), 2))
         for sigma in (0.0, 0.5 * (first[1] + first[2])):       # positive definite; two factors below sigma
             elements = state.K_elements + sigma * K_G
             factor = CondensedFactor(elements, el.connectivity, len(el.nodes), el.n_original, free, k)
-            K = frame._assemble(elements, frame._dofs(el.connectivity), 6 * len(el.nodes))[free][:, free].tocsc()
+            K = beam_elements.assemble(elements, dofs, 6 * len(el.nodes))[free][:, free].tocsc()
             expected = spla.spsolve(K, rhs)
             assert np.abs(factor.solve(rhs) - expected).max() < 1e-9 * np.abs(expected).max()
             assert np.abs(factor.solve(rhs[:, 0]) - expected[:, 0]).max() < 1e-9 * np.abs(expected).max()
@@ -427,7 +429,7 @@ def _against_the_dense_eigensolver() -> None:
 
     import scipy.linalg as sla
 
-    from engine import frame
+    from engine import beam_elements, frame
     from engine.linalg import congruent
 
     model, supports, loads = _space_frame()
@@ -435,8 +437,8 @@ def _against_the_dense_eigensolver() -> None:
     ours = linear_buckling(model, supports, loads, n_modes=6).factors
     state = frame._solve_linear(model, supports, loads)
     el, free = state.el, state.free
-    K_G = frame._assemble(congruent(state.T, frame._geometric_stiffness(state.L, state.local_forces[:, 6], el)),
-                          frame._dofs(el.connectivity), len(state.u))
+    K_G_elements = congruent(state.T, beam_elements.geometric_stiffness(state.L, state.local_forces[:, 6], el))
+    K_G = beam_elements.assemble(K_G_elements, beam_elements.element_dofs(el.connectivity), len(state.u))
     mu = sla.eigh(-K_G[free][:, free].toarray(), state.K[free][:, free].toarray(), eigvals_only=True)
     dense = np.sort(1.0 / mu[mu > 1e-12 * np.abs(mu).max()])[:6]
     assert len(ours) == 6
@@ -502,7 +504,7 @@ def test_nonlinear_solution_is_in_equilibrium():
     to 1e-6 of |lambda F| (path tolerance 1e-8)."""
     from dataclasses import replace
 
-    from engine import frame
+    from engine import corotational
 
     model, supports, loads = _space_frame()
     model = replace(model, elements_per_beam=1)              # every node's state is returned
@@ -510,9 +512,9 @@ def test_nonlinear_solution_is_in_equilibrium():
     run = nonlinear_static(model, supports, loads, control=(10, 0), max_load_factor=factor, max_steps=40,
                            tolerance=1e-8)
     assert run.path[-1, 0] == pytest.approx(factor)
-    cr = frame._Corotational(model, supports)
+    cr = corotational._Corotational(model, supports)
     x = cr.X + run.displacements[:, :3]
-    triads = frame._rotation_matrices(run.displacements[:, 3:])
+    triads = corotational._rotation_matrices(run.displacements[:, 3:])
     internal, _ = cr.internal_forces(x, triads)
     applied = factor * loads.ravel()
     residual = (applied - internal)[cr.free]

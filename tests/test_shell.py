@@ -8,18 +8,18 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError, MechanismError
+from engine.linalg import rigid_body_modes
 from engine.loads import LoadCase
 from engine.mesh import TriMesh
 from engine.parametric import cap, grid_triangles
 from engine.shell import (
     ShellMaterial,
     analyse_shell,
-    rigid_body_modes,
     shell_nodal_loads,
     shell_stiffness,
-    solve_shell_json,
 )
 from engine.supports import Supports
+from workflow.solver_json import solve_shell_json
 
 from .shell_models import (
     HEMISPHERE_REFERENCE,

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 from pathlib import Path
 
@@ -138,14 +139,14 @@ def cmd_init(args: argparse.Namespace) -> int:
 
 
 def cmd_shell(args: argparse.Namespace) -> int:
-    from engine.shell import solve_shell_json
+    from .solver_json import solve_shell_json
 
     _write_json(solve_shell_json(_read_json(args.model)), args.out)
     return 0
 
 
 def cmd_frame(args: argparse.Namespace) -> int:
-    from engine.frame import solve_frame_json
+    from .solver_json import solve_frame_json
 
     control = None
     if args.control:
@@ -174,6 +175,20 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     return sweep(args)
 
 
+#: The loggers of the product's packages (each module logs to a child of one of them).
+PACKAGE_LOGGERS = ("engine", "fabrication", "workflow")
+
+
+def log_to_stderr(level: int) -> None:
+    """Send the product's log records at ``level`` and above to stderr, with their time and module."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(name)s: %(message)s", datefmt="%H:%M:%S"))
+    for name in PACKAGE_LOGGERS:
+        logger = logging.getLogger(name)
+        logger.setLevel(level)
+        logger.addHandler(handler)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .runner import product_version
 
@@ -181,6 +196,9 @@ def build_parser() -> argparse.ArgumentParser:
                                      "from a free-form surface to shop drawings.")
     parser.add_argument("--version", action="version", version=f"gridshell {product_version()}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="log what the run does to stderr: why each stage runs or is cached, the solvers "
+                             "and paths (-vv: every step, with times)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     run = sub.add_parser("run", help="run a project (default: the 2.4 m mock-up template)")
@@ -224,10 +242,14 @@ def build_parser() -> argparse.ArgumentParser:
     frame.add_argument("--out", required=True, metavar="RESULT.json")
     frame.set_defaults(func=cmd_frame)
 
-    compare = sub.add_parser("compare", help="compare Voronoi, quad and triangular grids of equal length")
+    compare = sub.add_parser("compare", help="compare the Voronoi grid with lattices and an isotropic control "
+                                             "of equal length")
     compare.add_argument("project")
     compare.add_argument("--out", metavar="DIR")
     compare.add_argument("--quiet", action="store_true")
+    compare.add_argument("--grids", metavar="LIST",
+                         help="comma list of the rows: triangular,quad,quad45,statics_quad,isotropic,voronoi "
+                              "(default: all)")
     compare.add_argument("--size-sections", action="store_true",
                          help="size each grid's tubes as [design] size_sections does, and compare their masses")
     compare.set_defaults(func=cmd_compare)
@@ -247,6 +269,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.verbose:
+        log_to_stderr(logging.DEBUG if args.verbose > 1 else logging.INFO)
     try:
         return int(args.func(args) or 0)
     except GridshellError as exc:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import platform
 import shutil
 import time
@@ -28,12 +29,14 @@ from typing import Any
 from engine.errors import GridshellError
 from fabrication.files import atomic_folder, write_text_atomic
 
-from .config import STAGE_SECTIONS, Project
+from .config import KEYS_LEFT_OUT_AT_DEFAULT, Project, stage_sections
 from .outdir import remove_leftovers, run_lock
 from .progress import Progress
 
 __all__ = ["Stage", "StageContext", "RunSummary", "run_project", "product_version",
            "STATUS_RAN", "STATUS_CACHED", "STATUS_FAILED", "STATUS_NOT_RUN"]
+
+log = logging.getLogger(__name__)
 
 STATUS_RAN, STATUS_CACHED, STATUS_FAILED, STATUS_NOT_RUN = "ran", "cached", "failed", "not run"
 
@@ -85,10 +88,12 @@ class StageContext:
     progress: Progress
     findings: list[dict] = field(default_factory=list)
     earlier_findings: list[dict] = field(default_factory=list)
+    stage: str = ""
     timings: dict[str, float] = field(default_factory=dict)
 
     def step(self, text: str, fraction: float | None = None) -> None:
         """Report the current step of the stage (and optionally its completed fraction)."""
+        log.debug("stage %s: %s", self.stage, text)
         self.progress.step(text, fraction)
 
     def report_findings(self, findings: list[dict]) -> None:
@@ -151,16 +156,22 @@ def _section_value(project: Project, path: str):
         value = getattr(value, name)
     if hasattr(value, "model_dump"):
         return value.model_dump(mode="json")
+    if value is None or isinstance(value, (str, int, float, bool)):
+        return value
     return [item.model_dump(mode="json") for item in value]
 
 
 #: Settings that change how a stage runs, not what it makes: left out of the cache keys.
 NOT_IN_KEYS = ("workers", "choose", "choose_from", "fit_grid_to_tubes")
+def _in_key(section: str, key: str, value) -> bool:
+    """Whether a section's key goes into the cache key: not a worker count, not a later key at its default."""
+    later = KEYS_LEFT_OUT_AT_DEFAULT.get(section, {})
+    return key not in NOT_IN_KEYS and not (key in later and value == later[key])
 
 
 def _stage_key(stage: Stage, project: Project, keys: dict[str, str], version: str) -> str:
-    config = {name: _section_value(project, name) for name in STAGE_SECTIONS.get(stage.name, ())}
-    config = {name: {k: v for k, v in value.items() if k not in NOT_IN_KEYS} if isinstance(value, dict) else value
+    config = {name: _section_value(project, name) for name in stage_sections(stage.name, project)}
+    config = {name: {k: v for k, v in value.items() if _in_key(name, k, v)} if isinstance(value, dict) else value
               for name, value in config.items()}
     payload = {"stage": stage.name, "version": version, "config": config,
                "upstream": {d: keys[d] for d in stage.depends},
@@ -176,13 +187,24 @@ def _artifacts(folder: Path, out_dir: Path, published: tuple[str, ...] = ()) -> 
 
 
 def _still_valid(entry: dict | None, key: str, out_dir: Path) -> bool:
-    if not entry or entry.get("key") != key or entry.get("status") not in (STATUS_RAN, STATUS_CACHED):
-        return False
+    return _why_stale(entry, key, out_dir) is None
+
+
+def _why_stale(entry: dict | None, key: str, out_dir: Path) -> str | None:
+    """Why a stage's cached result cannot be used (None: it can), in words for the log."""
+    if not entry:
+        return "not run before"
+    if entry.get("status") not in (STATUS_RAN, STATUS_CACHED):
+        return f"last {entry.get('status')}"
+    if entry.get("key") != key:
+        return "its settings or an upstream stage changed"
     for artifact in entry.get("artifacts", []):
         path = out_dir / artifact["path"]
-        if not path.is_file() or path.stat().st_size != artifact["bytes"] or file_digest(path) != artifact["sha256"]:
-            return False
-    return bool(entry.get("artifacts"))
+        if not path.is_file():
+            return f"{artifact['path']} is missing"
+        if path.stat().st_size != artifact["bytes"] or file_digest(path) != artifact["sha256"]:
+            return f"{artifact['path']} changed"
+    return None if entry.get("artifacts") else "it has no artifacts"
 
 
 def _read_manifest(path: Path) -> dict:
@@ -241,7 +263,7 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
 
     def context(stage: Stage, folder: Path) -> StageContext:
         earlier = names[:names.index(stage.name)]
-        return StageContext(folder=folder, out_dir=out_dir, progress=progress,
+        return StageContext(folder=folder, out_dir=out_dir, progress=progress, stage=stage.name,
                             earlier_findings=[f for n in earlier for f in (records.get(n) or {}).get("findings", [])])
 
     def write_manifest() -> None:
@@ -269,12 +291,15 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
             continue
         folder = out_dir / stage.folder
         entry = previous.get(stage.name)
-        if not force and _still_valid(entry, keys[stage.name], out_dir):
+        stale = "--force" if force else _why_stale(entry, keys[stage.name], out_dir)
+        if stale is None:
+            log.info("stage %s: cached (key %s)", stage.name, keys[stage.name][:12])
             records[stage.name] = {**entry, "status": STATUS_CACHED, "duration_s": 0.0,
                                    "computed_s": entry.get("computed_s", entry.get("duration_s", 0.0))}
             progress.stage_done(stage.name, STATUS_CACHED, 0.0, findings=len(entry.get("findings", [])))
             summary.stages.append(records[stage.name])
             continue
+        log.info("stage %s: runs (%s; key %s)", stage.name, stale, keys[stage.name][:12])
         progress.stage_start(stage.name)
         started = time.perf_counter()
         tmp = atomic_folder(out_dir, stage.folder)
@@ -290,6 +315,7 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
                                    "duration_s": round(time.perf_counter() - started, 3),
                                    "key": keys[stage.name], "artifacts": []}
             summary.stopped_at = stage.name
+            log.info("stage %s: failed after %.1f s: %s", stage.name, time.perf_counter() - started, exc)
             progress.stage_done(stage.name, STATUS_FAILED, time.perf_counter() - started)
             write_manifest()
             raise
@@ -303,6 +329,7 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
                                "findings": ctx.findings,
                                **({"step_seconds": ctx.timings} if ctx.timings else {})}
         summary.stages.append(records[stage.name])
+        log.info("stage %s: ran in %.1f s, %d finding(s)", stage.name, duration, len(ctx.findings))
         progress.stage_done(stage.name, STATUS_RAN, duration, findings=len(ctx.findings))
         write_manifest()
     write_manifest()

@@ -1,0 +1,444 @@
+"""Co-rotational non-linear static analysis of a space frame, with Crisfield's cylindrical
+arc-length past limit points.
+
+Each element's rigid motion is followed by its chord and the mean of its end triads; its
+deformation is small in that frame, so the linear element of ``engine.beam_elements`` holds there.
+Newton iterations on the consistent tangent follow the path; the inertia of each step's factor
+(its negative pivots) tells limit points from bifurcations.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .beam_elements import (
+    FrameModel,
+    check_loads,
+    check_rigid_modes,
+    condense,
+    element_dofs,
+    element_geometry,
+    element_mesh,
+    factor_free_stiffness,
+    factor_or_none,
+    factor_with_inertia,
+    local_axes,
+    local_stiffness,
+    restrained_dofs,
+)
+from .errors import ConvergenceError, InputError
+from .linalg import single_threaded_blas
+from .supports import Supports
+
+__all__ = ["PathSettings", "NonlinearResult", "nonlinear_static"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, kw_only=True)
+class NonlinearResult:
+    """path (s,2): [load factor, control displacement] from [0, 0]; limit_load_factor: the first
+    maximum of the load factor (None if not reached); negative_pivots (s,): negative pivots of the
+    tangent stiffness at each point of the path (0 while stable; one more past a limit point or a
+    bifurcation); displacements (n,6) at the limit point (or the last step); converged: False when
+    a step failed to converge even at 1/256 of its arc; load_factors (s,); iterations (s,): Newton
+    iterations of each step; monitored (s, k): the ``monitor`` DOFs along the path."""
+
+    path: np.ndarray
+    limit_load_factor: float | None
+    negative_pivots: np.ndarray
+    displacements: np.ndarray
+    converged: bool = True
+    load_factors: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    iterations: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    monitored: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+
+
+
+
+def _rotation_matrices(vectors: np.ndarray) -> np.ndarray:
+    """Rodrigues: (k,3) rotation vectors to (k,3,3) matrices."""
+    angle = np.linalg.norm(vectors, axis=1)
+    safe = np.where(angle > 1e-12, angle, 1.0)
+    axis = vectors / safe[:, None]
+    K = np.zeros((len(vectors), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -axis[:, 2], axis[:, 1], -axis[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = axis[:, 2], -axis[:, 1], axis[:, 0]
+    s, c = np.sin(angle)[:, None, None], (1 - np.cos(angle))[:, None, None]
+    R = np.eye(3)[None] + s * K + c * (K @ K)
+    small = angle <= 1e-12
+    if np.any(small):
+        v = vectors[small]
+        W = np.zeros((len(v), 3, 3))
+        W[:, 0, 1], W[:, 0, 2], W[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+        W[:, 1, 0], W[:, 2, 0], W[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+        R[small] = np.eye(3)[None] + W
+    return R
+
+
+def _rotation_vectors(R: np.ndarray) -> np.ndarray:
+    """Inverse Rodrigues (log map) of (k,3,3) rotations with angles below pi."""
+    cosine = np.clip((np.einsum("kii->k", R) - 1) / 2, -1.0, 1.0)
+    angle = np.arccos(cosine)
+    w = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1)
+    sine = np.sin(angle)
+    factor = np.where(sine > 1e-9, angle / (2 * np.where(sine > 1e-9, sine, 1.0)), 0.5)
+    return w * factor[:, None]
+
+
+class _Corotational:
+    """State and kernels of the co-rotational analysis.
+
+    The element kernels work component-major: a vector per element is (3, m), a 3 x 3 matrix per
+    element (3, 3, m), so that every product is a few contiguous operations on length-m rows
+    (batched 3 x 3 matmuls on (m, 3, 3) stacks are several times slower)."""
+
+    def __init__(self, model: FrameModel, supports: Supports):
+        self.el = element_mesh(model)
+        self.n_all = len(self.el.nodes)
+        self.X = self.el.nodes.copy()
+        self.L0, self.R0 = element_geometry(self.el, self.X)
+        self.dofs = element_dofs(self.el.connectivity)
+        self.restrained = restrained_dofs(supports, self.el.n_original, self.n_all)
+        check_rigid_modes(self.el.nodes, self.restrained)
+        self.free = np.flatnonzero(~self.restrained)
+        self.R0_rows = np.ascontiguousarray(np.transpose(self.R0, (1, 2, 0)))        # R0[i, j] as (3, 3, m)
+        self.K_local = condense(local_stiffness(self.L0, self.el), self.el.released)
+        self.K_rows = np.ascontiguousarray(np.transpose(self.K_local, (1, 2, 0)))    # (12, 12, m)
+        self.scatter = self.dofs.T.ravel()                                           # f (12, m) onto the DOFs
+        self.step = 1e-8
+        self.spins = [_rotation_matrices(self.step * np.eye(3)[k:k + 1])[0] for k in range(3)]
+
+    def _end_forces(self, xa: np.ndarray, xb: np.ndarray, Ra: np.ndarray, Rb: np.ndarray):
+        """Element end forces (12, m) in global axes from the end positions (3, m) and the nodal
+        triads times the initial element frame transposed, T R0^T (3, 3, m) (``internal_forces``)."""
+        chord = xb - xa
+        length = np.sqrt(chord[0] ** 2 + chord[1] ** 2 + chord[2] ** 2)
+        e1 = chord / length
+        # nodal triads carry the initial element frame; their mean z orients the current frame
+        up = 0.5 * (Ra[:, 2] + Rb[:, 2])
+        z = up - (up[0] * e1[0] + up[1] * e1[1] + up[2] * e1[2]) * e1
+        norm = np.sqrt(z[0] ** 2 + z[1] ** 2 + z[2] ** 2)
+        bad = norm < 1e-6
+        if np.any(bad):                                     # up along the chord: as local_axes
+            z[:, bad] = local_axes(e1[:, bad].T, up[:, bad].T)[:, 2].T
+            norm[bad] = 1.0
+        z /= norm
+        y = np.stack([z[1] * e1[2] - z[2] * e1[1], z[2] * e1[0] - z[0] * e1[2], z[0] * e1[1] - z[1] * e1[0]])
+        R = (e1, y, z)                                      # rows of the element frame
+        d = np.zeros((12, len(length)))
+        d[6] = length - self.L0
+        # local end rotations: nodal triad relative to the element frame, by the log map
+        for offset, Rn in ((3, Ra), (9, Rb)):
+            M = [[R[i][0] * Rn[0, k] + R[i][1] * Rn[1, k] + R[i][2] * Rn[2, k] for k in range(3)] for i in range(3)]
+            cosine = np.clip((M[0][0] + M[1][1] + M[2][2] - 1) / 2, -1.0, 1.0)
+            angle = np.arccos(cosine)
+            sine = np.sin(angle)
+            factor = np.where(sine > 1e-9, angle / (2 * np.where(sine > 1e-9, sine, 1.0)), 0.5)
+            d[offset] = (M[2][1] - M[1][2]) * factor
+            d[offset + 1] = (M[0][2] - M[2][0]) * factor
+            d[offset + 2] = (M[1][0] - M[0][1]) * factor
+        f_local = np.einsum("ijm,jm->im", self.K_rows, d)
+        f_global = np.empty_like(f_local)
+        for block in range(0, 12, 3):
+            f = f_local[block:block + 3]
+            for j in range(3):
+                f_global[block + j] = f[0] * R[0][j] + f[1] * R[1][j] + f[2] * R[2][j]
+        return f_global
+
+    def internal_forces(self, x: np.ndarray, triads: np.ndarray) -> tuple[np.ndarray, object]:
+        """Internal forces (6 n_all,) of positions x (n,3) and nodal triads (n,3,3); also the
+        element state the tangent starts from."""
+        a, b = self.el.connectivity[:, 0], self.el.connectivity[:, 1]
+        R0 = self.R0_rows
+
+        def times_R0_T(T):                                  # T R0^T, component-major
+            T = np.transpose(T, (1, 2, 0))
+            return np.stack([np.stack([T[i, 0] * R0[k, 0] + T[i, 1] * R0[k, 1] + T[i, 2] * R0[k, 2]
+                                       for k in range(3)]) for i in range(3)])
+
+        state = (np.ascontiguousarray(x[a].T), np.ascontiguousarray(x[b].T), times_R0_T(triads[a]),
+                 times_R0_T(triads[b]))
+        f_global = self._end_forces(*state)
+        out = np.bincount(self.scatter, weights=f_global.ravel(), minlength=6 * self.n_all)
+        return out, state
+
+    def tangent(self, state) -> np.ndarray:
+        """Element tangent stiffnesses (m,12,12) in global axes: the derivative of the element
+        end forces with respect to the end translations and spins (applied as in ``_update``), by
+        forward differences over all elements at once (12 evaluations of the element kernel,
+        relative accuracy ~1e-8)."""
+        xa, xb, Ra, Rb = state
+        base = self._end_forces(xa, xb, Ra, Rb)
+        K = np.empty((12, 12, xa.shape[1]))
+        h_translation = self.step * self.L0
+        for column in range(12):
+            end, component = divmod(column, 6)
+            x_pair, r_pair = [xa, xb], [Ra, Rb]
+            if component < 3:
+                shifted = x_pair[end].copy()
+                shifted[component] += h_translation
+                x_pair[end] = shifted
+                h: np.ndarray | float = h_translation
+            else:
+                S, Rn = self.spins[component - 3], r_pair[end]
+                r_pair[end] = np.stack([S[i, 0] * Rn[0] + S[i, 1] * Rn[1] + S[i, 2] * Rn[2] for i in range(3)])
+                h = self.step
+            K[:, column] = (self._end_forces(x_pair[0], x_pair[1], r_pair[0], r_pair[1]) - base) / h
+        return np.ascontiguousarray(np.transpose(K, (2, 0, 1)))
+
+
+def _update(x: np.ndarray, triads: np.ndarray, du: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    step = du.reshape(-1, 6)
+    return x + step[:, :3], _rotation_matrices(step[:, 3:]) @ triads
+
+
+@dataclass(frozen=True)
+class PathSettings:
+    """Where the path stops and how closely it is followed: at ``max_load_factor``, after
+    ``max_steps`` steps, or ``steps_past_limit`` steps past the first limit point; ``tolerance``:
+    the residual norm relative to the norm of the applied load."""
+
+    max_load_factor: float = 10.0
+    max_steps: int = 80
+    tolerance: float = 1e-5
+    steps_past_limit: int = 3
+
+
+def nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *, control: tuple[int, int],
+                     max_load_factor: float = 10.0, max_steps: int = 80, initial_loads: np.ndarray | None = None,
+                     tolerance: float = 1e-5, steps_past_limit: int = 3,
+                     monitor: list[tuple[int, int]] | None = None,
+                     settings: PathSettings | None = None) -> NonlinearResult:
+    """Geometrically non-linear static analysis with arc-length control.
+
+    loads: reference load (n,6) scaled by the load factor; initial_loads: a dead load held
+    constant (applied first, in load steps); control: (node, dof 0..5) whose displacement the
+    path reports; monitor: further (node, dof) pairs recorded at every step in
+    ``NonlinearResult.monitored`` (s, len(monitor)). The path stops ``steps_past_limit`` steps
+    past the first limit point, at ``max_load_factor`` or after ``max_steps``.
+
+    Co-rotational elements (rigid motion from the chord and the mean of the end triads, local
+    end rotations by the log map), Newton iterations on the consistent tangent (the exact
+    derivative of the element forces, by vectorised forward differences), Crisfield's
+    cylindrical arc-length with the step size adapted to about 5 iterations per step, the
+    predictor's direction kept by the previous increment; a step that goes over the first maximum
+    of the load factor is redone shorter (up to 3 times, 0.3 of the arc each) so the limit load
+    factor is found within a small step. ``tolerance``: residual norm relative to the norm of
+    the applied load. ``negative_pivots`` tells a limit point (a pivot turns negative at the
+    maximum) from a bifurcation (pivots turn negative while the load still rises). ``settings``
+    (PathSettings), when given, replaces the four stopping and tolerance keywords.
+    """
+    if settings is None:
+        settings = PathSettings(max_load_factor=max_load_factor, max_steps=max_steps, tolerance=tolerance,
+                                steps_past_limit=steps_past_limit)
+    with single_threaded_blas():
+        return _nonlinear_static(model, supports, loads, control, settings, initial_loads, monitor)
+
+
+def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, control: tuple[int, int],
+                      settings: PathSettings, initial_loads: np.ndarray | None,
+                      monitor: list[tuple[int, int]] | None) -> NonlinearResult:
+    max_load_factor, max_steps = settings.max_load_factor, settings.max_steps
+    tolerance, steps_past_limit = settings.tolerance, settings.steps_past_limit
+    n = model.nodes.shape[0]
+    loads = check_loads(loads, n)
+    node, dof = control
+    if not (0 <= node < n and 0 <= dof < 6):
+        raise InputError(f"frame: control ({node}, {dof}) must be a node 0..{n - 1} and a DOF 0..5")
+    cr = _Corotational(model, supports)
+    free = cr.free
+    F_ref = np.zeros(6 * cr.n_all)
+    F_ref[:6 * n] = loads.ravel()
+    F_dead = np.zeros(6 * cr.n_all)
+    if initial_loads is not None:
+        F_dead[:6 * n] = check_loads(initial_loads, n).ravel()
+    scale = max(float(np.linalg.norm(F_ref[free])), float(np.linalg.norm(F_dead[free])), 1e-300)
+    x = cr.X.copy()
+    triads = np.tile(np.eye(3), (cr.n_all, 1, 1))
+
+    def residual(x, triads, lam):
+        f_int, cache = cr.internal_forces(x, triads)
+        return F_dead + lam * F_ref - f_int, cache
+
+    def displacement_of(x, triads):
+        if dof < 3:
+            return float(x[node, dof] - cr.X[node, dof])
+        return float(_rotation_vectors(triads[node:node + 1])[0, dof - 3])
+
+    def load_controlled(x, triads, target):
+        for _ in range(40):
+            f_int, cache = cr.internal_forces(x, triads)
+            r = target - f_int
+            if np.linalg.norm(r[free]) < tolerance * scale:
+                return x, triads
+            lu = factor_or_none(cr.tangent(cache), cr.el, free)
+            if lu is None:
+                return None
+            du = np.zeros(6 * cr.n_all)
+            du[free] = lu.solve(r[free])
+            x, triads = _update(x, triads, du)
+        return None
+
+    # dead load first (load control)
+    if initial_loads is not None and np.any(F_dead):
+        for fraction in np.linspace(0.25, 1.0, 4):
+            state = load_controlled(x, triads, fraction * F_dead)
+            if state is None:
+                raise ConvergenceError("the dead load alone exceeds the structure's capacity (no equilibrium)")
+            x, triads = state
+    # first step size from a linear prediction reaching about max_load_factor / 20
+    _, cache = residual(x, triads, 0.0)
+    lu = factor_free_stiffness(cr.tangent(cache), cr.el, free)
+    u_ref = np.zeros(6 * cr.n_all)
+    u_ref[free] = lu.solve(F_ref[free])
+    arc = float(np.linalg.norm(u_ref[free]) * min(max_load_factor, 10.0) / 20.0)
+    lam = 0.0
+    watch = list(monitor or [])
+
+    def watched(x, triads):
+        return [float(x[n_, d_] - cr.X[n_, d_]) if d_ < 3 else float(_rotation_vectors(triads[n_:n_ + 1])[0, d_ - 3])
+                for n_, d_ in watch]
+
+    monitored = [watched(x, triads)]
+    path = [[0.0, displacement_of(x, triads)]]
+    pivots = [0]
+    factors = [0.0]
+    iterations = [0]
+    desired_iterations = 5
+    refinements, arc_cap = 0, np.inf      # steps redone shorter near a critical point (at most 3)
+    previous: np.ndarray | None = None
+    limit = None
+    limit_state = None
+    past = 0
+    converged_all = True
+    saved = None                      # the state before the last step, to redo it shorter
+    for _step in range(max_steps):
+        _, cache = residual(x, triads, lam)
+        try:
+            lu, negatives = factor_with_inertia(cr.tangent(cache), cr.el, free)
+        except RuntimeError:
+            converged_all = False
+            break
+        pivots[-1] = negatives                               # pivots of the tangent at this state
+        du_f = np.zeros(6 * cr.n_all)
+        du_f[free] = lu.solve(F_ref[free])
+        # the predictor follows the previous increment (at the start: the load's direction on a
+        # stable tangent); the load factor falls along it once the path is past a maximum
+        if previous is not None:
+            direction = -1.0 if np.dot(previous[free], du_f[free]) < 0 else 1.0
+        else:
+            direction = -1.0 if negatives > 0 else 1.0
+        if saved is not None and limit is None and direction < 0 < lam and lam > saved[2] and refinements < 3:
+            # the last step went over a maximum of the load factor: redo it shorter, to land
+            # closer to the peak (each time 0.3 of the arc, held until the limit)
+            refinements += 1
+            x, triads, lam, previous, _, arc = saved
+            arc *= 0.3
+            arc_cap = arc
+            saved = None
+            for history in (path, monitored, pivots, factors, iterations):
+                history.pop()
+            continue
+        accepted = False
+        for _attempt in range(8):
+            x_try, t_try, lam_try = x.copy(), triads.copy(), lam
+            d_lam = direction * arc / max(float(np.linalg.norm(du_f[free])), 1e-300)
+            total = d_lam * du_f
+            x_try, t_try = _update(x_try, t_try, total)
+            lam_try += d_lam
+            ok = False
+            correction_norm = np.inf
+            for _iteration in range(25):
+                r, cache = residual(x_try, t_try, lam_try)
+                # relative to the load applied now; a tiny last correction also ends the iterations
+                # when round-off (very stiff short elements) keeps the residual above the tolerance
+                applied = max(float(np.linalg.norm(F_dead[free] + lam_try * F_ref[free])), 1e-12 * scale)
+                error = np.linalg.norm(r[free]) / applied
+                if error < tolerance or (error < 1e3 * tolerance
+                                         and correction_norm < 1e-10 * np.linalg.norm(total[free])):
+                    ok = True
+                    break
+                lu_i = factor_or_none(cr.tangent(cache), cr.el, free)
+                if lu_i is None:
+                    break
+                dr = np.zeros(6 * cr.n_all)
+                df = np.zeros(6 * cr.n_all)
+                dr[free] = lu_i.solve(r[free])
+                df[free] = lu_i.solve(F_ref[free])
+                # cylindrical constraint |total + dr + dl df| = arc
+                a = df[free] @ df[free]
+                b = 2 * df[free] @ (total[free] + dr[free])
+                c = (total[free] + dr[free]) @ (total[free] + dr[free]) - arc**2
+                disc = b * b - 4 * a * c
+                if disc < 0:
+                    dl = -b / (2 * a)
+                else:
+                    roots = ((-b + np.sqrt(disc)) / (2 * a), (-b - np.sqrt(disc)) / (2 * a))
+                    dl = max(roots, key=lambda root: (total[free] + dr[free] + root * df[free]) @ total[free])
+                correction = dr + dl * df
+                correction_norm = float(np.linalg.norm(correction[free]))
+                x_try, t_try = _update(x_try, t_try, correction)
+                total = total + correction
+                lam_try += float(dl)
+            if ok:
+                accepted = True
+                break
+            arc *= 0.5
+        if not accepted:
+            converged_all = False
+            break
+        if lam_try > max_load_factor >= lam and limit is None:
+            # land exactly on the largest load factor asked for
+            state = load_controlled(x, triads, F_dead + max_load_factor * F_ref)
+            if state is not None:
+                x_try, t_try = state
+                lam_try = max_load_factor
+        if limit is None and lam_try < lam and lam > 0 and direction > 0 and refinements < 3:
+            # the step went over a maximum of the load factor: redo it shorter, to land closer
+            # to the peak (each time 0.3 of the arc; the arc is then held until the limit)
+            refinements += 1
+            arc *= 0.3
+            arc_cap = arc
+            continue
+        saved = (x, triads, lam, previous, negatives, arc)
+        previous = total
+        if limit is None and lam_try < lam and lam > 0:
+            limit = lam
+            limit_state = (x.copy(), triads.copy())
+            arc_cap = np.inf
+        x, triads, lam = x_try, t_try, lam_try
+        path.append([lam, displacement_of(x, triads)])
+        monitored.append(watched(x, triads))
+        pivots.append(negatives)                             # provisional: set at the next step
+        factors.append(lam)
+        iterations.append(_iteration)
+        # automatic step size: aim at about `desired` corrector iterations per step
+        arc = min(arc * float(np.clip(np.sqrt(desired_iterations / max(_iteration, 1)), 0.5, 2.0)), arc_cap)
+        if limit is not None:
+            past += 1
+            if past >= steps_past_limit:
+                break
+        if lam >= max_load_factor:
+            break
+    if len(path) > 1:                                        # pivots of the final state
+        try:
+            pivots[-1] = factor_with_inertia(cr.tangent(residual(x, triads, lam)[1]), cr.el, free)[1]
+        except RuntimeError:
+            pass
+    log.info("non-linear path: %d steps, %d Newton iterations, load factor %.4g, limit %s%s", len(path) - 1,
+             int(np.sum(iterations)), lam, "none" if limit is None else f"{limit:.4g}",
+             "" if converged_all else ", a step did not converge")
+    if limit_state is None:
+        limit_state = (x, triads)
+    lx, lt = limit_state
+    displacements = np.zeros((cr.n_all, 6))
+    displacements[:, :3] = lx - cr.X
+    displacements[:, 3:] = _rotation_vectors(lt)
+    return NonlinearResult(path=np.array(path), limit_load_factor=limit, negative_pivots=np.array(pivots),
+                           displacements=displacements[:n], converged=converged_all, load_factors=np.array(factors),
+                           iterations=np.array(iterations),
+                           monitored=np.array(monitored, dtype=float).reshape(len(path), len(watch)))
