@@ -159,7 +159,7 @@ def _dxf_labels(msp, plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, h
     pt = 25.4 / 72.0
     em = height / DXF_CAP_HEIGHT / pt            # the first height as a type size in pt at scale 1
     texts, points, anchor, placement = _label_places(
-        plan, beams, centres, em, 1.0, None, obstacles, min_font=DXF_SMALLEST_LABEL * em,
+        plan, beams, _id_anchors(plan, beams, centres), em, 1.0, None, obstacles, min_font=DXF_SMALLEST_LABEL * em,
         far_rings=(1.2, 1.8, 2.6, 3.6, 5.0), gap=0.15 * em * pt)
     layers = np.repeat(["LABELS_NODES", "LABELS_BEAMS", "LABELS_PANELS"], [len(plan), len(beams), len(centres)])
     where = np.where(placement.placed[:, None], placement.centre, anchor)
@@ -177,65 +177,103 @@ def _text_box_mm(texts: list[str], points: float) -> np.ndarray:
     of height (ascent and descent)."""
     import re
 
+    shapes = [re.sub(r"[0-9]", "8", t) for t in texts]
+    widths = _shape_widths_mm(set(shapes), points)
+    pt = 25.4 / 72.0
+    return np.array([[widths[s], 1.2 * points * pt] for s in shapes]).reshape(-1, 2)
+
+
+def _shape_widths_mm(shapes, points: float) -> dict[str, float]:
+    """Paper width (mm) of each text shape at ``points``: its ink width plus a fifth of an em."""
     from matplotlib.textpath import TextPath
 
-    shapes = [re.sub(r"[0-9]", "8", t) for t in texts]
-    widths = {shape: TextPath((0, 0), shape, size=points).get_extents().width + 0.2 * points
-              for shape in set(shapes)}
     pt = 25.4 / 72.0
-    return np.array([[widths[s] * pt, 1.2 * points * pt] for s in shapes]).reshape(-1, 2)
+    return {shape: (TextPath((0, 0), shape, size=points).get_extents().width + 0.2 * points) * pt
+            for shape in shapes}
+
+
+def _id_shape_counts(prefix: str, count: int) -> dict[str, int]:
+    """How many of the ids prefix0001 .. of ``count`` parts have each shape (digits as 8s): N8888 for
+    the first 9999, N88888 for the next 90000, ..."""
+    counts = {}
+    for digits in range(4, max(4, len(str(count))) + 1):
+        first, last = (1 if digits == 4 else 10 ** (digits - 1)), min(count, 10 ** digits - 1)
+        if last >= first:
+            counts[prefix + "8" * digits] = last - first + 1
+    return counts
+
+
+def _id_anchors(plan: np.ndarray, beams: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """Where each id's part is on the plan (nodes + beams + panels, 2), in the plan's unit: the
+    nodes, the beams' middles and the cells' centres, in id order."""
+    mid = 0.5 * (plan[beams[:, 0]] + plan[beams[:, 1]]) if len(beams) else np.zeros((0, 2))
+    return np.concatenate([plan, mid, centres.reshape(-1, 2)])
 
 
 MIN_LABEL_POINTS = 3.0
 """The smallest type the plan's ids are set in (pt); ids that find no room at it are left out."""
 
+_BEAM_POINTS = 0.8
+"""The beams' ids are set at this share of the nodes' and panels' type size."""
 
-def _label_places(plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, font: float, scale: float,
+
+def _label_places(plan: np.ndarray, beams: np.ndarray, anchor: np.ndarray, font: float, scale: float,
                   bounds: tuple[float, float, float, float] | None, obstacles: np.ndarray, *,
                   min_font: float = MIN_LABEL_POINTS, far_rings: tuple[float, ...] = (1.2, 1.8, 2.6),
                   gap: float | None = None, keep: np.ndarray | None = None):
     """Node, beam and panel ids placed without overlap (model mm), nodes choosing first, then beams,
     then panels: at ``font`` pt (beams at 0.8 of it), or smaller by steps of 0.8 down to
     ``min_font`` until every id has room; ``far_rings`` are the leader lines' reaches in typical
-    label widths, ``gap`` the clear space round a label (model mm; 0.3 mm of paper by default).
-    ``keep`` (nodes + beams + panels,) bool: place only these ids (a tile of the plan).
+    label widths (the median of every id's, kept or not), ``gap`` the clear space round a label
+    (model mm; 0.3 mm of paper by default). ``anchor``: _id_anchors of the plan. ``keep`` (nodes +
+    beams + panels,) bool: measure and place only these ids (a tile of the plan).
     Returns texts, point sizes, anchors and the placement (fabrication.label_placement) of the ids
     placed (all, or those of ``keep``)."""
     from .label_placement import place_labels, ring_offsets
 
     nn, nb = len(plan), len(beams)
-    every = ([node_id(i) for i in range(nn)] + [beam_id(k) for k in range(nb)]
-             + [panel_id(f) for f in range(len(centres))])
-    mid = 0.5 * (plan[beams[:, 0]] + plan[beams[:, 1]]) if nb else np.zeros((0, 2))
-    anchor = np.concatenate([plan, mid, centres.reshape(-1, 2)])
-    along = plan[beams[:, 1]] - plan[beams[:, 0]] if nb else np.zeros((0, 2))
+    counts = (nn, nb, len(anchor) - nn - nb)
+    kept = np.arange(len(anchor)) if keep is None else np.flatnonzero(keep)
+    kind = np.searchsorted([nn, nn + nb], kept, side="right")          # 0 node, 1 beam, 2 panel
+    number = kept - np.array([0, nn, nn + nb])[kind]
+    texts = [(node_id, beam_id, panel_id)[k](i) for k, i in zip(kind.tolist(), number.tolist())]
+    groups = [np.flatnonzero(kind == k) for k in range(3)]
+    shares = (1.0, _BEAM_POINTS, 1.0)
+    ends = beams[number[groups[1]]]
+    along = plan[ends[:, 1]] - plan[ends[:, 0]]
     normal = np.column_stack([-along[:, 1], along[:, 0]])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    shape_counts = [_id_shape_counts(prefix, n) for prefix, n in zip("NBP", counts)]
     # the eight places round a node, the first again to make nine, as the beams and panels have
     node_unit = np.array([[1, 1], [-1, 1], [1, -1], [-1, -1], [1, 0], [-1, 0], [0, 1], [0, -1], [1, 1]], float)
     k = len(node_unit)
-    kept = np.arange(len(every)) if keep is None else np.flatnonzero(keep)
-    texts = [every[i] for i in kept]
     while True:
-        points = np.repeat([font, 0.8 * font, font], [nn, nb, len(centres)])
-        size = np.concatenate([_text_box_mm(every[:nn], font), _text_box_mm(every[nn:nn + nb], 0.8 * font),
-                               _text_box_mm(every[nn + nb:], font)]) * scale
+        points = np.array(shares)[kind] * font
+        size = np.zeros((len(kept), 2))
+        every_width = []            # the widths of every id of the plan, as shapes and their counts
+        for group, share, shape_count in zip(groups, shares, shape_counts):
+            size[group] = _text_box_mm([texts[i] for i in group], share * font)
+            widths = _shape_widths_mm(shape_count, share * font)
+            every_width.append(np.repeat([widths[s] for s in shape_count], list(shape_count.values())))
+        size *= scale
         w, h = size[:, :1], size[:, 1:]
-        near = np.zeros((len(anchor), k, 2))
+        near = np.zeros((len(kept), k, 2))
+        nodes, beam_ids, panels = groups
         # nodes: the eight places round the node, touching it
-        reach = np.concatenate([0.5 * w[:nn] + 0.2 * h[:nn], 0.6 * h[:nn]], axis=1)
-        near[:nn] = node_unit[None, :, :] * reach[:, None, :]
+        reach = np.concatenate([0.5 * w[nodes] + 0.2 * h[nodes], 0.6 * h[nodes]], axis=1)
+        near[nodes] = node_unit[None, :, :] * reach[:, None, :]
         # beams: at 0.5, 0.35 and 0.65 of the beam, on it or beside it
         for j, (t, side) in enumerate([(t, s) for t in (0.0, -0.15, 0.15) for s in (0.0, 0.8, -0.8)]):
-            near[nn:nn + nb, j] = t * along + side * h[nn:nn + nb] * normal
+            near[beam_ids, j] = t * along + side * h[beam_ids] * normal
         # panels: the centre, then round it
-        near[nn + nb:, 1:] = ring_offsets(1.0, k - 1)[None, :, :] * h[nn + nb:, None, :]
-        typical = float(np.median(w)) if len(w) else 1.0
+        near[panels, 1:] = ring_offsets(1.0, k - 1)[None, :, :] * h[panels, None, :]
+        every_width = np.concatenate(every_width) * scale
+        typical = float(np.median(every_width)) if len(every_width) else 1.0
         far = np.concatenate([ring_offsets(r * typical, 12, phase=0.26) for r in far_rings])
-        placement = place_labels(anchor[kept], size[kept], near[kept], far, bounds=bounds, obstacles=obstacles,
+        placement = place_labels(anchor[kept], size, near, far, bounds=bounds, obstacles=obstacles,
                                  gap=0.3 * scale if gap is None else gap)
         if not placement.left_out or font <= min_font:
-            return texts, points[kept], anchor[kept], placement
+            return texts, points, anchor[kept], placement
         font = max(0.8 * font, min_font)
 
 
@@ -316,9 +354,10 @@ def _write_pdf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.nd
         [lo[0], lo[1] - gap - 0.2 * text, hi[0], lo[1] - gap + text],
         [lo[0] - gap - text, lo[1], lo[0] - gap + 0.2 * text, hi[1]],
         [window[0], window[1], window[0] + 90.0 * scale, window[1] + 16.0 * scale]])
-    texts, points, anchor, placement = _label_places(plan, beams, centres, font, scale, window, obstacles)
+    anchor = _id_anchors(plan, beams, centres)
+    texts, points, _, placement = _label_places(plan, beams, anchor, font, scale, window, obstacles)
     colours = _label_colours(plan, beams, centres)
-    tiles = _tiles(plan, beams, centres, lo, hi, len(texts), int(placement.placed.sum())) \
+    tiles = _tiles(plan, beams, anchor, lo, hi, len(texts), int(placement.placed.sum())) \
         if placement.left_out else []
     notes = [f"Scale 1:{scale} on A3 ({_A3_MM[0]} x {_A3_MM[1]} mm)"]
     if tiles:
@@ -361,12 +400,11 @@ def _outline(box, colour: str, zorder: float = 1.0):
                      zorder=zorder)
 
 
-def _tiles(plan, beams, centres, lo, hi, n_ids: int, n_placed: int) -> list[dict]:
+def _tiles(plan, beams, anchor, lo, hi, n_ids: int, n_placed: int) -> list[dict]:
     """The plan cut into tiles of the frame's shape, as few as give every id room at TILE_POINTS
     (down to TILE_MIN_POINTS), at most MAX_TILE_SHEETS: each tile's core (x0, y0, x1, y1, mm),
-    scale, window and the placement of the ids whose anchor is in its core. Empty tiles are dropped."""
-    mid = 0.5 * (plan[beams[:, 0]] + plan[beams[:, 1]])
-    anchor = np.concatenate([plan, mid, centres.reshape(-1, 2)])
+    scale, window and the placement of the ids whose anchor (_id_anchors, mm) is in its core. Empty
+    tiles are dropped."""
     paper = np.array([_A3_MM[0] * _FRAME[2], _A3_MM[1] * _FRAME[3]])
     span = np.maximum(hi - lo, 1e-9)
 
@@ -388,7 +426,7 @@ def _tiles(plan, beams, centres, lo, hi, n_ids: int, n_placed: int) -> list[dict
                 scale = drawing_scale(1.25 * np.array([width, height]), paper)
                 window = _window(0.5 * (np.array(core[:2]) + np.array(core[2:])), scale)
                 obstacles = np.array([[window[0], window[1], window[0] + 90.0 * scale, window[1] + 16.0 * scale]])
-                labels = _label_places(plan, beams, centres, TILE_POINTS, scale, window, obstacles,
+                labels = _label_places(plan, beams, anchor, TILE_POINTS, scale, window, obstacles,
                                        min_font=TILE_MIN_POINTS, keep=keep)
                 tiles.append({"core": core, "scale": scale, "window": window, "keep": keep, "labels": labels,
                               "placement": labels[3]})

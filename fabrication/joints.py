@@ -5,14 +5,16 @@ node id engraved on its top face, one sleeve per beam (bore = beam size + 2 clea
 around it, a pin hole across it along the node axis); the bore starts at the set-back where neighbouring bores keep
 the least wall. Steel joint (full size): a hub tube along the node axis with one fin plate per
 beam, in the plane of the beam and the axis, with a bolt hole. Files: joints/J0001.step (the
-solid named J0001), joints/J0001.stl (watertight), joints/joints.step (all, named).
+exact solid named J0001, without the engraved id, points to 1e-8 mm), joints/J0001.stl (the part
+to print: engraved, watertight, 0.05 mm chord), joints/joints.step (all, named; on request and
+under 30 MB). Joints that are the same part but for the id are named by ``same_joints``.
 
 Speed (issue 6): a socket joint is one fuse (hub and sleeves) and one cut (bores and pin holes)
 in OCP, one joint per core; the id is written between the sleeves and engraved by building the
 pockets' faces into the hub's top face (fabrication.engraving) where the label is clear of bores,
 pin holes and the hub's rim by the least wall and no sleeve rises through the face over it, else
-by a boolean cut as before. Workers write each joint's files and its entities for joints.step
-(fabrication.step_assembly); the parent streams them into the combined file and is free for other
+by a boolean cut as before. Workers write each joint's files (and its entities for joints.step,
+fabrication.step_assembly); the parent streams them into the combined file and is free for other
 work meanwhile (JointsInBackground). Each joint's report records its seconds (``seconds``).
 """
 
@@ -33,15 +35,24 @@ from engine.errors import FabricationError
 from engine.mesh import PolyMesh
 from engine.parts import joint_id
 
-from .files import atomic_path, stamp_step
+from .files import atomic_path, compact_step_points, stamp_step
+from .settings import check_ranges
 from .step_assembly import StepAssemblyWriter, step_part, write_step_part
 from .workers import exit_with_parent
 
 __all__ = ["JointKind", "JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "joint_hub_radius_mm",
-           "joint_sleeve_mm", "smallest_angle", "build_joint", "build_joints",
+           "joint_sleeve_mm", "smallest_angle", "build_joint", "build_joint_and_blank", "build_joints", "same_joints",
            "JointsInBackground", "joint_name"]
 
 ENGRAVE_DEPTH_MM = 0.6
+#: The printed joint's STL: largest distance between a triangle and the surface (mm) and largest
+#: angle between neighbouring triangles (rad); see docs/decisions.md.
+STL_CHORD_MM = 0.05
+STL_ANGLE_RAD = 0.5
+#: Largest relative difference between the STL's volume and the solid's for a joint that is ok.
+STL_VOLUME_TOLERANCE = 0.005
+#: joints.step (every joint in one file) is kept only under this size, bytes (issue 17).
+JOINTS_STEP_LIMIT_BYTES = 30_000_000
 LABEL_MARGIN_MM = 0.5  # between the label and a sleeve rising through the hub's top face
 #: Steel joint: hub radius and fin plate length inside the slotted tube, per beam outer size.
 STEEL_HUB_RADIUS = 0.75
@@ -54,7 +65,8 @@ JointKind = Literal["socket", "steel"]
 
 @dataclass(frozen=True, kw_only=True)
 class JointSettings:
-    """Dimensions in mm. hub_radius_mm / sleeve_length_mm None: derived from the beam size."""
+    """Dimensions in mm, all positive but the clearance (zero or more). hub_radius_mm /
+    sleeve_length_mm None: derived from the beam size."""
 
     kind: JointKind = "socket"
     clearance_mm: float = 0.3
@@ -66,6 +78,11 @@ class JointSettings:
     sleeve_length_mm: float | None = None
     plate_thickness_mm: float = 10.0
     bolt_hole_mm: float = 18.0
+
+    def __post_init__(self) -> None:
+        check_ranges(self, "joint", positive=("wall_mm", "min_wall_mm", "pin_hole_mm", "hub_radius_mm",
+                                              "sleeve_length_mm", "plate_thickness_mm", "bolt_hole_mm"),
+                     zero_or_positive=("clearance_mm",))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -160,6 +177,45 @@ def joint_geometry(polymesh: PolyMesh, normals: np.ndarray, beam_size_mm: float 
                                  beam_size_mm=float(own.max()),
                                  beam_sizes_mm=own.copy() if per_beam and np.ptp(own) > 0 else None))
     return out
+
+
+def _beams_about_axis(geometry: JointGeometry) -> np.ndarray:
+    """(k, 3) per beam, in the order of their azimuths about the joint's axis: the beam's
+    elevation (its direction's component along the axis), the azimuth on to the next beam (rad)
+    and its outer size (mm). Unchanged by rotating the joint."""
+    axis = geometry.axis
+    e1 = np.cross([0.0, 0.0, 1.0] if abs(axis[2]) < 0.9 else [1.0, 0.0, 0.0], axis)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    d = geometry.directions
+    azimuth = np.mod(np.arctan2(d @ e2, d @ e1), 2 * np.pi)
+    order = np.argsort(azimuth, kind="stable")
+    gaps = np.mod(np.diff(np.r_[azimuth[order], azimuth[order][0] + 2 * np.pi]), 2 * np.pi)
+    return np.column_stack([d[order] @ axis, gaps, geometry.sizes_mm[order]])
+
+
+def same_joints(geometries: list[JointGeometry], tolerance_rad: float = 1e-3,
+                tolerance_mm: float = 1e-3) -> list[list[str]]:
+    """Groups (two or more ids) of joints that are the same part but for the engraved id: the same
+    beams (sizes within ``tolerance_mm``) at the same angles about the axis and to it (within
+    ``tolerance_rad``; 1e-3 rad is 0.05 mm at a sleeve's end), one turned onto the other. A
+    mirror image is not the same part. The hub, set-back, bores and pin holes follow from these."""
+    described = [_beams_about_axis(g) for g in geometries]
+    scale = np.array([tolerance_rad, tolerance_rad, tolerance_mm])
+
+    def same(a: np.ndarray, b: np.ndarray) -> bool:
+        return len(a) == len(b) and any(np.all(np.abs(a - np.roll(b, shift, axis=0)) <= scale)
+                                        for shift in range(len(b)))
+
+    groups: list[list[int]] = []
+    for k, d in enumerate(described):
+        for group in groups:
+            if same(described[group[0]], d):
+                group.append(k)
+                break
+        else:
+            groups.append([k])
+    return [[joint_name(geometries[k].node) for k in group] for group in groups if len(group) > 1]
 
 
 def _plane(origin, z_dir, x_dir=None):
@@ -369,6 +425,13 @@ def _engrave_id(solid, name: str, geometry: JointGeometry, settings: JointSettin
 def build_joint(geometry: JointGeometry, settings: JointSettings):
     """(solid, report) of one joint, built at the origin (mm); the caller places it. The report
     carries ``valid`` (BRepCheck) when the engraving already checked the solid."""
+    _, solid, report = build_joint_and_blank(geometry, settings)
+    return solid, report
+
+
+def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings):
+    """(blank, solid, report): the joint as ``build_joint`` gives it, and its blank, the same solid
+    before the id is engraved (the solid itself where nothing is engraved), both at the origin (mm)."""
     from build123d import Align, Box, Cylinder, Location
 
     name = joint_name(geometry.node)
@@ -399,6 +462,7 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
         # one fuse and one cut with all tools, as for the sockets: a boolean per plate and hole
         # took two thirds of the node's time
         solid = _as_build123d(_boolean("cut", [_boolean("fuse", [hub.wrapped], plates)], holes))
+        blank = solid
         report["min_wall_mm"] = float(settings.plate_thickness_mm)
     else:
         hub_radius = joint_hub_radius_mm(settings, size)
@@ -420,15 +484,15 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
                              0.5 * settings.pin_hole_mm))
         # one fuse and one cut with all tools: faster than a boolean per feature
         shape = _boolean("cut", [_boolean("fuse", [hub], sleeves)], tools)
+        blank = solid = _as_build123d(shape)
         if settings.engrave:
-            shape = _engrave_id(shape, name, geometry, settings, top_mm=0.5 * hub_height, hub_radius=hub_radius,
-                                features=features, report=report)
-        solid = _as_build123d(shape)
+            solid = _as_build123d(_engrave_id(shape, name, geometry, settings, top_mm=0.5 * hub_height,
+                                              hub_radius=hub_radius, features=features, report=report))
         # wall left between neighbouring bores at their start
         wall_between = 2 * setback * np.sin(0.5 * angle) - 2 * bore if len(directions) > 1 else settings.wall_mm
         report["min_wall_mm"] = float(min(settings.wall_mm, wall_between))
     report["clashes"] = _clashes(directions, outer, setback, sleeve)
-    return solid, report
+    return blank, solid, report
 
 
 def _as_build123d(shape):
@@ -476,10 +540,12 @@ def _axis_errors_deg(solid, directions: np.ndarray, bore_radius: float | np.ndar
     return worst
 
 
-def _tessellate(shape, tolerance: float, angular_tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+def _tessellate(shape, tolerance: float, angular_tolerance: float, *,
+                relative: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (n, 3), triangles (m, 3)) of an OCP shape's triangulation, as build123d's
     ``tessellate(tolerance, angular_tolerance)`` gives them (same mesher settings, same order),
-    read into numpy without a Python object per vertex."""
+    read into numpy without a Python object per vertex. ``relative`` False: ``tolerance`` is the
+    chord deviation in mm, not a fraction of each edge's size (build123d's)."""
     from OCP.BRep import BRep_Tool
     from OCP.BRepMesh import BRepMesh_IncrementalMesh
     from OCP.BRepTools import BRepTools
@@ -489,7 +555,7 @@ def _tessellate(shape, tolerance: float, angular_tolerance: float) -> tuple[np.n
     from OCP.TopoDS import TopoDS
 
     if not BRepTools.Triangulation_s(shape, tolerance):
-        BRepMesh_IncrementalMesh(shape, tolerance, True, angular_tolerance, False)
+        BRepMesh_IncrementalMesh(shape, tolerance, relative, angular_tolerance, False)
     vertices, triangles, offset = [], [], 0
     explorer = TopExp_Explorer(shape, TopAbs_FACE)
     while explorer.More():
@@ -511,11 +577,22 @@ def _tessellate(shape, tolerance: float, angular_tolerance: float) -> tuple[np.n
     return np.vstack(vertices), np.vstack(triangles)
 
 
-def _watertight_stl(solid, path: Path) -> bool:
-    """Tessellate, weld and write an STL; True when trimesh finds it watertight."""
+def _volume_mm3(shape) -> float:
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    props = GProp_GProps()
+    BRepGProp.VolumeProperties_s(shape, props)
+    return float(props.Mass())
+
+
+def _watertight_stl(solid, path: Path, report: dict | None = None) -> bool:
+    """Tessellate (STL_CHORD_MM, STL_ANGLE_RAD), weld and write an STL; True when trimesh finds it
+    watertight. ``report`` gets ``stl_triangles`` and ``stl_volume_error``, the mesh's volume over
+    the solid's, less 1."""
     import trimesh
 
-    vertices, triangles = _tessellate(solid.wrapped, 0.05, 0.3)
+    vertices, triangles = _tessellate(solid.wrapped, STL_CHORD_MM, STL_ANGLE_RAD, relative=False)
     if not len(triangles):
         raise FabricationError("the joint solid has no faces to tessellate (the booleans left nothing)")
     mesh = trimesh.Trimesh(vertices, triangles, process=True)
@@ -526,6 +603,9 @@ def _watertight_stl(solid, path: Path) -> bool:
     trimesh.repair.fix_normals(mesh)
     with atomic_path(path) as tmp:
         mesh.export(tmp, file_type="stl")
+    if report is not None:
+        report["stl_triangles"] = int(len(mesh.faces))
+        report["stl_volume_error"] = float(mesh.volume / _volume_mm3(solid.wrapped) - 1.0)
     return bool(mesh.is_watertight)
 
 
@@ -551,32 +631,40 @@ def _build_and_write_checked(job: tuple) -> dict:
     from build123d import Location, export_step
 
     started = time.perf_counter()
-    solid, report = build_joint(geometry, settings)
+    blank, solid, report = build_joint_and_blank(geometry, settings)
     built = time.perf_counter()
     bores = 0.5 * geometry.sizes_mm + settings.clearance_mm
     report["max_axis_error_deg"] = (_axis_errors_deg(solid, geometry.directions, bores) if settings.kind == "socket"
                                     else 0.0)
     report["single_solid"] = len(solid.solids()) == 1
     report["valid"] = bool(report["valid"]) if "valid" in report else _is_valid(solid.wrapped)
-    placed = solid.moved(Location(tuple(map(float, geometry.position_mm))))
-    placed.label = report["id"]
+    if blank is not solid:
+        report["valid"] = report["valid"] and _is_valid(blank.wrapped)
+    location = Location(tuple(map(float, geometry.position_mm)))
+    placed = solid.moved(location)
+    exact = blank.moved(location)  # the STEP: the exact solid without the engraved id (the STL has it)
+    exact.label = report["id"]
     folder = Path(folder)
     step_path = folder / f"{report['id']}.step"
     with atomic_path(step_path) as tmp:
         # no p-curves: the 2D copies of each edge on its faces, which readers rebuild, were 58 % of a
         # printed socket's bytes (its engraved id's splines); the solid reads back the same
-        export_step(placed, str(tmp), write_pcurves=False)
+        export_step(exact, str(tmp), write_pcurves=False)
         stamp_step(tmp)
-    part = step_part(step_path.read_text(encoding="utf-8"), first_id)
-    # a part too big for its id range is renumbered by the parent, above every range
-    report["_part"] = str(write_step_part(part, Path(parts_folder) / f"{report['id']}.part")) \
-        if part.last_id <= last_id else None
+        compact_step_points(tmp)
+    report["_part"] = False  # nothing for joints.step (not asked for)
+    if parts_folder is not None:
+        part = step_part(step_path.read_text(encoding="utf-8"), first_id)
+        # a part too big for its id range is renumbered by the parent, above every range
+        report["_part"] = str(write_step_part(part, Path(parts_folder) / f"{report['id']}.part")) \
+            if part.last_id <= last_id else None
     written = time.perf_counter()
-    report["watertight"] = _watertight_stl(placed, folder / f"{report['id']}.stl")
+    report["watertight"] = _watertight_stl(placed, folder / f"{report['id']}.stl", report)
     error = report["max_axis_error_deg"]
     report["wall_ok"] = report["min_wall_mm"] >= settings.min_wall_mm - 1e-9
+    report["stl_volume_ok"] = abs(report["stl_volume_error"]) <= STL_VOLUME_TOLERANCE
     report["ok"] = bool(report["valid"] and report["single_solid"] and report["watertight"] and report["wall_ok"]
-                        and not report["clashes"] and (np.isnan(error) or error <= 0.1))
+                        and report["stl_volume_ok"] and not report["clashes"] and (np.isnan(error) or error <= 0.1))
     finished = time.perf_counter()
     report["seconds"] = {"build": round(built - started, 4), "check_and_step": round(written - built, 4),
                          "stl": round(finished - written, 4)}
@@ -596,17 +684,18 @@ class JointsInBackground:
     (the parent is otherwise idle while the joints take both cores)::
 
         with JointsInBackground(polymesh, normals, beam_size_mm, settings, folder) as joints:
-            ...                    # the workers build; a thread streams their parts into joints.step
+            ...                    # the workers build (a thread streams their parts into joints.step)
             joints.wait(progress)  # optional: wait here, passing on the joints' progress
         joints.reports             # one report per joint, in node order
 
     The workers fork when the block is entered, before the caller's work starts. With one worker
     (or a handful of joints) everything is built in this process when the block ends. Joints
     with most beams go first, so that both cores stay busy to the end; ``seconds`` is the time
-    from entering the block to the last joint written."""
+    from entering the block to the last joint written. ``combined_step``: write joints.step too,
+    where it comes under JOINTS_STEP_LIMIT_BYTES (``combined_bytes`` is its size either way)."""
 
     def __init__(self, polymesh: PolyMesh, normals: np.ndarray, beam_size_mm: float, settings: JointSettings,
-                 folder: Path, *, workers: int | None = None, progress=None) -> None:
+                 folder: Path, *, workers: int | None = None, progress=None, combined_step: bool = False) -> None:
         self.folder = Path(folder)
         self.geometries = joint_geometry(polymesh, normals, beam_size_mm)
         self.settings = settings
@@ -614,6 +703,9 @@ class JointsInBackground:
         self.progress = progress
         self.reports: list[dict] = []
         self.seconds = 0.0
+        self.combined_step = combined_step
+        self.combined_bytes = 0  # joints.step's size, written or not (0: not asked for)
+        self._writer: StepAssemblyWriter | None = None
         self._ranges = _id_ranges(len(self.geometries))
         self._latest: tuple[str, float] | None = None
         self._error: BaseException | None = None
@@ -632,9 +724,13 @@ class JointsInBackground:
         self.folder.mkdir(parents=True, exist_ok=True)
         self._stack = contextlib.ExitStack()
         try:
-            parts = self._stack.enter_context(tempfile.TemporaryDirectory(dir=self.folder.parent))
-            path = self._stack.enter_context(atomic_path(self.folder / "joints.step"))
-            self._writer = StepAssemblyWriter(self._stack.enter_context(open(path, "w", encoding="utf-8")), "joints")
+            parts = None
+            if self.combined_step:
+                parts = self._stack.enter_context(tempfile.TemporaryDirectory(dir=self.folder.parent))
+                # written beside the parts, moved into joints/ when done and under JOINTS_STEP_LIMIT_BYTES
+                self._combined = Path(parts) / "joints.step"
+                self._file = self._stack.enter_context(open(self._combined, "w", encoding="utf-8"))
+                self._writer = StepAssemblyWriter(self._file, "joints")
             self._jobs = [(g, self.settings, str(self.folder), parts, *self._ranges[k])
                           for k, g in enumerate(self.geometries)]
             self._order = sorted(range(len(self._jobs)), key=lambda k: -len(self.geometries[k].directions))
@@ -651,7 +747,7 @@ class JointsInBackground:
 
     def _collect(self, report: dict) -> None:
         part = report.pop("_part")
-        if part is False:  # not built: nothing to add
+        if part is False or self._writer is None:  # not built, or no joints.step: nothing to add
             pass
         elif part is None:
             text = (self.folder / f"{report['id']}.step").read_text(encoding="utf-8")
@@ -692,8 +788,13 @@ class JointsInBackground:
                 self.wait()
                 if self._error is not None:
                     raise self._error
-                built = {r["id"] for r in self.reports if r.get("built", True)}
-                self._writer.finish([joint_name(g.node) for g in self.geometries if joint_name(g.node) in built])
+                if self._writer is not None:
+                    built = {r["id"] for r in self.reports if r.get("built", True)}
+                    self._writer.finish([joint_name(g.node) for g in self.geometries if joint_name(g.node) in built])
+                    self._file.close()
+                    self.combined_bytes = self._combined.stat().st_size
+                    if self.combined_bytes < JOINTS_STEP_LIMIT_BYTES:
+                        os.replace(self._combined, self.folder / "joints.step")
                 self.seconds = time.perf_counter() - self._started
             except BaseException as failure:  # noqa: BLE001 - raised below, after the clean-up
                 error = failure
@@ -702,11 +803,11 @@ class JointsInBackground:
                 future.cancel()
             self.wait()
         if error is None:
-            self._stack.close()  # joints.step renamed into place, part files removed, workers ended
+            self._stack.close()  # part files (and a joints.step over the limit) removed, workers ended
         else:
             for future in self._futures:
                 future.cancel()
-            self._stack.__exit__(type(error), error, error.__traceback__)  # joints.step left as it was
+            self._stack.__exit__(type(error), error, error.__traceback__)  # no joints.step written
             if value is None:
                 raise error
         self.reports.sort(key=lambda r: r["node"])
@@ -714,11 +815,11 @@ class JointsInBackground:
 
 
 def build_joints(polymesh: PolyMesh, normals: np.ndarray, beam_size_mm: float, settings: JointSettings, folder: Path,
-                 *, workers: int | None = None, progress=None) -> list[dict]:
+                 *, workers: int | None = None, progress=None, combined_step: bool = False) -> list[dict]:
     """Build, check and write every joint (see the module docstring and JointsInBackground);
     returns one report per joint, in node order."""
     with JointsInBackground(polymesh, normals, beam_size_mm, settings, folder, workers=workers,
-                            progress=progress) as joints:
+                            progress=progress, combined_step=combined_step) as joints:
         pass
     return joints.reports
 

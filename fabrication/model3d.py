@@ -17,16 +17,16 @@ __all__ = ["write_gridshell_step", "write_gridshell_3dm"]
 
 def write_gridshell_step(polymesh: PolyMesh, panels, beam_radius_mm: float | np.ndarray, joint_radius_mm: float,
                          path: Path) -> Path:
-    """Joints as spheres J0001..., beams as cylinders B0001... (one radius, or one per beam),
-    panels as 3 mm plates P0001... ."""
+    """Joints as spheres J0001... (one sphere shape, instanced at every node), beams as cylinders
+    B0001... (one radius, or one per beam), panels as 3 mm plates P0001... ."""
     import cadquery as cq
 
     nodes = 1000 * polymesh.nodes
     assembly = cq.Assembly(name="gridshell")
     grey, blue, glass = cq.Color(0.6, 0.6, 0.6), cq.Color(0.27, 0.51, 0.71), cq.Color(0.7, 0.85, 0.95, 0.5)
+    sphere = cq.Workplane().sphere(joint_radius_mm)  # one shape, placed at every node (instances)
     for i, p in enumerate(nodes):
-        assembly.add(cq.Workplane().sphere(joint_radius_mm), name=joint_id(i), loc=cq.Location(cq.Vector(*p)),
-                     color=grey)
+        assembly.add(sphere, name=joint_id(i), loc=cq.Location(cq.Vector(*p)), color=grey)
     radii = np.broadcast_to(np.asarray(beam_radius_mm, dtype=float), (len(polymesh.edges),))
     for k, (a, b) in enumerate(polymesh.edges):
         direction = nodes[b] - nodes[a]
@@ -41,7 +41,8 @@ def write_gridshell_step(polymesh: PolyMesh, panels, beam_radius_mm: float | np.
         solid = cq.Solid.extrudeLinear(face, cq.Vector(*(3.0 * normal)))
         assembly.add(cq.Workplane().add(solid), name=panel.id, color=glass)
     with atomic_path(path) as tmp:
-        assembly.export(str(tmp), "STEP")
+        # no p-curves (2D copies of the edges on their faces, which readers rebuild): a third of the bytes
+        assembly.export(str(tmp), "STEP", write_pcurves=False)
         stamp_step(tmp)
     return Path(path)
 

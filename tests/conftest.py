@@ -44,7 +44,8 @@ def small_project():
         "analysis": project.analysis.model_copy(update={"n_modes": 3, "imperfection_shapes": ["linear", "mode1"],
                                                         "elements_per_beam": 2}),
         "fabrication": project.fabrication.model_copy(update={
-            "sheets": project.fabrication.sheets.model_copy(update={"width": 2.0, "height": 1.25})}),
+            "sheets": project.fabrication.sheets.model_copy(update={"width": 2.0, "height": 1.25}),
+            "joints": project.fabrication.joints.model_copy(update={"combined_step": True})}),
     })
 
 

@@ -215,3 +215,17 @@ def test_plan_dxf_labels_do_not_overlap(tmp_path, rows, cols, jitter):
         if np.linalg.norm(centre - parts[t.dxf.text]) > 1.5 * size:
             assert any(np.allclose(start, parts[t.dxf.text]) and np.linalg.norm(end - centre) < 0.5 * size
                        for start, end in leaders), t.dxf.text
+
+
+@pytest.mark.parametrize("count", [0, 1, 660, 9999, 10001, 12345])
+def test_id_shapes_are_counted_as_the_ids_measure(count):
+    """A tile measures only its own ids; the leader lines' reach (the median width of every id of
+    the plan) comes from the ids' shapes and their counts, and is the median of every id measured."""
+    from fabrication.drawings import _id_shape_counts, _shape_widths_mm, _text_box_mm
+
+    counts = _id_shape_counts("B", count)
+    assert sum(counts.values()) == count
+    widths = _shape_widths_mm(counts, 4.0)
+    every = np.repeat([widths[s] for s in counts], list(counts.values()))
+    measured = _text_box_mm([beam_id(k) for k in range(count)], 4.0)[:, 0]
+    assert np.array_equal(np.sort(every), np.sort(measured))

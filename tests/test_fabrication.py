@@ -25,9 +25,13 @@ def test_joints_are_named_valid_watertight_solids(small_run):
     from OCP.IFSelect import IFSelect_RetDone
     from OCP.STEPControl import STEPControl_Reader
 
-    _, out = small_run
+    from fabrication.engraving import pocket_volume, text_faces
+    from fabrication.joints import ENGRAVE_DEPTH_MM, STL_VOLUME_TOLERANCE, joint_hub_radius_mm
+
+    project, out = small_run
     folder = out / "07-fabrication" / "joints"
     polymesh = _polymesh(out)
+    hub_radius = joint_hub_radius_mm(project.fabrication.joints.to_settings(), project.section.outer_size_mm())
     connected = np.flatnonzero(polymesh.valence > 0)
     names = sorted(p.stem for p in folder.glob("J*.step"))
     assert names == [f"J{i + 1:04d}" for i in connected]
@@ -44,8 +48,10 @@ def test_joints_are_named_valid_watertight_solids(small_run):
         mesh = trimesh.load(folder / f"{name}.stl")
         assert mesh.is_watertight or name in problems, "a leaky STL is reported as a joint problem"
         assert mesh.volume > 0
-        # the STEP read by OCCT (its p-curves rebuilt) and the STL read by trimesh are the same solid
-        assert _volume(shape) == pytest.approx(mesh.volume, rel=0.01)
+        # the STEP read by OCCT (its p-curves rebuilt) is the blank, the STL read by trimesh the printed
+        # part: the same solid but for the engraved id's pockets
+        pockets = pocket_volume(text_faces(name, 0.45 * hub_radius), ENGRAVE_DEPTH_MM)
+        assert _volume(shape) - pockets == pytest.approx(mesh.volume, rel=STL_VOLUME_TOLERANCE)
     combined = (folder / "joints.step").read_text(errors="ignore")
     assert all(f"'{name}'" in combined for name in names)
     top, parts = _read_assembly(folder / "joints.step")
@@ -56,6 +62,8 @@ def test_joints_are_named_valid_watertight_solids(small_run):
 
 @slow
 def test_cut_list_matches_the_geometry_and_the_bars_fit(small_run):
+    import os
+
     import pandas as pd
 
     _, out = small_run
@@ -87,6 +95,13 @@ def test_cut_list_matches_the_geometry_and_the_bars_fit(small_run):
     on_disk = sum(p.stat().st_size for p in (out / "07-fabrication" / "joints").rglob("*") if p.is_file())
     assert sizes["joints"] == pytest.approx(on_disk / 1e6, abs=0.01)
     assert sizes["total"] >= sizes["joints"] + sizes["beams"]
+    files = _json.loads((out / "07-fabrication" / "fabrication.json").read_text())["files"]
+    stage = [p for p in (out / "07-fabrication").rglob("*") if p.is_file() and p.name != "fabrication.json"]
+    assert files["total_bytes"] == sum(os.stat(p).st_size for p in stage) == sum(files["by_kind"].values())
+    assert files["by_kind"]["joint_stls"] == sum(os.stat(p).st_size for p in (out / "07-fabrication" / "joints")
+                                                 .glob("J*.stl"))
+    assert files["by_kind"]["gridshell_step"] == os.stat(out / "07-fabrication" / "gridshell.step").st_size
+    assert files["joints_step"]["written"] and files["by_kind"]["joints_step"] == files["joints_step"]["bytes"]
     # stock bars and sheets have names of their own kind (BAR001, SHEET01), not both S...
     assert list(bars["bar"]) == [f"BAR{k:03d}" for k in range(1, len(bars) + 1)]
 
@@ -560,3 +575,111 @@ def test_a_joint_that_fails_its_checks_is_a_finding_in_words():
     assert finding.kind == "joint_solid" and finding.parts == ["J0007"]
     assert "not one solid" in finding.message and "thinnest wall is 1.2 mm" in finding.message
     assert "single_solid" not in finding.message and "wall_ok" not in finding.message
+
+
+def _square_of_joints(tmp_path, monkeypatch, limit_bytes: int | None = None, combined: bool = True):
+    """The four joints of a flat square cell of 200 mm (one process), joints.step asked for
+    (``combined``) and kept under ``limit_bytes``: (reports, joints folder, the stage's file sizes)."""
+    from engine.mesh import PolyMesh
+    from fabrication import joints
+    from workflow.stages.fabrication import output_files
+
+    if limit_bytes is not None:
+        monkeypatch.setattr(joints, "JOINTS_STEP_LIMIT_BYTES", limit_bytes)
+    nodes = np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [0.2, 0.2, 0.0], [0.0, 0.2, 0.0]])
+    polymesh = PolyMesh(nodes=nodes, faces=(np.array([0, 1, 2, 3]),))
+    normals = np.tile([0.0, 0.0, 1.0], (4, 1))
+    folder = tmp_path / "joints"
+    reports = joints.build_joints(polymesh, normals, 12.0, joints.JointSettings(), folder, workers=1,
+                                  combined_step=combined)
+    return reports, folder, output_files(tmp_path)
+
+
+def test_joints_step_is_written_only_under_its_limit_and_sizes_are_the_disk_s(tmp_path, monkeypatch):
+    """joints.step, when asked for, holds every joint under JOINTS_STEP_LIMIT_BYTES and is not
+    written over it; the per-joint files are written either way, and the sizes reported are
+    os.stat's."""
+    import os
+
+    reports, folder, files = _square_of_joints(tmp_path / "under", monkeypatch)
+    assert all(r["ok"] for r in reports) and (folder / "joints.step").is_file()
+    step_bytes = sum(os.stat(p).st_size for p in folder.glob("J*.step"))
+    stl_bytes = sum(os.stat(p).st_size for p in folder.glob("J*.stl"))
+    assert files["by_kind"] == {"joints_step": os.stat(folder / "joints.step").st_size, "joint_steps": step_bytes,
+                                "joint_stls": stl_bytes}
+    assert files["total_bytes"] == sum(os.stat(p).st_size for p in (tmp_path / "under").rglob("*") if p.is_file())
+    assert files["count_by_kind"] == {"joints_step": 1, "joint_steps": 4, "joint_stls": 4}
+    reports, folder, files = _square_of_joints(tmp_path / "over", monkeypatch, limit_bytes=1000)
+    assert all(r["ok"] for r in reports) and not (folder / "joints.step").exists()
+    names = sorted(f"J000{k}{suffix}" for k in range(1, 5) for suffix in (".step", ".stl"))
+    assert sorted(p.name for p in folder.iterdir()) == names
+    assert "joints_step" not in files["by_kind"]
+    _, folder, files = _square_of_joints(tmp_path / "not asked", monkeypatch, combined=False)
+    assert sorted(p.name for p in folder.iterdir()) == names
+    assert files["by_kind"]["joint_steps"] == sum(os.stat(p).st_size for p in folder.glob("J*.step"))
+    assert not [p for p in tmp_path.rglob("*") if p.name.startswith(".") or p.name.startswith("tmp")], \
+        "no temporary files left"
+
+
+def test_the_printed_stl_is_the_engraved_solid_and_the_step_the_blank(tmp_path):
+    """The STL (what is printed) is watertight and holds the engraved solid's volume within 0.5 %:
+    the STEP's blank, read back by OCCT, less the pockets (glyph area times the depth); its
+    triangles keep within the chord deviation of the solid."""
+    import trimesh
+
+    from fabrication import joints
+    from fabrication.engraving import pocket_volume, text_faces
+
+    geometry, settings = _joint_geometry(), joints.JointSettings()
+    report = joints._build_and_write((geometry, settings, str(tmp_path), str(tmp_path), *joints._id_ranges(1)[0]))
+    assert report["ok"] and report["engraving"] == "faces"
+    mesh = trimesh.load(tmp_path / "J0007.stl")
+    assert mesh.is_watertight and len(mesh.faces) == report["stl_triangles"]
+    blank = _volume(_read_step(tmp_path / "J0007.step"))
+    hub_radius = joints.joint_hub_radius_mm(settings, 12.0)
+    engraved = blank - pocket_volume(text_faces("J0007", 0.45 * hub_radius), joints.ENGRAVE_DEPTH_MM)
+    assert mesh.volume == pytest.approx(engraved, rel=joints.STL_VOLUME_TOLERANCE)
+    assert abs(report["stl_volume_error"]) <= joints.STL_VOLUME_TOLERANCE
+    assert blank > engraved
+
+
+def test_same_joints_are_turned_copies_not_mirror_images():
+    """Joints whose beams meet at the same angles, one turned onto the other, are grouped; a mirror
+    image and a joint with another beam size are not."""
+    from fabrication.joints import JointGeometry, same_joints
+
+    base = _joint_geometry(tilt_deg=5.0, beams=3, node=0)
+    d = base.directions.copy()
+    d[1] = d[1] + np.array([0.05, 0.0, 0.0])
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    tilt = np.array([[1.0, 0.0, 0.0], [0.0, 0.6, -0.8], [0.0, 0.8, 0.6]])
+    mirror = np.diag([1.0, -1.0, 1.0])
+
+    def joint(node, rotation, sizes=None):
+        return JointGeometry(node=node, position_mm=np.zeros(3), directions=(rotation @ d.T).T[::-1],
+                             axis=rotation @ base.axis, beam_size_mm=12.0, beam_sizes_mm=sizes)
+
+    joints = [joint(0, np.eye(3)), joint(1, tilt @ turn), joint(2, mirror), joint(3, turn, np.array([12, 12, 10.0]))]
+    assert same_joints(joints) == [["J0001", "J0002"]]
+
+
+def test_step_points_written_to_8_places_read_back_the_same_solid(tmp_path):
+    """compact_step_points shortens a joint's STEP (the blank, as written) by a sixth; OCCT reads
+    back a valid solid of the same volume (1e-8) and bounding box (1e-6 mm)."""
+    from build123d import export_step
+    from OCP.BRepCheck import BRepCheck_Analyzer
+
+    from fabrication import joints
+    from fabrication.files import compact_step_points
+
+    solid, _, _ = joints.build_joint_and_blank(_joint_geometry(tilt_deg=6.0), joints.JointSettings())
+    export_step(solid, str(tmp_path / "full.step"), write_pcurves=False)
+    (tmp_path / "short.step").write_bytes((tmp_path / "full.step").read_bytes())
+    compact_step_points(tmp_path / "short.step")
+    full, short = _read_step(tmp_path / "full.step"), _read_step(tmp_path / "short.step")
+    assert BRepCheck_Analyzer(short).IsValid()
+    assert _volume(short) == pytest.approx(_volume(full), rel=1e-8)
+    assert _volume_and_box(short) == pytest.approx(_volume_and_box(full), abs=1e-6)
+    assert (tmp_path / "short.step").stat().st_size < 0.88 * (tmp_path / "full.step").stat().st_size
+    assert "CARTESIAN_POINT('',(0.,0.,0.));" in (tmp_path / "short.step").read_text()

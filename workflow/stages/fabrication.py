@@ -1,6 +1,6 @@
 """Stage ``fabrication``: everything a workshop needs to build the checked grid-shell.
 
-Artifacts (07-fabrication/): joints/ (J0001.step, J0001.stl ..., joints.step), beams/
+Artifacts (07-fabrication/): joints/ (J0001.step, J0001.stl ..., joints.step on request under 30 MB), beams/
 (cutlist.csv, cutlist.xlsx, bars.csv, beams.step), panels/ (P0001.dxf ..., sheets/SHEET01.dxf
 ..., panels.csv), assembly/ (sequence.csv, steps/*.png), drawings/ (plan.dxf, plan.pdf),
 gridshell.step, gridshell.3dm and fabrication.json (counts and checks; the seconds each step took
@@ -28,12 +28,14 @@ from fabrication.drawings import write_plan_drawings
 from fabrication.files import atomic_path, write_text_atomic
 from fabrication.ifc import IfcBeam, IfcJoint, IfcPanel, write_gridshell_ifc
 from fabrication.joints import (
+    JOINTS_STEP_LIMIT_BYTES,
     JointSettings,
     JointsInBackground,
     joint_geometry,
     joint_hub_radius_mm,
     joint_setback_mm,
     joint_sleeve_mm,
+    same_joints,
     smallest_angle,
 )
 from fabrication.limits import BuildLimits, default_min_cut_length_mm
@@ -108,7 +110,7 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     # the joints take both cores in worker processes; the other steps run here meanwhile
     clock.start("joints: start")
     with JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
-                            workers=config.workers) as joints:
+                            workers=config.workers, combined_step=config.joints.combined_step) as joints:
         _beams_panels_drawings_assembly(project, ctx, clock, optimize, normals, joint_settings, limits, summary,
                                         findings, sections)
         clock.start("joints: waiting")
@@ -119,6 +121,10 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     summary["joints"] = len(joint_reports)
     summary["joint_problems"] = [{k: v for k, v in r.items() if k != "seconds"} for r in joint_reports
                                  if not r.get("ok", True)]
+    # the same part but for the engraved id: one print file would do for each group but the label
+    groups = same_joints(joints.geometries)
+    summary["same_joints"] = groups
+    summary["distinct_joints"] = len(joint_reports) - sum(len(g) - 1 for g in groups)
     findings += _joint_findings(joint_reports, limits)
     clock.start("joints: clearance between neighbours")
     summary["joint_clashes"] = _joint_clashes(folder / "joints", [r["id"] for r in joint_reports
@@ -135,6 +141,10 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     clock.stop()
     summary["findings"] = [f.to_dict() for f in findings]
     summary["sizes_mb"] = output_sizes_mb(folder)
+    summary["files"] = output_files(folder)
+    summary["files"]["joints_step"] = {"asked": config.joints.combined_step,
+                                       "written": (folder / "joints" / "joints.step").is_file(),
+                                       "bytes": joints.combined_bytes, "limit_bytes": JOINTS_STEP_LIMIT_BYTES}
     ctx.report_findings(summary["findings"])
     ctx.timings.update(clock.seconds)
     write_text_atomic(folder / "fabrication.json", json.dumps(summary, indent=1, default=_jsonable))
@@ -153,6 +163,36 @@ def output_sizes_mb(folder: Path) -> dict[str, float]:
         sizes[entry.name] = round(sum(p.stat().st_size for p in files) / 1e6, 2)
     sizes["total"] = round(sum(sizes.values()), 2)
     return sizes
+
+
+def _file_kind(relative: Path) -> str:
+    """The kind of a file of the stage, by its path in the stage folder: joints_step (the combined
+    file), joint_steps and joint_stls (one per joint), the sub-folder's name for other files in
+    one (beams, panels, ...), else the file's name with "_" for "." (gridshell_step, ...)."""
+    parts = relative.parts
+    if parts[0] == "joints" and len(parts) == 2:
+        if parts[1] == "joints.step":
+            return "joints_step"
+        if relative.suffix in (".step", ".stl"):
+            return f"joint_{relative.suffix[1:]}s"
+    return parts[0] if len(parts) > 1 else parts[0].replace(".", "_")
+
+
+def output_files(folder: Path) -> dict:
+    """Bytes of the stage's files: ``total_bytes`` and ``by_kind`` (see _file_kind), with
+    ``count_by_kind``; fabrication.json itself (written after) and hidden files not counted."""
+    by_kind: dict[str, int] = {}
+    count: dict[str, int] = {}
+    for path in sorted(Path(folder).rglob("*")):
+        relative = path.relative_to(folder)
+        if not path.is_file() or any(p.startswith(".") for p in relative.parts) or relative.as_posix() == \
+                "fabrication.json":
+            continue
+        kind = _file_kind(relative)
+        by_kind[kind] = by_kind.get(kind, 0) + path.stat().st_size
+        count[kind] = count.get(kind, 0) + 1
+    return {"total_bytes": sum(by_kind.values()), "by_kind": dict(sorted(by_kind.items())),
+            "count_by_kind": dict(sorted(count.items()))}
 
 
 #: Joint solids sharing more than this volume (mm3) clash.
@@ -184,6 +224,7 @@ def _joint_findings(reports: list[dict], limits: BuildLimits) -> list[Finding]:
         failed += [words for name, words in (
             ("valid", "not a valid solid"), ("single_solid", "not one solid (a part of it does not join the rest)"),
             ("watertight", "its STL is not watertight"),
+            ("stl_volume_ok", f"its STL's volume is off the solid's by {100 * r.get('stl_volume_error', 0):.2f} %"),
             ("wall_ok", f"its thinnest wall is {r.get('min_wall_mm', float('nan')):.1f} mm, under min_wall"))
             if not r.get(name, True)]
         if r.get("clashes"):
