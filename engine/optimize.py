@@ -68,6 +68,7 @@ from .mesh import PolyMesh, TriMesh
 from .planarise import PlanariseSettings, planarise
 from .projections import face_corners, lengthen_short_beams, open_narrow_corners
 from .proximity import closest_point_on_triangles
+from .symmetry import PARTNER_REACH, mirror_partners, symmetrise_points
 
 __all__ = ["OptimizeSettings", "OptimizeResult", "optimize", "regular_targets", "planar_targets",
            "optimize_quality", "grid_quality", "lengthen_short_beams"]
@@ -93,6 +94,8 @@ class OptimizeSettings:
     the field's size among its neighbours (else it is the cell's given area); grading_quantile, the
     share of interior cells whose regular side may stay under min_beam_length before the grading
     is compressed (see :func:`graded_areas`; the iterations' projections lengthen those beams).
+    symmetry_planes: (point, normal) pairs (m) the nodes are kept symmetric about (engine.symmetry:
+    mirror pairs of the given grid moved to their mirrored mean after every step), none by default.
     """
 
     regularity_weight: float = 1.0
@@ -110,6 +113,7 @@ class OptimizeSettings:
     keep_grading: bool = True
     follow_field: bool = True
     grading_quantile: float = 0.2
+    symmetry_planes: tuple = ()
 
     def __post_init__(self) -> None:
         for name in ("regularity_weight", "planarity_weight", "closeness_weight", "fairness_weight"):
@@ -476,22 +480,24 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface
         cosine = np.einsum("fki,fki->fk", a, b) / np.maximum(
             np.linalg.norm(a, axis=2) * np.linalg.norm(b, axis=2), 1e-300)
         smallest = min(smallest, float(np.degrees(np.arccos(np.clip(cosine, -1, 1))).min()))
-    planarity = np.concatenate(planarity) if planarity else np.zeros(0)
-    regularity = np.concatenate(regularity) if regularity else np.zeros(0)
+    planarity_all = np.concatenate(planarity) if planarity else np.zeros(0)
+    regularity_all = np.concatenate(regularity) if regularity else np.zeros(0)
     scale = max(mean_length, 1e-300)
     out = {
-        "planarity_max_m": float(planarity.max()) if len(planarity) else 0.0,
-        "planarity_p95_m": float(np.percentile(planarity, 95)) if len(planarity) else 0.0,
-        "planarity_max_rel": float(planarity.max() / scale) if len(planarity) else 0.0,
-        "planarity_p95_rel": float(np.percentile(planarity, 95) / scale) if len(planarity) else 0.0,
-        "regularity": float(regularity.mean()) if len(regularity) else 0.0,
+        "planarity_max_m": float(planarity_all.max()) if len(planarity_all) else 0.0,
+        "planarity_p95_m": float(np.percentile(planarity_all, 95)) if len(planarity_all) else 0.0,
+        "planarity_max_rel": float(planarity_all.max() / scale) if len(planarity_all) else 0.0,
+        "planarity_p95_rel": float(np.percentile(planarity_all, 95) / scale) if len(planarity_all) else 0.0,
+        "regularity": float(regularity_all.mean()) if len(regularity_all) else 0.0,
         "shortest_beam_m": float(lengths.min()) if len(lengths) else 0.0,
         "mean_beam_length_m": mean_length,
         "smallest_angle_deg": smallest,
         "nonconvex_faces": nonconvex,
     }
     if mesh is not None or surface is not None:
-        surface = surface or _Surface(mesh)
+        if surface is None:
+            assert mesh is not None
+            surface = _Surface(mesh)
         distance = surface.closest(x)[1]
         out["closeness_max_rel"] = float(distance.max() / surface.diagonal)
         out["closeness_mean_rel"] = float(distance.mean() / surface.diagonal)
@@ -599,6 +605,17 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
 
     groups = _groups(polymesh.faces)
     x0 = x.copy()
+    planes = tuple(settings.symmetry_planes)
+    partners = mirror_partners(x, planes, PARTNER_REACH * float(polymesh.beam_lengths.mean())) if planes else None
+
+    def symmetric(x: np.ndarray) -> np.ndarray:
+        """x with mirror pairs at their mirrored mean, boundary nodes back on the boundary."""
+        if partners is None:
+            return x
+        x = symmetrise_points(x, planes, partners, fixed)
+        if sliding.any():
+            x[sliding] = boundary.closest(x[sliding])[0]
+        return x
 
     nearest_vertex = cKDTree(mesh.vertices) if field is not None and settings.follow_field else None
     grading: dict = {"given_slope": None, "target_slope": None}
@@ -613,7 +630,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
         for k, f in groups.items():
             area[ids[k]] = cell_areas(x0[f])
             centroid[ids[k]] = x0[f].mean(axis=1)
-        sizes = field.size[nearest_vertex.query(centroid)[1]] if nearest_vertex is not None else None
+        sizes = (field.size[nearest_vertex.query(centroid)[1]]
+                 if nearest_vertex is not None and field is not None else None)
         target, grading["given_slope"], grading["target_slope"] = graded_areas(
             area, sizes, ~grid.face_boundary, _cell_adjacency(grid.faces),
             min_side=settings.min_beam_length, quantile=settings.grading_quantile)
@@ -657,6 +675,7 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
         return shape * (C.T @ target) + node_weight * node_target + damping * x, energy
 
     def solve_global(x: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+        assert solve is not None  # factored whenever the plan has steps to solve
         residual = rhs.ravel() - A3 @ x.ravel()
         new = x + (B @ solve(B.T @ residual)).reshape(n, 3)
         if sliding.any():
@@ -711,7 +730,7 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
                 accepted += 1
             del history_g[:-ANDERSON_DEPTH - 1], history_f[:-ANDERSON_DEPTH - 1]
             previous_energy, previous_plain = energy, plain
-        new = hold_limits(new)
+        new = symmetric(hold_limits(new))
         step = float(np.linalg.norm(new - x, axis=1).max())
         x = new
         done = iteration + 1
@@ -721,7 +740,7 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
         x = previous_plain  # never end on an accelerated point that raised the energy
     if done:
         for _ in range(FINAL_HOLD_ROUNDS):  # the limits once more, to convergence of the sweeps
-            x = hold_limits(x, sweeps=10)
+            x = symmetric(hold_limits(x, sweeps=10))
     end = {"steps": 0, "rejected_steps": 0, "factorisations": 0, "planarity_weight": 0.0, "reached": False}
     repair_splits = 0
     ran_end_game = planar_panels and settings.planarity_iterations > 0
@@ -740,13 +759,14 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
             return _stack(groups, {k: regular_targets(x[faces], settings.max_cell_stretch, areas[k])
                                    for k, faces in groups.items()})
 
-        def said(steps: int, base: int = end["steps"]) -> None:
+        def said(steps: int, base: int = int(end["steps"])) -> None:
             if progress is not None:
                 progress(f"optimize: planarity step {base + steps}", None)
 
         x, report = planarise(x, groups, interior=interior, sliding=sliding, closest=surface.closest_normals,
                               slide=boundary.closest, centering=C, regular=regular, beams=polymesh.edges,
                               settings=end_settings, reference=given.nodes, progress=said)
+        x = symmetric(x)
         factorisations += report.factorisations
         for key, value in (("steps", report.iterations), ("rejected_steps", report.rejected_steps),
                            ("factorisations", report.factorisations)):
@@ -767,6 +787,7 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
         # the closeness band is a soft constraint: bring stray nodes back within the hard limit
         moving = interior | sliding
         x[moving] = _into_band(x[moving], *surface.closest(x[moving]), CLOSENESS_LIMIT * surface.diagonal)
+        x = symmetric(x)
 
     result = polymesh.replace_nodes(x)
     before = grid_quality(given, mesh, field, figures=before)

@@ -39,6 +39,7 @@ from scipy.spatial import cKDTree
 from .errors import InputError, MeshError
 from .field import GuidingField
 from .mesh import PolyMesh, TriMesh, best_fit_plane, chain_loops
+from .symmetry import reflect, symmetrised_grid, symmetry_record
 
 __all__ = ["RemeshSettings", "RemeshResult", "remesh", "polymesh_quality", "surface_corners"]
 
@@ -91,13 +92,16 @@ class RemeshSettings:
     cluster centroids, clusters regrown and clustered again) at each level of the clustering; at
     most COARSE_LLOYD_STEPS are taken at the coarsest level and LLOYD_STEPS at the finer ones, so
     values above COARSE_LLOYD_STEPS change nothing and 0 keeps the clustering of the initial
-    lattice; seed of the lattice's random offset (small meshes also try the next seeds)."""
+    lattice; seed of the lattice's random offset (small meshes also try the next seeds);
+    symmetry_planes: up to two (point, normal) pairs (m) the grid is made symmetric about (the
+    field's, engine.field.FieldSettings), none by default."""
 
     n_cells: int | None = None
     mean_beam_length: float | None = None
     total_length: float | None = None
     lloyd_iterations: int = 80
     seed: int = 0
+    symmetry_planes: tuple = ()
 
     def __post_init__(self) -> None:
         given = [k for k in ("n_cells", "mean_beam_length", "total_length") if getattr(self, k) is not None]
@@ -414,7 +418,9 @@ def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: floa
     ``keep`` clusterings of the finest level with the largest interior hexagon share
     (ties: the lower energy), from FIRST_CANDIDATE_STEP Lloyd steps on, best first: at a few cells
     across, over-relaxed Lloyd steps move the clusters among equally graded local minima of the
-    energy whose hexagon shares differ by up to 20 points."""
+    energy whose hexagon shares differ by up to 20 points. With symmetry planes (and a symmetric
+    mesh) seeds and clusters are made symmetric at every step, and only symmetric clusterings are
+    candidates while there are any."""
     from .clustering import centred_moments, cluster_vertices
 
     rng = np.random.default_rng(settings.seed)
@@ -430,14 +436,50 @@ def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: floa
     sweeps = 0
     result = None
     candidates: list[_Clusters] = []
+    spares: list[_Clusters] = []  # clusterings that could not be made symmetric
+    mirrors = _mirrors(fine, tuple(settings.symmetry_planes))
+    centred: list = [None]  # sigma of the last symmetric clustering (its clusters centred on a plane)
+
+    def clustered(seeds: np.ndarray, lloyd: bool = False):
+        """(seeds, clustering, symmetric): seeds grown into clusters and clustered; with symmetry planes
+        the seeds made symmetric first (_symmetric_seeds, ``lloyd``: of a Lloyd step) and the clusters
+        after (_symmetric_seeds, _symmetric_clusters)."""
+        sigma = None
+        if mirrors is not None:
+            if lloyd and centred[0] is not None:
+                seeds = _onto_planes(fine, mirrors, seeds, centred[0])
+            centred[0] = None
+            seeds, sigma = _symmetric_seeds(fine, mirrors, seeds, lloyd)
+        labels = _grow_clusters(fine, seeds)
+        result = cluster_vertices(fine.vertices, fine.faces, fine.edges, adjacency, fine.metric, weights, labels,
+                                  len(seeds), max_sweeps=MAX_SWEEPS, moments=moments)
+        if sigma is None or mirrors is None:
+            return seeds, result, True
+        symmetric = _symmetric_clusters(fine, mirrors, seeds, sigma, result, moments)
+        if symmetric is None:
+            return seeds, result, False
+        centred[0] = sigma
+        for _ in range(JUNCTION_ROUNDS):
+            merged = _merged_pairs(fine, mirrors, seeds, sigma, symmetric)
+            if merged is None:
+                break
+            seeds, sigma = _symmetric_seeds(fine, mirrors, merged, lloyd=True)
+            labels = _grow_clusters(fine, seeds)
+            again = cluster_vertices(fine.vertices, fine.faces, fine.edges, adjacency, fine.metric, weights, labels,
+                                     len(seeds), max_sweeps=MAX_SWEEPS, moments=moments)
+            symmetric = _symmetric_clusters(fine, mirrors, seeds, sigma, again, moments)
+            if symmetric is None:
+                centred[0] = None
+                return seeds, again, False
+            centred[0] = sigma
+        return seeds, symmetric, True
+
     for level, count in enumerate(counts):
         if result is None:
             seeds = _initial_seeds(fine, count, rng, turn_deg)
         else:
             seeds = _refined_seeds(fine, tree, result.labels, result.centroids, count, rng)
-        labels = _grow_clusters(fine, seeds)
-        result = cluster_vertices(fine.vertices, fine.faces, fine.edges, adjacency, fine.metric, weights, labels,
-                                  len(seeds), max_sweeps=MAX_SWEEPS, moments=moments)
+        seeds, result, symmetric = clustered(seeds)
         sweeps += result.sweeps
         steps = min(settings.lloyd_iterations, COARSE_LLOYD_STEPS if level == 0 else LLOYD_STEPS)
         last = level == len(counts) - 1
@@ -445,20 +487,214 @@ def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: floa
             if step > 0:
                 relaxation = LLOYD_RELAXATION if step <= steps - LLOYD_PLAIN_STEPS else 1.0
                 target = fine.vertices[seeds] + relaxation * (result.centroids - fine.vertices[seeds])
-                seeds = _snap(tree, target, seeds)
-                labels = _grow_clusters(fine, seeds)
-                result = cluster_vertices(fine.vertices, fine.faces, fine.edges, adjacency, fine.metric, weights,
-                                          labels, len(seeds), max_sweeps=MAX_SWEEPS, moments=moments)
+                seeds, result, symmetric = clustered(_snap(tree, target, seeds), lloyd=True)
                 sweeps += result.sweeps
             if last and step >= min(FIRST_CANDIDATE_STEP, steps):
-                candidates.append(_Clusters(labels=result.labels, centroids=result.centroids, sweeps=sweeps,
+                pool = candidates if symmetric else spares  # with symmetry planes: symmetric ones first
+                pool.append(_Clusters(labels=result.labels, centroids=result.centroids, sweeps=sweeps,
                                             moves=result.moves, energy=float(result.energy.sum()),
-                                            hexagon_share=_interior_hexagon_share(fine, result.labels, len(seeds))))
-                candidates.sort(key=_candidate_order)
-                del candidates[keep:]
+                                            hexagon_share=_interior_hexagon_share(fine, result.labels,
+                                                                                  len(result.centroids))))
+                pool.sort(key=_candidate_order)
+                del pool[keep:]
+    candidates = candidates or spares
     for clusters in candidates:
         clusters.sweeps = sweeps
     return candidates
+
+
+# ----------------------------------------------------------------------------- symmetry
+
+#: Two vertices are mirrors of each other when one's image lies within this share of the mean
+#: edge length of the other: the clustered mesh must be symmetric for its clusters to be.
+MIRROR_MATCH = 0.5
+#: A vertex within this share of the mean edge length of a plane is on it.
+ON_PLANE = 0.01
+#: A seed within this share of the seed spacing of a symmetry plane is moved onto it.
+SEED_SNAP = 0.25
+#: Rounds of merging consecutive mirrored pairs of clusters along a plane (_merged_pairs) and
+#: clustering again, per clustering.
+JUNCTION_ROUNDS = 3
+
+
+@dataclass
+class _Mirrors:
+    """The clustered mesh's mirror maps through the symmetry planes (perpendicular, one or two):
+    per plane each vertex's mirror and whether it is its own (on the plane); for each vertex its
+    image in the fundamental region (on the positive side of every plane, a plane's vertices
+    included) and through which planes it gets there."""
+
+    planes: tuple
+    maps: list
+    fixed: list
+    sides: list
+    flips: list
+    image: np.ndarray
+
+
+def _on_planes(mirrors: _Mirrors, combination: tuple) -> np.ndarray:
+    """(n,) bool: the clustered mesh's vertices on every plane whose flag is set in ``combination``."""
+    on = np.ones(len(mirrors.image), dtype=bool)
+    for plane, wanted in enumerate(combination):
+        if wanted:
+            on &= mirrors.fixed[plane]
+    return on
+
+
+def _mirrors(fine: _Fine, planes: tuple) -> _Mirrors | None:
+    """The mirror maps of ``fine`` through ``planes``, or None without planes, for planes that are
+    not perpendicular, or where the clustered mesh's vertices are not symmetric (MIRROR_MATCH)."""
+    if not planes:
+        return None
+    normals = [np.asarray(n, dtype=float) / np.linalg.norm(n) for _, n in planes]
+    if len(normals) == 2 and abs(float(normals[0] @ normals[1])) > 1e-6:
+        return None
+    if fine.tree is None:
+        fine.tree = cKDTree(fine.vertices)
+    x = fine.vertices
+    edge = float(np.linalg.norm(x[fine.edges[:, 1]] - x[fine.edges[:, 0]], axis=1).mean())
+    tolerance = MIRROR_MATCH * edge
+    every = np.arange(len(x))
+    maps, sides = [], []
+    for plane, normal in zip(planes, normals):
+        distance, mirror = fine.tree.query(reflect(x, plane))
+        if distance.max() > tolerance or not np.array_equal(mirror[mirror], every):
+            return None
+        maps.append(mirror)
+        sides.append((x - np.asarray(plane[0], dtype=float)) @ normal)
+    image, flips = every, []
+    for mirror, side in zip(maps, sides):
+        flip = side[image] < -ON_PLANE * edge
+        image = np.where(flip, mirror[image], image)
+        flips.append(flip)
+    return _Mirrors(planes=planes, maps=maps, fixed=[m == every for m in maps], sides=sides, flips=flips,
+                    image=image)
+
+
+def _symmetric_seeds(fine: _Fine, mirrors: _Mirrors, seeds: np.ndarray, lloyd: bool = False
+                     ) -> tuple[np.ndarray, list]:
+    """(seeds, sigma): the seeds in the fundamental region, those within SEED_SNAP of the seed
+    spacing of a plane moved to the nearest vertex on it, and their mirror images; sigma per plane
+    maps each seed's index to its mirror's. ``lloyd``: the seeds of a Lloyd step (from symmetric
+    centroids), none moved."""
+    reps = np.unique(seeds[mirrors.image[seeds] == seeds])
+    reach = 0.0 if lloyd else SEED_SNAP * np.sqrt(fine.areas.sum() / max(len(seeds), 1))
+    near = np.array([np.abs(side[reps]) < reach for side in mirrors.sides])
+    for combination in sorted({tuple(column) for column in near.T if any(column)}):
+        chosen = np.flatnonzero(np.all(near.T == combination, axis=1))
+        on = _on_planes(mirrors, combination)
+        on &= mirrors.image == np.arange(len(fine.vertices))
+        if on.any():
+            candidates = np.flatnonzero(on)
+            reps[chosen] = candidates[cKDTree(fine.vertices[candidates]).query(fine.vertices[reps[chosen]])[1]]
+    orbit = [np.unique(reps)]
+    for mirror in mirrors.maps:
+        orbit = orbit + [mirror[o] for o in orbit]
+    seeds = np.unique(np.concatenate(orbit))
+    return seeds, [np.searchsorted(seeds, mirror[seeds]) for mirror in mirrors.maps]
+
+
+def _symmetric_clusters(fine: _Fine, mirrors: _Mirrors, seeds: np.ndarray, sigma: list, result,
+                        moments: np.ndarray):
+    """``result`` (engine.clustering.ClusteringResult) with the labels of the fundamental region
+    mirrored onto the rest, centroids and energies of the mirrored labels; None where that leaves a
+    cluster empty or in pieces. In the region, a cluster whose seed lies outside it gives its
+    vertices to its mirror image's (the border of the two is the plane; the vertices on a plane go
+    to the region's side)."""
+    from .clustering import ClusteringResult, _accumulate, centroids_of
+
+    inside = np.searchsorted(seeds, mirrors.image[seeds])
+    labels = inside[result.labels][mirrors.image]
+    for p in reversed(range(len(mirrors.maps))):
+        labels = np.where(mirrors.flips[p], sigma[p][labels], labels)
+    count = len(result.centroids)
+    if len(np.unique(labels)) != count:
+        return None
+    E = fine.edges
+    same = labels[E[:, 0]] == labels[E[:, 1]]
+    graph = sp.coo_matrix((np.ones(int(same.sum())), (E[same, 0], E[same, 1])), shape=(len(labels),) * 2)
+    if connected_components(graph, directed=False)[0] != count:
+        return None
+    S, _ = _accumulate(labels, moments, count)
+    centred = centroids_of(S)
+    return ClusteringResult(labels=labels, centroids=centred + fine.vertices.mean(axis=0),
+                            energy=S[:, 9] - np.einsum("ki,ki->k", S[:, 6:9], centred), sweeps=result.sweeps,
+                            moves=result.moves)
+
+
+def _onto_planes(fine: _Fine, mirrors: _Mirrors, seeds: np.ndarray, sigma: list) -> np.ndarray:
+    """``seeds`` (of a Lloyd step, in the order of the clusters of the last symmetric clustering)
+    with those of the clusters that are their own mirror through some planes (sigma) moved to the
+    nearest vertex on those planes: snapped off the plane, such a cluster would split into a mirrored
+    pair (or vanish) at the next clustering."""
+    seeds = seeds.copy()
+    own = np.array([mirror == np.arange(len(seeds)) for mirror in sigma])
+    for combination in sorted({tuple(column) for column in own.T if any(column)}):
+        chosen = np.flatnonzero(np.all(own.T == combination, axis=1))
+        on = _on_planes(mirrors, combination)
+        if on.any():
+            candidates = np.flatnonzero(on)
+            seeds[chosen] = candidates[cKDTree(fine.vertices[candidates]).query(fine.vertices[seeds[chosen]])[1]]
+    return seeds
+
+
+def _merged_pairs(fine: _Fine, mirrors: _Mirrors, seeds: np.ndarray, sigma: list, result) -> np.ndarray | None:
+    """The seeds with mirrored pairs of clusters merged where two such pairs follow each other along
+    a plane, or None where none do. The four clusters of two consecutive pairs meet at one point of
+    the plane, which no symmetric grid splits into valence-3 nodes (an extra beam there would part
+    clusters that are not mirrors), so the extraction collapses it into a valence-4 node; a
+    honeycomb symmetric about a line has a cluster centred on it between any two pairs. Two pairs
+    are consecutive where a mesh edge within one mean edge length of the plane (an end in the
+    fundamental region) joins clusters of both; of the two, the pair of the smaller weight becomes
+    one cluster, its seed the vertex on the plane (in the fundamental region) nearest the pair's
+    mean centroid. One junction per orbit under the mirrors, taken in order of the mesh edges."""
+    x = fine.vertices
+    E = fine.edges
+    labels = result.labels
+    n = len(seeds)
+    edge = float(np.linalg.norm(x[E[:, 1]] - x[E[:, 0]], axis=1).mean())
+    weight = np.bincount(labels, weights=fine.areas * fine.inverse_h2, minlength=n)
+    region = mirrors.image == np.arange(len(x))
+    orbit = np.searchsorted(seeds, mirrors.image[seeds])  # each cluster's representative in the region
+    taken = set(seeds.tolist())
+
+    def into_region(point: np.ndarray) -> np.ndarray:
+        for plane in mirrors.planes:
+            if (point - np.asarray(plane[0], dtype=float)) @ np.asarray(plane[1], dtype=float) < 0:
+                point = reflect(point[None, :], plane)[0]
+        return point
+
+    merged: dict[int, int] = {}  # representative replaced -> its new seed on the plane
+    la, lb = labels[E[:, 0]], labels[E[:, 1]]
+    for p, (side, flip_map) in enumerate(zip(mirrors.sides, sigma)):
+        on = np.flatnonzero(mirrors.fixed[p] & region)
+        if not len(on):
+            continue
+        on_tree = cKDTree(x[on])
+        near = (np.abs(side[E[:, 0]]) <= edge) & (np.abs(side[E[:, 1]]) <= edge)
+        straddle = flip_map != np.arange(n)
+        touching = np.zeros(n, dtype=bool)
+        across = near & (la != lb) & (flip_map[la] == lb)
+        touching[la[across]] = True
+        touching[lb[across]] = True
+        junction = (near & (la != lb) & (flip_map[la] != lb) & straddle[la] & straddle[lb] & touching[la]
+                    & touching[lb] & (region[E[:, 0]] | region[E[:, 1]]))
+        for e in np.flatnonzero(junction):
+            a, b = int(la[e]), int(lb[e])
+            if orbit[a] in merged or orbit[b] in merged:
+                continue
+            wa, wb = weight[a] + weight[flip_map[a]], weight[b] + weight[flip_map[b]]
+            chosen = a if (wa, a) <= (wb, b) else b
+            centre = into_region(0.5 * (result.centroids[chosen] + result.centroids[flip_map[chosen]]))
+            vertex = int(on[on_tree.query(centre)[1]])
+            if vertex in taken:
+                continue
+            taken.add(vertex)
+            merged[int(orbit[chosen])] = vertex
+    if not merged:
+        return None
+    kept = [int(s) for i, s in enumerate(seeds) if orbit[i] == i and i not in merged] + list(merged.values())
+    return np.unique(np.asarray(kept, dtype=np.int64))
 
 
 def _candidate_order(clusters: _Clusters) -> tuple[float, float]:
@@ -468,6 +704,23 @@ def _candidate_order(clusters: _Clusters) -> tuple[float, float]:
 
 # ----------------------------------------------------------------------------- extraction
 
+def _edge_points(fine: _Fine, labels: np.ndarray, centroids: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The point (k, 3) on each fine edge (a, b) between two clusters where the metric distances to
+    their centroids balance (linear in between, clipped to the edge): a node of the grid there."""
+    la, lb = labels[a], labels[b]
+    gaps = []
+    for end in (a, b):
+        x, M = fine.vertices[end], fine.metric[end]
+        to_a, to_b = x - centroids[la], x - centroids[lb]
+        gaps.append(np.sqrt(np.maximum(np.einsum("ei,eij,ej->e", to_a, M, to_a), 0.0))
+                    - np.sqrt(np.maximum(np.einsum("ei,eij,ej->e", to_b, M, to_b), 0.0)))
+    denominator = gaps[0] - gaps[1]
+    safe = np.abs(denominator) > 1e-300
+    t = np.clip(np.where(safe, gaps[0] / np.where(safe, denominator, 1.0), 0.5), 0.0, 1.0)
+    x0, x1 = fine.vertices[a], fine.vertices[b]
+    return x0 + t[:, None] * (x1 - x0)
+
+
 def _extract(fine: _Fine, labels: np.ndarray, centroids: np.ndarray):
     """Polygon mesh from the cluster labels: (nodes, flat cell loops, loop offsets, cell labels,
     boundary mask, corner mask)."""
@@ -476,19 +729,8 @@ def _extract(fine: _Fine, labels: np.ndarray, centroids: np.ndarray):
     la, lb = labels[E[:, 0]], labels[E[:, 1]]
     mixed = la != lb
     ids = np.flatnonzero(mixed)
-    # point on each mixed edge where the metric distances to the two centroids balance (linear in between)
-    gaps = []
-    for end in (E[ids, 0], E[ids, 1]):
-        x, M = fine.vertices[end], fine.metric[end]
-        to_a, to_b = x - centroids[la[ids]], x - centroids[lb[ids]]
-        gaps.append(np.sqrt(np.maximum(np.einsum("ei,eij,ej->e", to_a, M, to_a), 0.0))
-                    - np.sqrt(np.maximum(np.einsum("ei,eij,ej->e", to_b, M, to_b), 0.0)))
-    denominator = gaps[0] - gaps[1]
-    safe = np.abs(denominator) > 1e-300
-    t = np.clip(np.where(safe, gaps[0] / np.where(safe, denominator, 1.0), 0.5), 0.0, 1.0)
     edge_points = np.zeros((n_edges, 3))
-    x0, x1 = fine.vertices[E[ids, 0]], fine.vertices[E[ids, 1]]
-    edge_points[ids] = x0 + t[:, None] * (x1 - x0)
+    edge_points[ids] = _edge_points(fine, labels, centroids, E[ids, 0], E[ids, 1])
     FL = labels[F]
     three = (FL[:, 0] != FL[:, 1]) & (FL[:, 1] != FL[:, 2]) & (FL[:, 0] != FL[:, 2])
     two = ~three & (mixed[FE].sum(axis=1) == 2)
@@ -543,8 +785,8 @@ def _extract(fine: _Fine, labels: np.ndarray, centroids: np.ndarray):
         half_u.append(events[keep])
         half_v.append(nxt[keep])
         half_region.append(after[keep])
-    half_u, half_v, half_region = np.concatenate(half_u), np.concatenate(half_v), np.concatenate(half_region)
-    flat, offsets, cell_labels = _cells(half_u, half_v, half_region, len(centroids))
+    flat, offsets, cell_labels = _cells(np.concatenate(half_u), np.concatenate(half_v), np.concatenate(half_region),
+                                        len(centroids))
     return nodes, flat, offsets, cell_labels, boundary, corner
 
 
@@ -750,7 +992,8 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
     offsets (seeds settings.seed, +1, ...; the lattice turned by LATTICE_TURNS_DEG in turn) are
     tried, up to START_BUDGET clustered vertices in all and MAX_STARTS starts, each giving its
     CANDIDATES_PER_START best clusterings (a single start gives one); the grid kept is the
-    candidate's with the best _grid_score (valence 3, size and aspect within the band, hexagons)."""
+    candidate's with the best _grid_score (valence 3, size and aspect within the band, hexagons),
+    its nodes symmetrised where settings.symmetry_planes are given (engine.symmetry)."""
     from time import perf_counter
 
     say("refining the surface", 0.0)
@@ -780,7 +1023,8 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
         timing.clustering_s += middle - start
         timing.extraction_s += perf_counter() - middle
         timing.sweeps = candidates[0].sweeps
-    return best
+    assert best is not None  # there is at least one candidate
+    return symmetrised_grid(best, tuple(settings.symmetry_planes)) if settings.symmetry_planes else best
 
 
 def _grid_score(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField) -> tuple[float, float, float]:
@@ -807,10 +1051,13 @@ def _split_ring_cells(fine: _Fine, labels: np.ndarray, centroids: np.ndarray) ->
     that every cell is a disc and every hole stays a polygon: a cell that wraps a whole loop (a hole
     smaller than the cells round it, or a tiny roof) is cut into RING_SPLIT wedges round the loop's
     centre, and where two cells share a loop without a corner on it, the one with the longer arc
-    of it is cut in two through its arc's middle (cuts in the plane of the cell, from the centre)."""
+    of it is cut in two through its arc's middle (cuts in the plane of the cell, from the centre).
+    A cell that would meet a loop, once cut, along a beam short enough to be collapsed
+    (SHORT_BEAM_FRACTION of the largest cell at the loop) leaves the loop to its neighbour first,
+    so that the loop keeps three nodes once short beams are collapsed."""
     is_corner = np.zeros(len(fine.vertices), dtype=bool)
     is_corner[fine.corners] = True
-    labels, centroids = labels.copy(), [c for c in centroids]
+    labels, centres = labels.copy(), [c for c in centroids]
 
     def cut(owner: int, centre: np.ndarray, start: np.ndarray, pieces: int) -> None:
         members = np.flatnonzero(labels == owner)
@@ -826,12 +1073,12 @@ def _split_ring_cells(fine: _Fine, labels: np.ndarray, centroids: np.ndarray) ->
                 continue
             centroid = np.average(fine.vertices[part], axis=0, weights=fine.areas[part])
             if k == 0:
-                centroids[owner] = centroid
+                centres[owner] = centroid
             else:
-                labels[part] = len(centroids)
-                centroids.append(centroid)
+                labels[part] = len(centres)
+                centres.append(centroid)
 
-    for loop in fine.loops:
+    def split(loop: np.ndarray) -> None:
         around = labels[loop]
         change = np.flatnonzero(around != np.roll(around, 1))
         centre = fine.vertices[loop].mean(axis=0)
@@ -843,7 +1090,28 @@ def _split_ring_cells(fine: _Fine, labels: np.ndarray, centroids: np.ndarray) ->
             middle = loop[(change[longest] + runs[longest] // 2) % len(loop)]
             # the arc's middle is the cut: a piece each side of it (half-turns from the opposite ray)
             cut(int(around[change[longest]]), centre, 2 * centre - fine.vertices[middle], 2)
-    return labels, np.asarray(centroids)
+
+    for loop in fine.loops:
+        before = labels.copy(), list(centres)
+        split(loop)
+        around = labels[loop]
+        change = np.flatnonzero(around != np.roll(around, 1))
+        if is_corner[loop].any() or len(change) == 0:
+            continue
+        # a run whose beam is short enough to be collapsed (its two nodes become one) does not count
+        node = _edge_points(fine, labels, np.asarray(centres), loop[change - 1], loop[change])
+        area = np.bincount(labels, weights=fine.areas, minlength=len(centres))
+        short = (np.linalg.norm(np.roll(node, -1, axis=0) - node, axis=1)
+                 < SHORT_BEAM_FRACTION * np.sqrt(area[around[change]].max()))
+        if (~short).sum() >= 3:
+            continue
+        # else its cell leaves the loop to the cell before it, and the loop's cells are cut again
+        labels, centres = before[0], before[1]
+        ends = np.r_[change[1:], change[0] + len(loop)]
+        for first, last in zip(change[short], ends[short]):
+            labels[loop[np.arange(first, last) % len(loop)]] = labels[loop[first - 1]]
+        split(loop)
+    return labels, np.asarray(centres)
 
 
 def _polygons(mesh: TriMesh, fine: _Fine, clusters: _Clusters, support_vertices: np.ndarray | None) -> PolyMesh:
@@ -896,6 +1164,28 @@ def _cells_for_length(mesh: TriMesh, field: GuidingField, mean_beam_length: floa
 def remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
            support_vertices: np.ndarray | None = None, progress: Progress | None = None) -> RemeshResult:
     """The statics-aware Voronoi grid-shell of ``mesh`` under ``field`` (see the module docstring).
+    With symmetry planes, a grid that cannot be made symmetric (too few cells for the planes to
+    keep seeds on every part, or nodes that do not settle) is remeshed without them, and the
+    quality's ``symmetry`` says so (``symmetric`` false, ``reason``)."""
+    if not settings.symmetry_planes:
+        return _remesh(mesh, field, settings, support_vertices=support_vertices, progress=progress)
+    try:
+        result = _remesh(mesh, field, settings, support_vertices=support_vertices, progress=progress)
+        if np.all(np.isfinite(result.polymesh.nodes)):
+            return result
+        reason = "its nodes did not settle (non-finite positions)"
+    except MeshError as error:
+        reason = str(error).splitlines()[0]
+    result = _remesh(mesh, field, replace(settings, symmetry_planes=()), support_vertices=support_vertices,
+                     progress=progress)
+    result.quality["symmetry"] = {"symmetric": False, "reason": f"not made symmetric: {reason}",
+                                  "planes": [list(map(list, plane)) for plane in settings.symmetry_planes]}
+    return result
+
+
+def _remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
+            support_vertices: np.ndarray | None = None, progress: Progress | None = None) -> RemeshResult:
+    """The grid of ``remesh`` with the settings as given.
 
     The quality dict also holds ``clustering_s`` and ``extraction_s`` (seconds spent in the
     clustering, including refinement and seeding, and in the polygon extraction, over all
@@ -930,6 +1220,8 @@ def remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
                 break
             n_cells = max(4, int(round(n_cells * (achieved / settings.mean_beam_length) ** 2)))
             polymesh = _tessellate(mesh, field, n_cells, settings, support_vertices, say, timing)
+    if settings.n_cells is not None and settings.symmetry_planes:
+        polymesh = _symmetric_count(mesh, field, settings, support_vertices, say, polymesh, timing)
     if settings.total_length is not None:
         polymesh, n_cells = _match_total_length(mesh, field, settings, support_vertices, say, polymesh, n_cells,
                                                 timing)
@@ -937,12 +1229,46 @@ def remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
     quality.update({"n_cells_requested": int(n_cells), "field_size_ratio": ratio, "field_max_aspect": aspect,
                     "clustering_s": timing.clustering_s, "extraction_s": timing.extraction_s,
                     "clustering_sweeps": timing.sweeps})
+    if settings.symmetry_planes:
+        quality["symmetry"] = symmetry_record(polymesh.nodes, settings.symmetry_planes,
+                                              float(polymesh.beam_lengths.mean()))
     if settings.total_length is not None:
         quality["total_length_target_m"] = settings.total_length
         quality["total_length_error"] = polymesh.total_length / settings.total_length - 1.0
     if quality["n_faces"] < 3:
         raise InputError("remesh: the tessellation degenerated", hint="lower D or A, or ask for more cells")
     return RemeshResult(polymesh=polymesh, quality=quality)
+
+
+#: A symmetric grid's cell count is matched to the count asked for within this share: seeds near a
+#: plane merge with their mirrors, and so do consecutive mirrored pairs of clusters along a plane
+#: (_merged_pairs), so the same seed count gives fewer cells than without planes.
+SYMMETRIC_COUNT_TOLERANCE = 0.03
+#: Tessellations after the first that the match of a symmetric grid's cell count may take.
+SYMMETRIC_COUNT_TRIES = 4
+
+
+def _symmetric_count(mesh, field, settings, support_vertices, say, polymesh, timing=None):
+    """The symmetric grid with the cell count nearest ``settings.n_cells``: up to
+    SYMMETRIC_COUNT_TRIES more tessellations with the seed count scaled by asked / built (a seed
+    count tried before moved by one towards the count asked)."""
+    asked = settings.n_cells
+    best = polymesh
+    trial = asked
+    tried = {asked}
+    for _ in range(SYMMETRIC_COUNT_TRIES):
+        if abs(best.n_faces / asked - 1) <= SYMMETRIC_COUNT_TOLERANCE:
+            break
+        step = 1 if polymesh.n_faces < asked else -1
+        trial = max(4, int(round(trial * asked / max(polymesh.n_faces, 1))))
+        while trial in tried:
+            trial = max(4, trial + step)
+        tried.add(trial)
+        say(f"symmetric grid: {polymesh.n_faces} cells for {asked} asked, seeding {trial}")
+        polymesh = _tessellate(mesh, field, trial, settings, support_vertices, say, timing)
+        if abs(polymesh.n_faces - asked) < abs(best.n_faces - asked):
+            best = polymesh
+    return best
 
 
 def _match_total_length(mesh, field, settings, support_vertices, say, polymesh, n_cells, timing=None):
