@@ -5,8 +5,9 @@ large: energy criterion h ~ n^(-2/3), capped at h_max / h_min = D (or, where n v
 than D^(3/2), with the exponent raised to reach D), or a linear map of n onto [D, 1];
 the anisotropy a = sqrt(|N1| / |N2|) for principal forces of the same sign (energy criterion)
 or a linear remap of |N1| / |N2| over its range to [1, A]; the direction u is that of the larger
-|principal force|. Scalars and the line field are smoothed over the mesh and symmetrised with
-up to two planes. Sizes are relative (smallest 1); the remesher scales them to its target.
+|principal force|, or normal to it in the tangent plane for cells elongated across the stress
+(Orientation.ACROSS, beyond the thesis). Scalars and the line field are smoothed over the mesh and
+symmetrised with up to two planes. Sizes are relative (smallest 1); the remesher scales them to its target.
 """
 
 from __future__ import annotations
@@ -21,8 +22,8 @@ from scipy.spatial import cKDTree
 from .errors import InputError
 from .mesh import TriMesh
 
-__all__ = ["GuidingField", "SizeMap", "AnisotropyMap", "FieldSettings", "guiding_field", "principal_forces",
-           "smooth_scalar", "smooth_directions", "symmetrise", "tangent_basis"]
+__all__ = ["GuidingField", "SizeMap", "AnisotropyMap", "Orientation", "FieldSettings", "guiding_field",
+           "principal_forces", "smooth_scalar", "smooth_directions", "symmetrise", "tangent_basis"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -30,8 +31,8 @@ class GuidingField:
     """Per-vertex guiding field on a TriMesh.
 
     size: (n_vertices,) target cell size h, m; anisotropy: (n_vertices,) a >= 1;
-    direction: (n_vertices, 3) unit tangent u, the direction of the larger principal
-    force, along which cells are elongated; normals: (n_vertices, 3) unit normals.
+    direction: (n_vertices, 3) unit tangent u, along which cells are elongated: the direction of
+    the larger principal force (or normal to it, FieldSettings.orientation); normals: (n_vertices, 3) unit normals.
     The metric is M = R diag(1/(h^2 a), a/h^2) R^T in the (u, v = n x u) frame: its
     unit ellipse has semi-axes h sqrt(a) along u and h / sqrt(a) along v.
     """
@@ -70,11 +71,20 @@ class AnisotropyMap(str, Enum):
     LINEAR = "linear"
 
 
+class Orientation(str, Enum):
+    """Which way cells are elongated: along the larger principal force (the thesis) or across it."""
+
+    ALONG = "along"
+    ACROSS = "across"
+
+
 @dataclass(frozen=True, kw_only=True)
 class FieldSettings:
     """D = max_size_ratio, A = max_aspect; opposite_sign_anisotropy: a where N1 and N2 differ in
     sign (energy map); clamp_percentiles: of the force level; smoothing iterations of the
-    scalars and of the line field; symmetry_planes: up to two (point, normal) pairs."""
+    scalars and of the line field; symmetry_planes: up to two (point, normal) pairs;
+    orientation: cells elongated along the larger principal force or across it (turned by
+    90 degrees in the tangent plane)."""
 
     max_size_ratio: float = 2.0
     max_aspect: float = 2.0
@@ -85,6 +95,7 @@ class FieldSettings:
     smoothing_iterations: int = 10
     direction_smoothing_iterations: int = 10
     symmetry_planes: tuple[tuple[tuple[float, float, float], tuple[float, float, float]], ...] = ()
+    orientation: Orientation = Orientation.ALONG
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.max_size_ratio) and self.max_size_ratio >= 1.0):
@@ -93,7 +104,7 @@ class FieldSettings:
         if not (np.isfinite(self.max_aspect) and self.max_aspect >= 1.0):
             raise InputError(f"field: A (max_aspect) must be a finite number >= 1, got {self.max_aspect}",
                              hint="Voro(D, A): A = 1 gives isotropic cells, A = 2 lets them stretch by 2")
-        for name, enum in (("size_map", SizeMap), ("anisotropy_map", AnisotropyMap)):
+        for name, enum in (("size_map", SizeMap), ("anisotropy_map", AnisotropyMap), ("orientation", Orientation)):
             try:
                 object.__setattr__(self, name, enum(getattr(self, name)))
             except ValueError:
@@ -323,4 +334,7 @@ def guiding_field(mesh: TriMesh, vertex_membrane_forces: np.ndarray, settings: F
         if reached and 1.0 < aspect.max() < A:  # averaging lowered the peak: restore a_max = A (affine, symmetric)
             aspect = 1.0 + (aspect - 1.0) * (A - 1.0) / (aspect.max() - 1.0)
         field = GuidingField(size=size, anisotropy=aspect, direction=field.direction, normals=normals)
+    if Orientation(settings.orientation) is Orientation.ACROSS:
+        field = GuidingField(size=field.size, anisotropy=field.anisotropy,
+                             direction=np.cross(normals, field.direction), normals=normals)
     return field

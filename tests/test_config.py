@@ -237,6 +237,22 @@ _REFUSED = [
      {"hole_inset_mm": -1.0}),
     ("fabrication.panels", {"planarity_tolerance": "-1 mm"}, "fabrication.panels.planarity_tolerance", PanelSettings,
      {"planarity_tolerance_mm": -1.0}),
+    ("fabrication.joints", {"clearance": "-0.1 mm"}, "fabrication.joints.clearance", JointSettings,
+     {"clearance_mm": -0.1}),
+    ("fabrication.joints", {"wall": 0.0}, "fabrication.joints.wall", JointSettings, {"wall_mm": 0.0}),
+    ("fabrication.joints", {"min_wall": "-1 mm"}, "fabrication.joints.min_wall", JointSettings, {"min_wall_mm": -1.0}),
+    ("fabrication.joints", {"pin_hole": 0.0}, "fabrication.joints.pin_hole", JointSettings, {"pin_hole_mm": 0.0}),
+    ("fabrication.joints", {"hub_radius": 0.0}, "fabrication.joints.hub_radius", JointSettings,
+     {"hub_radius_mm": 0.0}),
+    ("fabrication.joints", {"sleeve_length": "-5 mm"}, "fabrication.joints.sleeve_length", JointSettings,
+     {"sleeve_length_mm": -5.0}),
+    ("fabrication.joints", {"plate_thickness": 0.0}, "fabrication.joints.plate_thickness", JointSettings,
+     {"plate_thickness_mm": 0.0}),
+    ("fabrication.joints", {"bolt_hole": "-1 mm"}, "fabrication.joints.bolt_hole", JointSettings,
+     {"bolt_hole_mm": -1.0}),
+    ("fabrication.beams", {"stock_length": 0.0}, "fabrication.beams.stock_length", BeamSettings,
+     {**_TUBE, "stock_length_mm": 0.0}),
+    ("fabrication.beams", {"kerf": "-1 mm"}, "fabrication.beams.kerf", BeamSettings, {**_TUBE, "kerf_mm": -1.0}),
     ("fabrication.sheets", {"width": 0.0, "height": 0.6}, "fabrication.sheets.width", SheetSettings,
      {"width_mm": 0.0}),
     ("fabrication.sheets", {"spacing": "-1 mm"}, "fabrication.sheets.spacing", SheetSettings, {"spacing_mm": -1.0}),
@@ -259,3 +275,16 @@ def test_the_schema_refuses_what_the_settings_refuse(table, values, key, setting
     with pytest.raises(ConfigError) as info:
         parse_project(data)
     assert key in str(info.value)
+
+
+_RANGES = [r for r in _REFUSED if r[3] in (JointSettings, BeamSettings, PanelSettings, SheetSettings)
+           and "leaves no room" not in r[2]]
+
+
+@pytest.mark.parametrize("settings, same", [r[3:] for r in _RANGES], ids=[r[2] for r in _RANGES])
+def test_the_fabrication_settings_name_the_setting_and_the_fix(settings, same):
+    name = next(k for k in same if k not in _TUBE or settings is not BeamSettings)
+    with pytest.raises(InputError) as refused:
+        settings(**same)
+    assert f"setting {name} = {same[name]!r} must be" in str(refused.value)
+    assert refused.value.hint.startswith(f"set {name} ")

@@ -11,6 +11,7 @@ from engine.errors import InputError
 from engine.field import (
     AnisotropyMap,
     FieldSettings,
+    Orientation,
     SizeMap,
     guiding_field,
     principal_forces,
@@ -303,3 +304,41 @@ def test_plots_write_pngs_that_read_back(tmp_path):
     assert _png_size(path) == (1950, 870)
     assert _png_size(forces) == (1350, 1200)
     assert not list(tmp_path.glob("*.tmp*")), "atomic saving leaves no temporary file"
+
+
+def _compression_along_x(mesh: TriMesh) -> np.ndarray:
+    """N1 = -10 along x, N2 = -2 along y: cells of aspect sqrt(5), capped at A, along x."""
+    n = mesh.n_vertices
+    return _tensors(np.full(n, -10.0), np.full(n, -2.0), np.tile([1.0, 0.0, 0.0], (n, 1)), mesh.vertex_normals)
+
+
+def test_across_turns_the_direction_by_ninety_degrees_and_keeps_size_and_aspect():
+    mesh = vault()
+    x = mesh.vertices[:, 0]
+    tensors = _tensors(-(1.0 + x - x.min()), np.full(mesh.n_vertices, -0.2), np.tile([1.0, 0.0, 0.0],
+                       (mesh.n_vertices, 1)), mesh.vertex_normals)
+    along = guiding_field(mesh, tensors, FieldSettings())
+    across = guiding_field(mesh, tensors, FieldSettings(orientation=Orientation.ACROSS))
+    assert FieldSettings().orientation is Orientation.ALONG
+    assert np.array_equal(along.size, across.size) and np.array_equal(along.anisotropy, across.anisotropy)
+    assert np.allclose(np.einsum("ni,ni->n", along.direction, across.direction), 0.0)
+    assert np.allclose(np.einsum("ni,ni->n", across.direction, across.normals), 0.0, atol=1e-12)
+    assert np.allclose(np.linalg.norm(across.direction, axis=1), 1.0)
+    with pytest.raises(InputError, match="orientation must be one of"):
+        FieldSettings(orientation="sideways")
+
+
+@pytest.mark.parametrize("orientation, long_axis", [("along", 0), ("across", 1)])
+def test_remeshed_cells_are_long_along_the_stress_or_across_it(orientation, long_axis):
+    from engine.voronoi import RemeshSettings, remesh
+
+    mesh = _flat_square()
+    field = guiding_field(mesh, _compression_along_x(mesh), FieldSettings(orientation=orientation))
+    grid = remesh(mesh, field, RemeshSettings(n_cells=60)).polymesh
+    interior = [f for f, edge in zip(grid.faces, grid.face_boundary) if not edge]
+    # each cell's long axis: the first principal axis of its nodes
+    axes = np.array([np.linalg.svd(grid.nodes[f] - grid.nodes[f].mean(axis=0))[2][0] for f in interior])
+    stretch = np.array([np.divide(*np.linalg.svd(grid.nodes[f] - grid.nodes[f].mean(axis=0))[1][:2])
+                        for f in interior])
+    assert len(interior) >= 15 and np.median(stretch) > 1.3
+    assert np.mean(np.abs(axes[:, long_axis]) > np.cos(np.radians(30))) > 0.8

@@ -4,6 +4,7 @@ processes, killed and resumed, against plain runs."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import signal
@@ -15,12 +16,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from engine.errors import InputError
+from engine.field import Orientation
 from workflow.cli import main
-from workflow.config import load_project
+from workflow.config import KEYS_LEFT_OUT_AT_DEFAULT, STAGE_SECTIONS, load_project
 from workflow.plots.sweep import pareto_front
-from workflow.runner import _stage_key, product_version
+from workflow.runner import NOT_IN_KEYS, _section_value, _stage_key, product_version
 from workflow.stages import STAGES
-from workflow.sweep import Point, plan_tasks
+from workflow.sweep import Point, load_sweep, plan_tasks, sweep_points
 
 ROOT = Path(__file__).resolve().parents[1]
 GRIDSHELL = [sys.executable, "-m", "workflow.cli"]
@@ -91,22 +94,69 @@ def test_the_plan_runs_each_shared_stage_once_and_children_after_parents():
     assert len(plan_tasks(_points(3), {1: list("wxyz"), 2: list("wxyz"), 3: list("wxyz")})) == 1
 
 
+def _stage_keys(project) -> dict[str, str]:
+    """Every stage's cache key of ``project``, as the runner computes them."""
+    version, out = product_version(), {}
+    for stage in STAGES:
+        out[stage.name] = _stage_key(stage, project, out, version)
+    return out
+
+
 def test_worker_counts_are_not_in_the_cache_keys(tmp_path):
     assert main(["init", str(tmp_path / "p"), "--template", "cap"]) == 0
     project = load_project(tmp_path / "p" / "project.toml")
-    version = product_version()
-
-    def keys(p):
-        out = {}
-        for stage in STAGES:
-            out[stage.name] = _stage_key(stage, p, out, version)
-        return out
+    keys = _stage_keys
 
     one = project.model_copy(update={"analysis": project.analysis.model_copy(update={"workers": 1}),
                                      "fabrication": project.fabrication.model_copy(update={"workers": 1})})
     other = project.model_copy(update={"analysis": project.analysis.model_copy(update={"n_modes": 7})})
     assert keys(one) == keys(project)
     assert keys(other)["analysis"] != keys(project)["analysis"] and keys(other)["shell"] == keys(project)["shell"]
+
+
+def test_later_keys_at_their_default_leave_the_cache_keys_as_they_were(tmp_path):
+    assert main(["init", str(tmp_path / "p"), "--template", "cap"]) == 0
+    project = load_project(tmp_path / "p" / "project.toml")
+    keys = _stage_keys
+
+    def changed(section: str, **update):
+        return project.model_copy(update={section: getattr(project, section).model_copy(update=update)})
+
+    plain = keys(project)
+    # the keys of a project that does not give orientation or statics_rounds: as before they existed
+    before = {}
+    for stage in STAGES:
+        config = {name: _section_value(project, name) for name in STAGE_SECTIONS.get(stage.name, ())}
+        for name, later in KEYS_LEFT_OUT_AT_DEFAULT.items():
+            for key in later:
+                config.get(name, {}).pop(key, None)
+        config = {name: {k: v for k, v in value.items() if k not in NOT_IN_KEYS} if isinstance(value, dict)
+                  else value for name, value in config.items()}
+        payload = {"stage": stage.name, "version": product_version(), "config": config,
+                   "upstream": {d: before[d] for d in stage.depends},
+                   "external": stage.external(project) if stage.external else None}
+        before[stage.name] = hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
+    assert plain == before
+    across = keys(changed("field", orientation=Orientation.ACROSS))
+    assert across["field"] != plain["field"] and across["shell"] == plain["shell"]
+    rounds = changed("remesh", statics_rounds=2)
+    assert keys(rounds)["remesh"] != plain["remesh"] and keys(rounds)["field"] == plain["field"]
+    # with rounds the remesh analyses its grids: the analysis keys it takes are in its key, the others not
+    finer = rounds.model_copy(update={"analysis": rounds.analysis.model_copy(update={"elements_per_beam": 2})})
+    modes = rounds.model_copy(update={"analysis": rounds.analysis.model_copy(update={"n_modes": 9})})
+    assert keys(finer)["remesh"] != keys(rounds)["remesh"] and keys(modes)["remesh"] == keys(rounds)["remesh"]
+    assert keys(changed("analysis", elements_per_beam=2))["remesh"] == plain["remesh"]
+
+
+def test_a_sweep_over_statics_rounds_is_accepted(tmp_path):
+    path = _sweep(tmp_path, '"remesh.statics_rounds" = [1, 2]\n"field.orientation" = ["along", "across"]',
+                  until="analysis", template="cap")
+    points = sweep_points(load_sweep(path), tmp_path / "out")
+    assert [(p.project.remesh.statics_rounds, p.project.field.orientation.value) for p in points] == [
+        (1, "along"), (1, "across"), (2, "along"), (2, "across")]
+    bad = _sweep(tmp_path / "bad", '"remesh.statics_rounds" = [0]')
+    with pytest.raises(InputError, match="remesh.statics_rounds = 0"):
+        sweep_points(load_sweep(bad), tmp_path / "out")
 
 
 def test_the_pareto_front_is_what_no_other_point_dominates():

@@ -1,11 +1,17 @@
 """``gridshell compare PROJECT``: Voronoi, quad and triangular grids of the same total length.
 
 The thesis's comparison (METHOD.md section 5): the project's Voro(D, A) grid-shell (from the
-optimize stage, run or reused from the project's output folder) sets L_tot; a triangular and
-a quadrilateral grid of the same L_tot (within 1 %) are built on the same surface with the
-same supports, section and loads; each goes through the structural protocol (LS, LB, GNL with
-every imperfection). Writes OUT/compare/: compare.csv, compare.md, response.png and each
-grid as a polygon OBJ.
+optimize stage, run or reused from the project's output folder) sets L_tot; the other grids of
+the same L_tot (within 1 %) are built on the same surface with the same supports, section and
+loads: triangular, quad (squares along the plan's principal axes), quad45 (at 45 degrees to
+them), "statics quad" (squares along the guiding field's dominant direction, lines graded by
+its size: engine.grids.statics_quad_grid) and "isotropic" (the same Voronoi remesher under a
+uniform field, Voro(1,1): the control that differs only in statics-awareness). Each goes
+through the structural protocol (LS, LB, GNL with every imperfection). ``--grids`` picks the
+rows (default: all). The lattices and the isotropic grid are analysed as built, not optimised;
+the Voronoi row is the optimised grid (for a control that goes through the optimiser too, sweep
+``"remesh.grid" = ["voronoi", "isotropic"]`` with a ``[remesh] total_length``). Writes
+OUT/compare/: compare.csv, compare.md, response.png and each grid as a polygon OBJ.
 
 With ``[design] size_sections = true`` (or ``--size-sections``) each grid's tubes are sized as
 ``gridshell run`` sizes them, and the rows also say what each topology weighs when it passes:
@@ -26,14 +32,20 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.errors import ConvergenceError, GridshellError
+from engine.errors import ConvergenceError, GridshellError, InputError
+from engine.field import GuidingField
 from engine.mesh import PolyMesh
 from fabrication.files import atomic_path, write_text_atomic
 
 from .config import Project, check_inputs, load_project
 from .progress import Progress
 
-__all__ = ["GridRow", "compare_grids", "failure_message", "run_compare", "markdown_table"]
+__all__ = ["GridRow", "GRIDS", "compare_grids", "failure_message", "run_compare", "markdown_table"]
+
+#: the grids compare can build (``--grids``), in the table's order; "voronoi" is the project's grid
+GRIDS = ("triangular", "quad", "quad45", "statics_quad", "isotropic", "voronoi")
+#: row labels where they differ from the names
+_LABELS = {"statics_quad": "statics quad"}
 
 COLUMNS = ["grid", "nodes", "beams", "L_tot_m", "weight_kg", "delta_L_mm", "lambda_LB", "lambda_NL_perfect",
            "lambda_NL_worst", "worst_shape", "limit_point", "knock_down", "status", "message", "sized_mass_kg",
@@ -126,13 +138,15 @@ def _protocol(polymesh: PolyMesh, surface, project: Project, progress, executor=
     return GridRow(values=values, curves=curves, worst=None if worst is None else worst.name)
 
 
-def compare_grids(project: Project, surface, voronoi: PolyMesh, *,
+def compare_grids(project: Project, surface, voronoi: PolyMesh, *, field: GuidingField | None = None,
+                  grids: tuple[str, ...] | None = None,
                   progress=None) -> dict[str, tuple[PolyMesh | None, GridRow]]:
-    """The three grids of equal total length and their protocol results, keyed by grid name
-    (triangular, quad, Voro(...)). A grid that cannot be built is (None, failed row); one whose
-    protocol raises a GridshellError is (grid, failed row with its size); any other exception
-    is a bug and propagates."""
-    from engine.grids import quad_grid, triangular_grid
+    """The grids of equal total length and their protocol results, keyed by row label
+    (triangular, quad, quad45, statics quad, isotropic, Voro(...)); ``grids`` names the rows
+    (GRIDS, default all); statics quad and isotropic need the guiding ``field``. A grid that
+    cannot be built is (None, failed row); one whose protocol raises a GridshellError is (grid,
+    failed row with its size); any other exception is a bug and propagates."""
+    from engine import grids as lattices
 
     from .stages.analysis import beam_properties, path_pool
 
@@ -140,21 +154,46 @@ def compare_grids(project: Project, surface, voronoi: PolyMesh, *,
         if progress is not None:
             progress(text, None)
 
+    asked = GRIDS if grids is None else tuple(grids)
+    unknown = sorted(set(asked) - set(GRIDS))
+    if unknown:
+        raise InputError(f"compare: no grid called {unknown[0]!r}", hint=f"the grids are {', '.join(GRIDS)}")
     support_vertices = np.zeros(surface.mesh.n_vertices, dtype=bool)
     support_vertices[surface.supports.nodes] = True
     length = voronoi.total_length
-    name = f"Voro({project.field.max_size_ratio:g},{project.field.max_aspect:g})"
-    grids: dict[str, PolyMesh | None] = {}
+    name = _project_label(project)
+
+    def isotropic(mesh, *, total_length, support_vertices):
+        from engine.voronoi import RemeshSettings, remesh
+
+        settings = RemeshSettings(total_length=total_length, lloyd_iterations=project.remesh.lloyd_iterations,
+                                  seed=project.remesh.seed)
+        grid = remesh(mesh, lattices.isotropic_field(_needed(field)), settings,
+                      support_vertices=support_vertices).polymesh
+        if abs(grid.total_length / total_length - 1) >= 0.01:
+            raise ConvergenceError(f"the isotropic remesh reached {grid.total_length:.2f} m of beams, not "
+                                   f"{total_length:.2f} m within 1 %")
+        return grid
+
+    makers = {"triangular": lambda *a, **k: lattices.triangular_grid(*a, **k),
+              "quad": lambda *a, **k: lattices.quad_grid(*a, **k),
+              "quad45": lambda *a, **k: lattices.quad45_grid(*a, **k),
+              "statics_quad": lambda mesh, **k: lattices.statics_quad_grid(mesh, _needed(field), **k),
+              "isotropic": isotropic}
+    built: dict[str, PolyMesh | None] = {}
     out: dict[str, tuple[PolyMesh | None, GridRow]] = {}
-    for label, make in (("triangular", triangular_grid), ("quad", quad_grid)):
+    for key in (g for g in GRIDS if g in asked and g != "voronoi"):
+        label = _LABELS.get(key, key)
         say(f"building the {label} grid")
         try:
-            grids[label] = make(surface.mesh, total_length=length, support_vertices=support_vertices)
+            built[label] = makers[key](surface.mesh, total_length=length, support_vertices=support_vertices)
         except GridshellError as error:
-            grids[label] = None
+            built[label] = None
             out[label] = (None, GridRow(values={}, curves={}, worst=None, status="failed",
                                         message=failure_message(label, "built", error)))
-    grids[name] = voronoi
+    grids = built
+    if "voronoi" in asked:
+        grids[name] = voronoi
     mass_per_length = beam_properties(project)[0].mass_per_length
     config = project.analysis
     with path_pool(config.workers if config.nonlinear else 1) as pool:  # each grid's paths side by side
@@ -172,6 +211,33 @@ def compare_grids(project: Project, surface, voronoi: PolyMesh, *,
     return {label: out[label] for label in grids}
 
 
+def _needed(field: GuidingField | None) -> GuidingField:
+    if field is None:
+        raise InputError("this grid is made from the guiding field, and none was given",
+                         hint="run the project's field stage (gridshell run PROJECT --to field)")
+    return field
+
+
+def _project_label(project: Project) -> str:
+    """The project's own row: Voro(D,A), or its [remesh] grid where that is not the Voronoi grid."""
+    grid = str(getattr(project.remesh.grid, "value", project.remesh.grid))
+    if grid == "voronoi":
+        return f"Voro({project.field.max_size_ratio:g},{project.field.max_aspect:g})"
+    return f"project ({_LABELS.get(grid, grid)})"
+
+
+def parse_grids(text: str | None) -> tuple[str, ...]:
+    """The ``--grids`` option: a comma list of GRIDS (None or empty: all of them)."""
+    if not text:
+        return GRIDS
+    names = tuple(dict.fromkeys(n.strip() for n in text.split(",") if n.strip()))
+    unknown = [n for n in names if n not in GRIDS]
+    if unknown or not names:
+        raise InputError(f"--grids: no grid called {(unknown or [text])[0]!r}",
+                         hint=f"a comma list of {','.join(GRIDS)}")
+    return names
+
+
 def markdown_table(rows: list[dict]) -> str:
     """A GitHub-style Markdown table of the comparison rows."""
     def cell(value) -> str:
@@ -187,7 +253,7 @@ def markdown_table(rows: list[dict]) -> str:
 
 
 def run_compare(args: argparse.Namespace) -> int:
-    """The CLI verb: run (or reuse) the project up to optimize, then compare the three grids."""
+    """The CLI verb: run (or reuse) the project up to optimize, then compare the grids of ``--grids``."""
     import pandas as pd
 
     from .runner import run_project
@@ -196,6 +262,7 @@ def run_compare(args: argparse.Namespace) -> int:
 
     project_path = Path(args.project)
     project = load_project(project_path)
+    asked = parse_grids(getattr(args, "grids", None))
     if getattr(args, "size_sections", False):
         if project.section.kind != "circular_hollow":
             from .config import ConfigError
@@ -214,8 +281,9 @@ def run_compare(args: argparse.Namespace) -> int:
         return 1
     surface = _load_stage(project, out_dir, "surface")
     voronoi = _load_stage(project, out_dir, "optimize").polymesh
+    field = _load_stage(project, out_dir, "field") if {"isotropic", "statics_quad"} & set(asked) else None
     progress.stage_start("compare")
-    results = compare_grids(project, surface, voronoi, progress=progress.step)
+    results = compare_grids(project, surface, voronoi, field=field, grids=asked, progress=progress.step)
     folder = out_dir / "compare"
     folder.mkdir(parents=True, exist_ok=True)
     rows = []
@@ -233,7 +301,7 @@ def run_compare(args: argparse.Namespace) -> int:
     with atomic_path(folder / "compare.csv") as tmp:
         frame.to_csv(tmp, index=False, float_format="%.6g")
     failed = [row for row in rows if row["status"] != "ok"]
-    text = (f"# Same-length comparison: {project.project.name}\n\nTotal beam length of the Voronoi grid: "
+    text = (f"# Same-length comparison: {project.project.name}\n\nTotal beam length of the project's grid: "
             f"{voronoi.total_length:.3f} m; the other grids {'built ' if failed else ''}match it within 1 %.\n\n"
             + markdown_table(rows))
     if failed:

@@ -31,7 +31,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from engine.en1993 import ChecksMethod
 from engine.errors import GridshellError
-from engine.field import AnisotropyMap, FieldSettings, SizeMap
+from engine.field import AnisotropyMap, FieldSettings, Orientation, SizeMap
+from engine.grids import GridKind
 from engine.optimize import OptimizeSettings
 from engine.protocol import ImperfectionShape, ProtocolSettings
 from engine.supports import restraint_flags
@@ -43,7 +44,8 @@ from fabrication.settings import BeamSettings, PanelSettings, SheetSettings
 from .units import AreaLoad, Density, Force, Length, Stress
 
 __all__ = ["ConfigError", "Project", "load_project", "parse_project", "read_toml", "project_from_surface",
-           "check_inputs", "unusual_values", "STAGE_SECTIONS", "MM", "DEFAULT_CELLS"]
+           "check_inputs", "unusual_values", "STAGE_SECTIONS", "KEYS_LEFT_OUT_AT_DEFAULT", "stage_sections", "MM",
+           "DEFAULT_CELLS"]
 
 MM = 1000.0
 """Millimetres per metre: the project is in metres, fabrication's settings in millimetres."""
@@ -289,7 +291,8 @@ class SymmetryPlane(_Section):
 
 
 class FieldConfig(_Section):
-    """Guiding field (METHOD.md 2): D = max_size_ratio, A = max_aspect."""
+    """Guiding field (METHOD.md 2): D = max_size_ratio, A = max_aspect. orientation: cells elongated
+    "along" the larger principal force (the thesis) or "across" it (turned by 90 degrees)."""
 
     max_size_ratio: float = _default_of(FieldSettings, "max_size_ratio", ge=1.0, le=20.0)
     max_aspect: float = _default_of(FieldSettings, "max_aspect", ge=1.0, le=20.0)
@@ -300,6 +303,7 @@ class FieldConfig(_Section):
     smoothing_iterations: int = _default_of(FieldSettings, "smoothing_iterations", ge=0)
     direction_smoothing_iterations: int = _default_of(FieldSettings, "direction_smoothing_iterations", ge=0)
     symmetry_planes: list[SymmetryPlane] = Field(default_factory=list, max_length=2)
+    orientation: Orientation = _default_of(FieldSettings, "orientation")
 
     @field_validator("clamp_percentiles")
     @classmethod
@@ -316,7 +320,8 @@ class FieldConfig(_Section):
             anisotropy_map=self.anisotropy_map, opposite_sign_anisotropy=self.opposite_sign_anisotropy,
             clamp_percentiles=tuple(self.clamp_percentiles), smoothing_iterations=self.smoothing_iterations,
             direction_smoothing_iterations=self.direction_smoothing_iterations,
-            symmetry_planes=tuple((tuple(p.point), tuple(p.normal)) for p in self.symmetry_planes))
+            symmetry_planes=tuple((tuple(p.point), tuple(p.normal)) for p in self.symmetry_planes),
+            orientation=self.orientation)
 
 
 class RemeshConfig(_Section):
@@ -324,7 +329,17 @@ class RemeshConfig(_Section):
     lloyd_iterations caps the Lloyd steps between clusterings at each level (the remesher takes at
     most 20 at its coarsest level and 3 at finer ones; 0: the clustering of the initial lattice).
     coarsen_for_joints: remesh with fewer cells when most beams are shorter than their joints take
-    (a grid_coarsened finding says so); false keeps the cells asked for, and the joints clash."""
+    (a grid_coarsened finding says so); false keeps the cells asked for, and the joints clash.
+    statics_rounds: 1 remeshes under the shell's field; N > 1 then rebuilds the field N - 1 times from
+    the grid's own beam forces (linear, ULS) and remeshes with the same size target.
+    grid: which grid the remesh builds (engine.grids.GridKind): "voronoi" (the statics-aware grid,
+    the default), "isotropic" (the same remesher under a uniform field, Voro(1,1): the control, it
+    is optimised like the Voronoi grid), or a lattice clipped to the plan and lifted, not optimised:
+    "quad" (squares along the plan's principal axes), "quad45" (at 45 degrees to them),
+    "triangular", "statics_quad" (squares along the field's dominant direction, lines graded by
+    its size). A lattice meets total_length within 1 %; n_cells or mean_beam_length give it the
+    length of a regular lattice of that many cells, or of that spacing, over the surface's area
+    (engine.grids.lattice_total_length); coarsen_for_joints does not apply to lattices."""
 
     n_cells: int | None = Field(None, ge=4)
     mean_beam_length: Length | None = Field(None, gt=0.0)
@@ -332,6 +347,8 @@ class RemeshConfig(_Section):
     lloyd_iterations: int = _default_of(RemeshSettings, "lloyd_iterations", ge=0)
     seed: int = _default_of(RemeshSettings, "seed")
     coarsen_for_joints: bool = True
+    statics_rounds: int = Field(1, ge=1, le=10)
+    grid: GridKind = GridKind.VORONOI
 
     @model_validator(mode="after")
     def _one_target(self) -> "RemeshConfig":
@@ -340,13 +357,15 @@ class RemeshConfig(_Section):
             raise ValueError(f"give one size target, not {', '.join(given)}")
         return self
 
-    def to_settings(self) -> RemeshSettings:
-        """The engine's remesh settings: the size target given, else DEFAULT_CELLS cells."""
+    def to_settings(self, symmetry_planes: tuple = ()) -> RemeshSettings:
+        """The engine's remesh settings: the size target given, else DEFAULT_CELLS cells; the grid is
+        made symmetric about ``symmetry_planes`` ((point, normal) pairs: [field] symmetry_planes)."""
         target = {"n_cells": self.n_cells, "mean_beam_length": self.mean_beam_length,
                   "total_length": self.total_length}
         if all(v is None for v in target.values()):
             target["n_cells"] = DEFAULT_CELLS
-        return RemeshSettings(**target, lloyd_iterations=self.lloyd_iterations, seed=self.seed)
+        return RemeshSettings(**target, lloyd_iterations=self.lloyd_iterations, seed=self.seed,
+                              symmetry_planes=tuple(symmetry_planes))
 
 
 class OptimizeConfig(_Section):
@@ -452,19 +471,22 @@ class JointsConfig(_Section):
     """Joint kind: printed sockets ("socket", small tubes) or steel hub nodes with fin plates
     ("steel"); unset, steel for steel beams over 30 mm and sockets otherwise. min_angle: the
     smallest angle between two beams at a node (degrees; unset, 5 degrees above where the joint's
-    own sleeves or fin plates collide, see fabrication.limits)."""
+    own sleeves or fin plates collide, see fabrication.limits). combined_step: also write every
+    joint into one joints/joints.step, where it comes under 30 MB (the J0001.step files hold the
+    same solids)."""
 
     kind: JointKind | None = None
     min_angle: float | None = Field(None, gt=0.0, lt=120.0)
-    hub_radius: Length | None = None
-    sleeve_length: Length | None = None
-    clearance: Length = _default_of(JointSettings, "clearance_mm", per=MM)
-    wall: Length = _default_of(JointSettings, "wall_mm", per=MM)
-    min_wall: Length = _default_of(JointSettings, "min_wall_mm", per=MM)
-    pin_hole: Length = _default_of(JointSettings, "pin_hole_mm", per=MM)
+    hub_radius: Length | None = Field(None, gt=0.0)
+    sleeve_length: Length | None = Field(None, gt=0.0)
+    clearance: Length = _default_of(JointSettings, "clearance_mm", per=MM, ge=0.0)
+    wall: Length = _default_of(JointSettings, "wall_mm", per=MM, gt=0.0)
+    min_wall: Length = _default_of(JointSettings, "min_wall_mm", per=MM, gt=0.0)
+    pin_hole: Length = _default_of(JointSettings, "pin_hole_mm", per=MM, gt=0.0)
     engrave: bool = _default_of(JointSettings, "engrave")
-    plate_thickness: Length = _default_of(JointSettings, "plate_thickness_mm", per=MM)
-    bolt_hole: Length = _default_of(JointSettings, "bolt_hole_mm", per=MM)
+    plate_thickness: Length = _default_of(JointSettings, "plate_thickness_mm", per=MM, gt=0.0)
+    bolt_hole: Length = _default_of(JointSettings, "bolt_hole_mm", per=MM, gt=0.0)
+    combined_step: bool = False
 
     def to_settings(self) -> JointSettings:
         """Fabrication's joint settings (mm). The Project resolves an unset kind; a section on its
@@ -482,8 +504,8 @@ class BeamsConfig(_Section):
     tube plus half its diameter, at least one diameter); remesh and optimize collapse beams shorter
     than it plus their joints' set-backs."""
 
-    stock_length: Length = _default_of(BeamSettings, "stock_length_mm", per=MM)
-    kerf: Length = _default_of(BeamSettings, "kerf_mm", per=MM)
+    stock_length: Length = _default_of(BeamSettings, "stock_length_mm", per=MM, gt=0.0)
+    kerf: Length = _default_of(BeamSettings, "kerf_mm", per=MM, ge=0.0)
     min_cut_length: Length | None = Field(None, gt=0.0)
 
     def to_settings(self, *, profile_name: str, material_name: str, density: float, area_m2: float,
@@ -651,6 +673,22 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "report": ("report", "project"),
 }
 """The project sections each stage reads: its cache key."""
+
+#: Keys that came after runs were cached, left out of the cache keys at these defaults (what those
+#: runs did), so that the caches of earlier runs stay valid.
+KEYS_LEFT_OUT_AT_DEFAULT: dict[str, dict[str, Any]] = {
+    "field": {"orientation": "along"},
+    "remesh": {"statics_rounds": 1, "grid": "voronoi"},
+}
+
+
+def stage_sections(stage: str, project: "Project") -> tuple[str, ...]:
+    """The project sections (or dotted keys) ``stage`` reads for ``project``: STAGE_SECTIONS, and for
+    a remesh with statics rounds the analysis keys its frame analyses take."""
+    sections = STAGE_SECTIONS.get(stage, ())
+    if stage == "remesh" and project.remesh.statics_rounds > 1:
+        sections += ("analysis.elements_per_beam", "analysis.uls_combination")
+    return sections
 
 
 def _unwrap(annotation: Any) -> Any:

@@ -52,7 +52,8 @@ from .sizing import (
 )
 from .surface import SurfaceResult
 
-__all__ = ["run", "load", "beam_properties", "build_frame", "pick_combination", "AnalysisSummary"]
+__all__ = ["run", "load", "beam_properties", "build_frame", "pick_combination", "linear_axial_forces",
+           "AnalysisSummary"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -331,6 +332,16 @@ def frame_and_loads(polymesh, surface, props: BeamProperties, cases, elements_pe
     loads = [gridshell_loads(polymesh, case, mass_per_length=props.mass_per_length,
                              surface_vertices=surface.mesh.vertices) for case in cases]
     return model, supports, loads
+
+
+def linear_axial_forces(polymesh: PolyMesh, surface: SurfaceResult, project: Project) -> np.ndarray:
+    """(n_beams,) axial forces, N (tension > 0), of a linear static analysis of ``polymesh`` with the
+    project's section under its ULS combination: the frame model and loads of this stage, each
+    beam's force the mean of its two ends."""
+    props = beam_properties(project)[0]
+    case = combine(surface.load_cases, pick_combination(project, surface, "ULS"))
+    model, supports, (loads,) = frame_and_loads(polymesh, surface, props, [case], project.analysis.elements_per_beam)
+    return linear_static(model, supports, loads).beam_end_forces[:, :, 0].mean(axis=1)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -21,17 +21,14 @@ from ..plots.field import plot_field
 from ..runner import StageContext
 from .surface import SurfaceResult
 
-__all__ = ["run", "load"]
+__all__ = ["run", "load", "save_field", "load_field"]
 
 
 def run(surface: SurfaceResult, shell: ShellResult, project: Project, ctx: StageContext) -> GuidingField:
     mesh = surface.mesh
     ctx.step("stress to metric")
     field = guiding_field(mesh, shell.vertex_membrane_forces, project.field.to_settings())
-    with atomic_path(ctx.folder / "field.npz") as tmp:
-        with open(tmp, "wb") as handle:
-            np.savez_compressed(handle, size=field.size, anisotropy=field.anisotropy,
-                                direction=field.direction, normals=field.normals)
+    save_field(field, ctx.folder / "field.npz")
     summary = {"max_size_ratio_D": project.field.max_size_ratio, "max_aspect_A": project.field.max_aspect,
                "achieved_size_ratio": float(field.size.max() / field.size.min()),
                "achieved_max_aspect": float(field.anisotropy.max()),
@@ -46,7 +43,20 @@ def run(surface: SurfaceResult, shell: ShellResult, project: Project, ctx: Stage
     return field
 
 
-def load(folder: Path, project: Project) -> GuidingField:
-    with np.load(folder / "field.npz") as data:
+def save_field(field: GuidingField, path: Path) -> None:
+    """Write ``field`` as an npz file (size, anisotropy, direction, normals)."""
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as handle:
+            np.savez_compressed(handle, size=field.size, anisotropy=field.anisotropy,
+                                direction=field.direction, normals=field.normals)
+
+
+def load_field(path: Path) -> GuidingField:
+    """A field written by save_field."""
+    with np.load(path) as data:
         return GuidingField(size=data["size"], anisotropy=data["anisotropy"], direction=data["direction"],
                             normals=data["normals"])
+
+
+def load(folder: Path, project: Project) -> GuidingField:
+    return load_field(folder / "field.npz")

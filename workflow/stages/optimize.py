@@ -18,18 +18,29 @@ import numpy as np
 from engine.collapse import collapse_beams, dissolve_kinks, open_narrow_joints, remove_short_beams
 from engine.field import GuidingField
 from engine.findings import Finding
+from engine.grids import LATTICES, GridKind, isotropic_field
 from engine.mesh import PolyMesh
 from engine.optimize import OptimizeResult, OptimizeSettings, grid_quality, optimize
 from engine.parts import panel_id
+from engine.symmetry import symmetrised_grid, symmetry_record
 from fabrication.files import write_text_atomic
 from fabrication.limits import required_beam_lengths_m
 
 from ..config import Project
 from ..plots.remesh import plot_gridshell
 from ..runner import StageContext
+from . import lattice
 from .build_limits import build_limits_of
 from .polymesh_io import read_polymesh_obj, write_polymesh_obj
-from .remesh import MAX_COLLAPSE_SHARE, buildable_grid, grid_figures, short_count, short_share, too_fine_finding
+from .remesh import (
+    MAX_COLLAPSE_SHARE,
+    buildable_grid,
+    field_of_grid,
+    grid_figures,
+    short_count,
+    short_share,
+    too_fine_finding,
+)
 from .surface import SurfaceResult
 
 if TYPE_CHECKING:  # engine.panel_pieces imports shapely: loaded where panels are made or read
@@ -65,11 +76,13 @@ class OptimizedGrid:
 
 def optimize_settings(project: Project) -> OptimizeSettings:
     """The engine's optimiser settings of [optimize], holding the grid to its joints (with the end
-    game's margin) and its cells to the field's aspect bound (with STRETCH_MARGIN)."""
+    game's margin), its cells to the field's aspect bound (with STRETCH_MARGIN) and its nodes
+    symmetric about [field] symmetry_planes."""
     limits = build_limits_of(project)
-    return project.optimize.to_settings(min_beam_length_mm=MIN_LENGTH_MARGIN * limits.shortest_beam_mm(),
-                                        min_corner_angle_deg=max(20.0, MIN_LENGTH_MARGIN * limits.min_angle_deg),
-                                        max_cell_stretch=STRETCH_MARGIN * project.field.max_aspect)
+    settings = project.optimize.to_settings(min_beam_length_mm=MIN_LENGTH_MARGIN * limits.shortest_beam_mm(),
+                                            min_corner_angle_deg=max(20.0, MIN_LENGTH_MARGIN * limits.min_angle_deg),
+                                            max_cell_stretch=STRETCH_MARGIN * project.field.max_aspect)
+    return dataclasses.replace(settings, symmetry_planes=project.field.to_settings().symmetry_planes)
 
 
 def beam_length_limits(project: Project):
@@ -81,11 +94,24 @@ def beam_length_limits(project: Project):
 
 def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: Project,
         ctx: StageContext) -> OptimizedGrid:
+    grid = GridKind(project.remesh.grid)
+    if grid in LATTICES:  # a lattice is not a grid of Voronoi cells: it goes through as built
+        return lattice.run_optimize(surface, field, remesh, project, ctx)
+    if grid == GridKind.ISOTROPIC:  # the control is held to uniform cells, not to the field's grading
+        field = isotropic_field(field)
     polymesh = remesh
+    rounds_field = field_of_grid(ctx.out_dir, project)  # statics rounds: the field the grid was made under
+    field = field if rounds_field is None else rounds_field
     ctx.step("local/global iterations and the planarity end game")
     settings = optimize_settings(project)
     limits = beam_length_limits(project)
     result = optimize(polymesh, surface.mesh, field, settings, progress=ctx.step, beam_length_limits=limits)
+    if settings.symmetry_planes and not np.all(np.isfinite(result.polymesh.nodes)):
+        # the mirror pairs did not settle: optimised without keeping the symmetry (optimize.json's
+        # symmetry record measures what is left of it)
+        ctx.step("the symmetric optimisation did not settle: optimising without the symmetry planes")
+        settings = dataclasses.replace(settings, symmetry_planes=())
+        result = optimize(polymesh, surface.mesh, field, settings, progress=ctx.step, beam_length_limits=limits)
     grading_kept, share_kept = True, short_share(result.polymesh, project)
     share = share_kept
     if share_kept > GRADED_SHORT_SHARE:
@@ -152,6 +178,11 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
         ctx.report_findings([grading_finding(share_kept, result.quality)])
     elif compressed_grading(result.quality):
         ctx.report_findings([compressed_finding(result.quality)])
+    planes = settings.symmetry_planes
+    if planes:  # the collapses and removals keep mirror orbits only nearly: nodes symmetrised again
+        symmetric = symmetrised_grid(result.polymesh, planes)
+        if np.all(np.isfinite(symmetric.nodes)):  # else kept as optimised; the record measures it
+            result = dataclasses.replace(result, polymesh=symmetric)
     write_polymesh_obj(result.polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: optimised grid-shell")
     ctx.step("panels: planar convex pieces of the cells that are not")
@@ -167,6 +198,9 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
     quality["shortest_beam_m"] = buildable["shortest_beam_m"]
     quality["smallest_beam_angle_deg"] = buildable["smallest_beam_angle_deg"]
     quality["weights"] = project.optimize.model_dump(mode="json")
+    if planes:  # of the grid as written
+        quality["symmetry"] = symmetry_record(result.polymesh.nodes, planes,
+                                              float(result.polymesh.beam_lengths.mean()))
     write_text_atomic(ctx.folder / "optimize.json", json.dumps(quality, indent=1, default=float))
     ctx.step("drawing")
     plot_gridshell(result.polymesh, ctx.folder / "planarity.png", color_by="planarity",

@@ -1,7 +1,11 @@
 """Stage ``remesh``: the statics-aware Voronoi grid-shell (anisotropic CVT under the field's metric).
 
 Artifacts (04-remesh/): gridshell.obj (+ gridshell.nodes.json), remesh.json (quality
-figures) and pictures coloured by face degree.
+figures) and pictures coloured by face degree. With ``[remesh] statics_rounds`` N > 1 the field
+is rebuilt N - 1 times from the grid's own beam forces and the surface remeshed under it
+(remeshed_from_beam_forces): remesh.json gains the rounds, field_round_N.npz holds the last field
+(the one the grid was made under, which the optimiser follows: field_of_grid) and
+field_round_N.png shows it.
 """
 
 from __future__ import annotations
@@ -14,28 +18,43 @@ from pathlib import Path
 import numpy as np
 
 from engine.collapse import CollapseReport, collapse_short_beams
-from engine.field import GuidingField
+from engine.field import GuidingField, guiding_field
 from engine.findings import Finding
+from engine.grid_stress import surface_membrane_forces
+from engine.grids import LATTICES, GridKind, isotropic_field
 from engine.mesh import PolyMesh
-from engine.voronoi import RemeshResult, polymesh_quality, remesh
+from engine.structure import node_normals
+from engine.symmetry import symmetrised_grid, symmetry_record
+from engine.voronoi import RemeshResult, RemeshSettings, polymesh_quality, remesh
 from fabrication.files import write_text_atomic
 from fabrication.limits import node_smallest_angles, required_beam_lengths_m
 
 from ..config import Project
+from ..plots.field import plot_field
 from ..plots.remesh import plot_gridshell
 from ..runner import StageContext
+from . import lattice
 from .build_limits import build_limits_of
+from .field import load_field, save_field
 from .polymesh_io import read_polymesh_obj, write_polymesh_obj
 from .surface import SurfaceResult
 
-__all__ = ["run", "load", "buildable_grid"]
+__all__ = ["run", "load", "remesh_settings", "buildable_grid", "remeshed_from_beam_forces", "field_of_grid"]
 
 
 def run(surface: SurfaceResult, field: GuidingField, project: Project, ctx: StageContext) -> PolyMesh:
+    grid = GridKind(project.remesh.grid)
+    if grid in LATTICES:  # squares, triangles, the statics-aware quads: .lattice
+        return lattice.run_remesh(surface, field, project, ctx)
+    if grid == GridKind.ISOTROPIC:  # the control: the same remesher under a uniform field
+        field = isotropic_field(field)
     support_vertices = np.zeros(surface.mesh.n_vertices, dtype=bool)
     support_vertices[surface.supports.nodes] = True
-    settings = project.remesh.to_settings()
+    settings = remesh_settings(project)
     result = remesh(surface.mesh, field, settings, support_vertices=support_vertices, progress=ctx.step)
+    rounds: list[dict] = []
+    if grid == GridKind.VORONOI:  # the control stays uniform: its field is not the forces'
+        result, field, rounds = remeshed_from_beam_forces(result, field, surface, project, ctx)
     asked, remeshes = settings.n_cells or result.polymesh.n_faces, 0
     if project.remesh.coarsen_for_joints:
         result, remeshes = fitted_to_joints(
@@ -48,6 +67,10 @@ def run(surface: SurfaceResult, field: GuidingField, project: Project, ctx: Stag
         ctx.report_findings([coarsened_finding(asked, result)])
     ctx.step("collapsing beams far shorter than the joints and the shortest cut take")
     polymesh, buildable = buildable_grid(result.polymesh, project, share=REMESH_SHARE)
+    planes = settings.symmetry_planes
+    if planes:  # the collapses keep mirror orbits only nearly
+        symmetric = symmetrised_grid(polymesh, planes)
+        polymesh = symmetric if np.all(np.isfinite(symmetric.nodes)) else polymesh
     write_polymesh_obj(polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: statics-aware Voronoi grid-shell (remesh)")
     quality = dict(result.quality)
@@ -58,11 +81,73 @@ def run(surface: SurfaceResult, field: GuidingField, project: Project, ctx: Stag
     quality["buildable"] = buildable
     quality["coarsened"] = {"cells_asked": int(asked), "cells_built": int(polymesh.n_faces), "remeshes": remeshes}
     quality.update({"max_size_ratio_D": project.field.max_size_ratio, "max_aspect_A": project.field.max_aspect})
+    if rounds:
+        quality["statics_rounds"] = rounds
+    if planes:  # of the grid as written
+        quality["symmetry"] = symmetry_record(polymesh.nodes, planes, float(polymesh.beam_lengths.mean()))
+    if grid != GridKind.VORONOI:  # recorded where set: the default grid's remesh.json is as before
+        quality["grid"] = grid.value
     write_text_atomic(ctx.folder / "remesh.json", json.dumps(quality, indent=1, default=float))
     ctx.step("drawing")
     plot_gridshell(polymesh, ctx.folder / "degree.png", color_by="degree",
                    title=f"{project.project.name}: remeshed grid-shell, cells by number of sides")
     return polymesh
+
+
+def remesh_settings(project: Project) -> RemeshSettings:
+    """The engine's remesh settings of [remesh], the grid made symmetric about [field] symmetry_planes."""
+    return project.remesh.to_settings(project.field.to_settings().symmetry_planes)
+
+
+def remeshed_from_beam_forces(result: RemeshResult, field: GuidingField, surface: SurfaceResult, project: Project,
+                              ctx: StageContext) -> tuple[RemeshResult, GuidingField, list[dict]]:
+    """(result, field, rounds): with ``[remesh] statics_rounds`` N > 1, N - 1 times the field rebuilt
+    from the last grid's beam forces (linear analysis under the ULS combination, as the analysis
+    stage builds it; engine.grid_stress) with the project's field settings, and the surface
+    remeshed under it with the same size target. rounds (JSON-ready, empty for N = 1): per round
+    the grid's total length (m), cells and size rank correlation with the field it was made under
+    (round 1: the shell's). The last round's field is written as field_round_N.npz and drawn as
+    field_round_N.png."""
+    count = project.remesh.statics_rounds
+    if count <= 1:
+        return result, field, []
+    # the analysis stage imports the optimiser's, which imports this module: imported here
+    from .analysis import linear_axial_forces
+
+    mesh = surface.mesh
+    support_vertices = np.zeros(mesh.n_vertices, dtype=bool)
+    support_vertices[surface.supports.nodes] = True
+    settings, field_settings = remesh_settings(project), project.field.to_settings()
+    rounds = [_round_figures(1, result)]
+    for number in range(2, count + 1):
+        grid = result.polymesh
+        ctx.step(f"statics round {number} of {count}: beam forces of the {grid.n_faces}-cell grid")
+        axial = linear_axial_forces(grid, surface, project)
+        forces = surface_membrane_forces(mesh, grid, axial, node_normals(grid, mesh))
+        field = guiding_field(mesh, forces, field_settings)
+        ctx.step(f"statics round {number} of {count}: remeshing under the field of the beam forces")
+        result = remesh(mesh, field, settings, support_vertices=support_vertices, progress=ctx.step)
+        rounds.append(_round_figures(number, result))
+        ctx.step(f"statics round {number} of {count}: {rounds[-1]['cells']} cells, "
+                 f"{rounds[-1]['total_length_m']:.1f} m of beams")
+    save_field(field, ctx.folder / f"field_round_{count}.npz")
+    plot_field(mesh, field, ctx.folder / f"field_round_{count}.png",
+               title=f"{project.project.name}: guiding field of round {count} (beam forces of round {count - 1})")
+    return result, field, rounds
+
+
+def field_of_grid(out_dir: Path, project: Project) -> GuidingField | None:
+    """The field the remeshed grid was made under where statics rounds rebuilt it (read from the
+    run's 04-remesh/field_round_N.npz), else None: the field stage's."""
+    count = project.remesh.statics_rounds
+    return load_field(out_dir / "04-remesh" / f"field_round_{count}.npz") if count > 1 else None
+
+
+def _round_figures(number: int, result: RemeshResult) -> dict:
+    """One statics round's figures (JSON-ready)."""
+    return {"round": number, "field": "shell" if number == 1 else "beam forces",
+            "total_length_m": float(result.polymesh.total_length), "cells": int(result.polymesh.n_faces),
+            "size_rank_correlation": result.quality.get("size_rank_correlation")}
 
 
 #: The remesh removes only beams under this share of their buildable length: the optimiser, which

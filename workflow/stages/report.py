@@ -188,7 +188,8 @@ def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
                             tables=([_figures_table("field", "Field against the bounds D and A", field)]
                                     if field else [])))
     remesh_rows = {k: remesh[k] for k in GRID_KEYS if k in remesh}
-    sections.append(Section(title="4. Statics-aware Voronoi remeshing", figures=_figures(out_dir, "remesh"),
+    title = "4. Statics-aware Voronoi remeshing" if "grid" not in remesh else f"4. Remeshing: {remesh['grid']} grid"
+    sections.append(Section(title=title, figures=_figures(out_dir, "remesh"),
                             tables=[_figures_table("remesh", "Remeshing quality", remesh_rows)]))
     after = optimize.get("after", {})
     before = optimize.get("before", {})

@@ -1,0 +1,437 @@
+"""The same-length study of issue 14: when does a statics-aware Voronoi grid beat a quad grid?
+
+    .venv/bin/python benchmarks/study.py [--surfaces cap,Neumunster,...] [--cells 40,80,160]
+        [--seeds 0,1,2] [--questions spacing,statics,optimiser,rounds] [--workers N] [--out out/study]
+
+Every surface gets one project: the cap template's loads, material, section (CHS 114.3 x 6.3 S355)
+and analysis protocol, on the surface with its flagged supports (pinned), and ``[remesh]
+total_length`` as the size target, so that every grid of a row has the same total beam length
+L_tot. The surfaces are the cap and every roof in ../shared/data/surfaces that is a height field
+over its plan (the reference lattices need one). The L_tot levels are those of a hexagonal grid of
+about ``--cells`` cells over the surface's area (3 n edges of a regular hexagon of area A / n).
+Each question is one or two ``gridshell sweep`` runs (their files and results stay under
+OUT/SURFACE/QUESTION/), up to the analysis:
+
+| question | sweep | at |
+|---|---|---|
+| spacing | remesh.grid (voronoi, isotropic) x remesh.seed; remesh.grid (quad, quad45, triangular, statics_quad) | every L_tot |
+| statics | (field.max_size_ratio, field.max_aspect) in (1,1) (2,1) (1,2) (3,3), and (2,2) with field.orientation = across, x remesh.seed | the middle L_tot |
+| optimiser | optimize.iterations = 0 (none), optimize.planarise_cells = true (planar cells, added beams) x remesh.seed | the middle L_tot |
+| rounds | remesh.statics_rounds = 2, 3 (field from the grid's own beam forces) x remesh.seed | the middle L_tot |
+
+The default Voronoi grid, Voro(2,2) with split panels and one round, is the spacing sweep's voronoi
+row at the same L_tot; the isotropic uniform CVT of the same length is the control. Printed and
+written to OUT/study.md: one table per question with the median over the seeds of the worst
+non-linear load factor of the imperfection protocol (lambda_NL_worst), the linear buckling factor
+and the size rank correlation of the optimised grid with the field, and the largest deviation of
+L_tot from its row's target, after a table of verdicts (design against reference, at how many
+surface and length pairs it is higher). OUT/study.csv has every point, OUT/study_summary.csv the
+table rows; OUT/spacing.png and OUT/designs.png plot them. Sweeps already run are read from their
+cache, so a rerun only adds what is missing (a new surface, seed or question).
+"""  # noqa: E501 (Markdown table rows, which cannot be wrapped)
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+REAL_SURFACES = Path(os.environ.get("GRIDSHELL_SURFACES", ROOT.parent / "shared" / "data" / "surfaces"))
+QUESTIONS = ("spacing", "statics", "optimiser", "rounds")
+LATTICES = ("quad", "quad45", "triangular", "statics_quad")
+VORONOI = ("voronoi", "isotropic")
+#: (D, A) pairs of the statics question besides the default (2, 2)
+PAIRS = ((1.0, 1.0), (2.0, 1.0), (1.0, 2.0), (3.0, 3.0))
+
+
+def _gridshell() -> list[str]:
+    for candidate in (ROOT / ".venv" / "bin" / "gridshell", Path(sys.executable).parent / "gridshell"):
+        if candidate.is_file():
+            return [str(candidate)]
+    return [sys.executable, "-m", "workflow.cli"]
+
+
+def height_field_roofs() -> list[Path]:
+    """The shared roofs that are height fields over their plan (the lattices need one)."""
+    from engine.grids import is_height_field
+    from engine.mesh import TriMesh
+    from workflow.surface_io import read_surface
+
+    if not REAL_SURFACES.is_dir():
+        print(f"study: no real surfaces at {REAL_SURFACES}; the cap only", file=sys.stderr)
+        return []
+    roofs = []
+    for path in sorted(REAL_SURFACES.glob("*.ply")):
+        vertices, faces, flagged = read_surface(path)
+        if is_height_field(TriMesh(vertices=vertices, faces=faces, flagged=flagged)):
+            roofs.append(path)
+    return roofs
+
+
+def _cap_text() -> str:
+    return (ROOT / "templates" / "cap.toml").read_text(encoding="utf-8")
+
+
+def _section(text: str, name: str) -> tuple[int, int]:
+    """Line range [start, end) of the TOML table ``[name]`` (its header included)."""
+    lines = text.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.strip() == f"[{name}]")
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].lstrip().startswith("[")), len(lines))
+    return start, end
+
+
+def project_text(surface: Path | None, name: str, total_length_m: float) -> str:
+    """The study's project: the cap template with the surface (None: the cap itself) and its
+    flagged supports, no symmetry planes but the cap's, a total-length target (set per point) and no
+    coarsening for the joints (which would change L_tot)."""
+    lines = _cap_text().splitlines()
+    out = []
+    skip = None
+    for line in lines:
+        stripped = line.strip()
+        if stripped.startswith("["):
+            skip = None
+            if surface is not None and stripped in ("[surface]", "[surface.parameters]", "[[supports]]"):
+                skip = stripped
+                if stripped == "[surface]":
+                    out += ["[surface]", f"file = {json.dumps(str(surface.resolve()))}", "",
+                            "[[supports]]", 'select = "flagged"', 'restraint = "pinned"', ""]
+                continue
+            if stripped == "[remesh]":
+                out += ["[remesh]", f"total_length = {total_length_m}", "coarsen_for_joints = false", ""]
+                skip = stripped
+                continue
+        if skip is not None:
+            continue
+        if surface is not None and (stripped.startswith("symmetry_planes") or stripped.startswith("{ point")
+                                    or stripped == "]"):
+            continue
+        out.append(line)
+    text = "\n".join(out) + "\n"
+    text = re.sub(r'name = "cap"', f'name = {json.dumps(name)}', text, count=1)
+    text = re.sub(r'description = ".*"', 'description = "same-length study: the cap\'s loads, section and protocol"',
+                  text, count=1)
+    return text
+
+
+def length_levels(project: Path, cells: list[int]) -> list[float]:
+    """L_tot (m) of a regular hexagonal grid of about n cells over the surface's area, per n."""
+    from workflow.config import load_project
+    from workflow.stages.surface import build_surface
+
+    mesh, _ = build_surface(load_project(project))
+    area = float(mesh.face_areas.sum())
+    return [round(float(3 * n * np.sqrt(2 * area / (3 * np.sqrt(3) * n))), 1) for n in cells]
+
+
+def _toml_value(value) -> str:
+    return json.dumps(value)
+
+
+def write_sweep(folder: Path, project: Path, parameters: dict[str, list]) -> Path:
+    """OUT/SURFACE/QUESTION/NAME.toml: a sweep file of the contract."""
+    folder.mkdir(parents=True, exist_ok=True)
+    lines = [f"project = {json.dumps(os.path.relpath(project, folder))}", 'until = "analysis"', "", "[parameters]"]
+    for key, values in parameters.items():
+        lines.append(f"{json.dumps(key)} = [{', '.join(_toml_value(v) for v in values)}]")
+    path = folder / "sweep.toml"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def run_sweep(path: Path, workers: int | None) -> list[dict]:
+    """Run one sweep (a cached one only reads its manifests) and return its rows with the optimised
+    grid's size rank correlation and L_tot added."""
+    import pandas as pd
+
+    command = [*_gridshell(), "sweep", str(path), "--out", str(path.parent / "out"), "--quiet"]
+    if workers:
+        command += ["--workers", str(workers)]
+    started = time.perf_counter()
+    done = subprocess.run(command, capture_output=True, text=True, cwd=ROOT)
+    if done.returncode != 0:
+        raise RuntimeError(f"{path}: gridshell sweep exited {done.returncode}: {done.stderr.strip()[-400:]}")
+    print(f"  {path.parent.relative_to(path.parents[2])}: {time.perf_counter() - started:.0f} s", flush=True)
+    rows = pd.read_csv(path.parent / "out" / "sweep.csv").to_dict("records")
+    for row in rows:
+        folder = path.parent / "out" / str(row["folder"])
+        for stage, key, column in (("05-optimize/optimize.json", "after", "size_rank_correlation"),
+                                   ("04-remesh/remesh.json", None, "remesh_rank_correlation")):
+            row[column] = None
+            try:
+                data = json.loads((folder / stage).read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                continue
+            figures = data.get(key, data) if key else data
+            value = figures.get("size_rank_correlation") if isinstance(figures, dict) else None
+            row[column] = float(value) if isinstance(value, (int, float)) else None
+    return rows
+
+
+def questions_of(surface_dir: Path, project: Path, lengths: list[float], seeds: list[int],
+                 asked: list[str]) -> dict[str, dict[str, dict[str, list]]]:
+    """The sweeps of each question: {question: {sweep name: parameters}}."""
+    middle = lengths[len(lengths) // 2]
+    plans: dict[str, dict[str, dict[str, list]]] = {}
+    if "spacing" in asked:
+        plans["spacing"] = {
+            "voronoi": {"remesh.total_length": lengths, "remesh.grid": list(VORONOI), "remesh.seed": seeds},
+            "lattices": {"remesh.total_length": lengths, "remesh.grid": list(LATTICES)}}
+    if "statics" in asked:
+        plans["statics"] = {f"D{d:g}A{a:g}": {"remesh.total_length": [middle], "field.max_size_ratio": [d],
+                                              "field.max_aspect": [a], "remesh.seed": seeds} for d, a in PAIRS}
+        plans["statics"]["across"] = {"remesh.total_length": [middle], "field.orientation": ["across"],
+                                      "remesh.seed": seeds}
+    if "optimiser" in asked:
+        plans["optimiser"] = {
+            "none": {"remesh.total_length": [middle], "optimize.iterations": [0], "remesh.seed": seeds},
+            "added_beams": {"remesh.total_length": [middle], "optimize.planarise_cells": [True], "remesh.seed": seeds}}
+    if "rounds" in asked:
+        plans["rounds"] = {"rounds": {"remesh.total_length": [middle], "remesh.statics_rounds": [2, 3],
+                                      "remesh.seed": seeds}}
+    return plans
+
+
+def variant_of(question: str, sweep: str, row: dict) -> str:
+    """The name of a row's design in the tables."""
+    if sweep in ("voronoi", "lattices"):
+        return {"voronoi": "Voro(2,2)", "isotropic": "isotropic CVT", "quad": "quad 0", "quad45": "quad 45",
+                "triangular": "triangular", "statics_quad": "statics-aware quad"}[row["remesh.grid"]]
+    if sweep == "across":
+        return "Voro(2,2) across"
+    if sweep.startswith("D"):
+        return f"Voro({row['field.max_size_ratio']:g},{row['field.max_aspect']:g})"
+    if sweep == "none":
+        return "Voro(2,2) not optimised"
+    if sweep == "added_beams":
+        return "Voro(2,2) planar cells, added beams"
+    return f"Voro(2,2) {int(row['remesh.statics_rounds'])} rounds"
+
+
+def _median(values) -> float | None:
+    finite = [v for v in values if v is not None and np.isfinite(v)]
+    return float(np.median(finite)) if finite else None
+
+
+def summary(rows: list[dict]) -> list[dict]:
+    """One line per (surface, L_tot, design): medians over the seeds, the worst L_tot deviation."""
+    groups: dict[tuple, list[dict]] = {}
+    for row in rows:
+        groups.setdefault((row["surface"], row["remesh.total_length"], row["design"]), []).append(row)
+    lines = []
+    for (surface, length, design), members in groups.items():
+        ok = [m for m in members if m["status"] == "ok"]
+        deviation = [abs(m["total_beam_length_m"] / length - 1) for m in ok if m.get("total_beam_length_m")]
+        lines.append({"surface": surface, "L_tot_m": length, "design": design, "runs": len(members), "ok": len(ok),
+                      "lambda_NL_worst": _median(m["lambda_NL_worst"] for m in ok),
+                      "lambda_LB": _median(m["lambda_LB"] for m in ok),
+                      "delta_L_mm": _median(1e3 * m["delta_L_m"] for m in ok if m["delta_L_m"] is not None),
+                      "size_rank_correlation": _median(m["size_rank_correlation"] for m in ok),
+                      "L_tot_deviation": max(deviation) if deviation else None,
+                      "L_tot_median_m": _median(m.get("total_beam_length_m") for m in ok),
+                      "message": next((m["message"] for m in members if m["status"] != "ok"), "")})
+    return lines
+
+
+def _fmt(value, digits=2) -> str:
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return "-"
+    return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
+
+
+def markdown(lines: list[dict], question: str) -> str:
+    rows = [line for line in lines if line["question"] == question]
+    head = ("| surface | L_tot m | design | runs ok | lambda_NL worst | lambda_LB | delta_L mm | size rank corr. "
+            "| L_tot dev. % |")
+    out = [head, "|" + "---|" * 9]
+    for r in rows:
+        out.append(f"| {r['surface']} | {r['L_tot_m']:.0f} | {r['design']} | {r['ok']}/{r['runs']} | "
+                   f"{_fmt(r['lambda_NL_worst'])} | {_fmt(r['lambda_LB'])} | {_fmt(r['delta_L_mm'], 1)} | "
+                   f"{_fmt(r['size_rank_correlation'])} | "
+                   f"{_fmt(None if r['L_tot_deviation'] is None else 100 * r['L_tot_deviation'], 1)} |")
+    return "\n".join(out)
+
+
+#: The verdicts: each design's lambda_NL_worst over a reference design's at the same surface and L_tot.
+VERDICTS = (("Voro(2,2)", "quad 0"), ("Voro(2,2)", "quad 45"), ("Voro(2,2)", "isotropic CVT"),
+            ("statics-aware quad", "quad 0"), ("Voro(2,2)", "triangular"), ("Voro(1,2)", "isotropic CVT"),
+            ("Voro(2,1)", "isotropic CVT"), ("Voro(3,3)", "isotropic CVT"), ("Voro(2,2) across", "Voro(2,2)"),
+            ("Voro(2,2) not optimised", "Voro(2,2)"), ("Voro(2,2) planar cells, added beams", "Voro(2,2)"),
+            ("Voro(2,2) 2 rounds", "Voro(2,2)"), ("Voro(2,2) 3 rounds", "Voro(2,2)"))
+
+
+def verdicts(lines: list[dict]) -> str:
+    """Per pair of designs: at how many (surface, L_tot) the first's median lambda_NL_worst is
+    higher, the median and range of the ratio, the median ratio of the deflections under the
+    serviceability load (below 1: stiffer), and how far apart the two designs' median lengths
+    are at most (the study asks for 1 %: a pair beyond it is marked, and its ratio carries the
+    difference: lambda_NL grows about 1.5 to 2 times as fast as L_tot in the spacing study)."""
+    best = {(line["surface"], line["L_tot_m"], line["design"]): line for line in lines}
+    out = ["| design | against | higher at | ratio median | ratio range | deflection ratio median "
+           "| L_tot apart, at most |", "|---|---|---|---|---|---|---|"]
+    for design, reference in VERDICTS:
+        ratios, apart, deflections = [], [], []
+        for (surface, length, name), line in best.items():
+            other = best.get((surface, length, reference))
+            if name != design or other is None or not line["lambda_NL_worst"] or not other["lambda_NL_worst"]:
+                continue
+            ratios.append(line["lambda_NL_worst"] / other["lambda_NL_worst"])
+            if line["delta_L_mm"] and other["delta_L_mm"]:
+                deflections.append(line["delta_L_mm"] / other["delta_L_mm"])
+            if line["L_tot_median_m"] and other["L_tot_median_m"]:
+                apart.append(abs(line["L_tot_median_m"] / other["L_tot_median_m"] - 1))
+        if not ratios:
+            continue
+        higher = sum(r > 1 for r in ratios)
+        gap = f"{100 * max(apart):.1f} %" + (" (over 1 %)" if max(apart) > 0.01 else "") if apart else "-"
+        out.append(f"| {design} | {reference} | {higher} of {len(ratios)} | {np.median(ratios):.2f} | "
+                   f"{min(ratios):.2f}-{max(ratios):.2f} | "
+                   f"{_fmt(float(np.median(deflections)) if deflections else None)} | {gap} |")
+    return "\n".join(out)
+
+
+def plot_study(lines: list[dict], out: Path) -> list[Path]:
+    """OUT/spacing.png: lambda_NL_worst against L_tot per design, one panel per surface (medians over
+    the seeds, the seeds' range as a band); OUT/designs.png: each design's lambda_NL_worst over the
+    isotropic control's at the middle L_tot, per surface."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    written = []
+    spacing = [r for r in lines if r["question"] == "spacing"]
+    surfaces = sorted({r["surface"] for r in spacing})
+    if surfaces:
+        columns = min(3, len(surfaces))
+        rows = -(-len(surfaces) // columns)
+        figure, axes = plt.subplots(rows, columns, figsize=(4.2 * columns, 3.4 * rows), squeeze=False)
+        for ax, surface in zip(axes.ravel(), surfaces):
+            for design in sorted({r["design"] for r in spacing if r["surface"] == surface}):
+                points = sorted((r["L_tot_m"], r["lambda_NL_worst"]) for r in spacing
+                                if r["surface"] == surface and r["design"] == design and r["lambda_NL_worst"])
+                if points:
+                    x, y = zip(*points)
+                    ax.plot(x, y, marker="o", lw=2.2 if design == "Voro(2,2)" else 1.2, label=design)
+            ax.set_title(surface)
+            ax.set_xlabel("total beam length L_tot (m)")
+            ax.set_ylabel("worst non-linear load factor")
+            ax.grid(alpha=0.3)
+        for ax in axes.ravel()[len(surfaces):]:
+            ax.axis("off")
+        axes.ravel()[0].legend(fontsize=7)
+        figure.suptitle("Worst non-linear load factor at equal beam length\n(median of the seeds)", fontsize=10)
+        figure.tight_layout()
+        written.append(out / "spacing.png")
+        figure.savefig(written[-1], dpi=110)
+        plt.close(figure)
+    others = [r for r in lines if r["question"] in ("statics", "optimiser", "rounds")]
+    if others:
+        control = {(r["surface"], r["L_tot_m"]): r["lambda_NL_worst"] for r in lines
+                   if r["design"] == "isotropic CVT" and r["lambda_NL_worst"]}
+        order = [v[0] for v in VERDICTS] + [r["design"] for r in others]
+        designs = [d for d in dict.fromkeys(order) if d != "isotropic CVT" and any(r["design"] == d for r in others)]
+        surfaces = sorted({r["surface"] for r in others})
+        figure, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(designs) + 2), 4.2))
+        width = 0.8 / max(len(surfaces), 1)
+        for k, surface in enumerate(surfaces):
+            ratios = []
+            for design in designs:
+                match = [r["lambda_NL_worst"] / control[(surface, r["L_tot_m"])] for r in others
+                         if r["surface"] == surface and r["design"] == design and r["lambda_NL_worst"]
+                         and control.get((surface, r["L_tot_m"]))]
+                ratios.append(match[0] if match else np.nan)
+            ax.bar(np.arange(len(designs)) + (k - (len(surfaces) - 1) / 2) * width, ratios, width, label=surface)
+        ax.axhline(1.0, color="k", lw=0.8)
+        ax.set_xticks(np.arange(len(designs)), designs, rotation=35, ha="right", fontsize=8)
+        ax.set_ylabel("lambda_NL worst / isotropic CVT's")
+        ax.set_title("Voronoi designs against the isotropic CVT of the same length (middle L_tot)", fontsize=10)
+        ax.legend(fontsize=7)
+        figure.tight_layout()
+        written.append(out / "designs.png")
+        figure.savefig(written[-1], dpi=110)
+        plt.close(figure)
+    return written
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--surfaces", help="comma list of names (cap and shared roof stems); default: all")
+    parser.add_argument("--cells", default="40,80,160", help="hexagonal cell counts that set the L_tot levels")
+    parser.add_argument("--seeds", default="0,1,2")
+    parser.add_argument("--questions", default=",".join(QUESTIONS))
+    parser.add_argument("--workers", type=int, default=None, help="sweep workers (default: the cores)")
+    parser.add_argument("--out", default=str(ROOT / "out" / "study"))
+    args = parser.parse_args(argv)
+    import pandas as pd
+
+    out = Path(args.out).resolve()
+    cells = [int(c) for c in args.cells.split(",")]
+    seeds = [int(s) for s in args.seeds.split(",")]
+    asked = [q for q in args.questions.split(",") if q]
+    unknown = sorted(set(asked) - set(QUESTIONS))
+    if unknown:
+        parser.error(f"--questions: unknown {unknown}; choose from {QUESTIONS}")
+    surfaces: list[tuple[str, Path | None]] = [("cap", None)] + [(p.stem, p) for p in height_field_roofs()]
+    if args.surfaces:
+        wanted = args.surfaces.split(",")
+        surfaces = [s for s in surfaces if s[0] in wanted]
+    rows: list[dict] = []
+    started = time.perf_counter()
+    for name, path in surfaces:
+        folder = out / name
+        folder.mkdir(parents=True, exist_ok=True)
+        project = folder / "project.toml"
+        project.write_text(project_text(path, name, 1.0), encoding="utf-8")
+        lengths = length_levels(project, cells)
+        project.write_text(project_text(path, name, lengths[len(lengths) // 2]), encoding="utf-8")
+        print(f"{name}: L_tot {lengths} m", flush=True)
+        for question, sweeps in questions_of(folder, project, lengths, seeds, asked).items():
+            for sweep, parameters in sweeps.items():
+                sweep_file = write_sweep(folder / question / sweep, project, parameters)
+                try:
+                    found = run_sweep(sweep_file, args.workers)
+                except RuntimeError as error:
+                    print(f"  {error}", flush=True)
+                    found = [{"status": "failed", "message": str(error), **{k: v[0] for k, v in parameters.items()}}]
+                for row in found:
+                    row.update(surface=name, question=question, sweep=sweep, design=variant_of(question, sweep, row))
+                    rows.append(row)
+    frame = pd.DataFrame(rows)
+    frame.to_csv(out / "study.csv", index=False)
+    lines = []
+    for question in asked:
+        members = [r for r in rows if r["question"] == question]
+        if question != "spacing":  # the default design and the control at the same L_tot come from spacing
+            lengths = {(r["surface"], r["remesh.total_length"]) for r in members}
+            members += [dict(r, question=question) for r in rows
+                        if r["question"] == "spacing" and r["sweep"] == "voronoi"
+                        and (r["surface"], r["remesh.total_length"]) in lengths]
+        for line in summary(members):
+            lines.append(dict(line, question=question))
+    lines.sort(key=lambda r: (r["question"], r["surface"], r["L_tot_m"], r["design"]))
+    unique = {(r["surface"], r["L_tot_m"], r["design"]): r for r in lines}  # the shared rows once
+    text = "### verdicts (median over the seeds of lambda_NL_worst)\n\n" + verdicts(list(unique.values()))
+    text += "\n\n" + "\n\n".join(f"### {q}\n\n{markdown(lines, q)}" for q in asked)
+    (out / "study.md").write_text(text + "\n", encoding="utf-8")
+    pd.DataFrame(lines).to_csv(out / "study_summary.csv", index=False)
+    for path in plot_study(lines, out):
+        print(f"plot: {path}")
+    print(text)
+    print(f"\n{len(rows)} points, {sum(r.get('status') == 'ok' for r in rows)} ok, "
+          f"{time.perf_counter() - started:.0f} s; {out / 'study.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
