@@ -25,11 +25,24 @@ __all__ = ["TEMPLATES", "MockupResult", "mockup", "cap", "vault", "hypar", "cour
 
 TEMPLATES = ("mockup", "cap", "vault", "hypar", "courtyard")
 
+#: The most triangles a template builds: twice the 100k-triangle shell of benchmarks/shell_scaling.py.
+#: Beyond it a mistyped parameter (divisions = 1_000, length = 1e9) would fill the memory before any check.
+MAX_TEMPLATE_TRIANGLES = 200_000
+
 
 def _positive(**values: float) -> None:
     for key, value in values.items():
-        if not value > 0:
-            raise InputError(f"surface parameter {key} = {value!r} must be positive")
+        if not 0 < value < np.inf:
+            raise InputError(f"surface parameter {key} = {value!r} must be positive and finite")
+
+
+def _not_too_fine(n_triangles: int, *parameters: str) -> None:
+    """Refuse parameters that would build more than MAX_TEMPLATE_TRIANGLES triangles, naming them."""
+    if n_triangles > MAX_TEMPLATE_TRIANGLES:
+        names = parameters[0] if len(parameters) == 1 else f"{', '.join(parameters[:-1])} and {parameters[-1]}"
+        raise InputError(f"the surface parameters ({names}) give a template mesh of {n_triangles:,} triangles, "
+                         f"more than the {MAX_TEMPLATE_TRIANGLES:,} a template builds",
+                         hint=f"lower surface.parameters.{parameters[0]}, or give the surface as a mesh file")
 
 
 def grid_triangles(nx: int, ny: int, mask: np.ndarray | None = None) -> np.ndarray:
@@ -78,6 +91,7 @@ def mockup(*, span: float = 2.4, rise: float = 0.45, divisions: int = 24,
     _positive(span=span, rise=rise, load_per_area=load_per_area)
     if divisions < 4 or divisions % 2:
         raise InputError(f"surface parameter divisions = {divisions} must be an even number >= 4")
+    _not_too_fine(2 * divisions**2, "divisions")
     nodes = _plan_grid(span, span, divisions, divisions)
     triangles = grid_triangles(divisions, divisions)
     n = divisions + 1
@@ -104,6 +118,7 @@ def cap(*, span: float = 20.0, span_to_rise: float = 21.43, rings: int = 12) -> 
     _positive(span=span, span_to_rise=span_to_rise)
     if rings < 2:
         raise InputError(f"surface parameter rings = {rings} must be >= 2")
+    _not_too_fine(6 * rings**2, "rings")
     radius_plan = span / 2
     rise = span / span_to_rise
     sphere = (radius_plan**2 + rise**2) / (2 * rise)
@@ -129,7 +144,8 @@ def vault(*, span: float = 10.0, length: float = 15.0, rise: float = 3.0, divisi
     radius = (span**2 / 4 + rise**2) / (2 * rise)
     half_angle = np.arcsin(span / (2 * radius))
     n_arc = divisions
-    n_len = max(2, int(round(divisions * length / span / 2)) * 2)
+    n_len = max(2, int(round(min(divisions * length / span / 2, MAX_TEMPLATE_TRIANGLES))) * 2)
+    _not_too_fine(2 * n_len * n_arc, "divisions", "length", "span")
     s, t = np.meshgrid(np.linspace(-length / 2, length / 2, n_len + 1),
                        np.linspace(-half_angle, half_angle, n_arc + 1), indexing="ij")
     nodes = np.stack([s.ravel(), radius * np.sin(t.ravel()), radius * np.cos(t.ravel()) - (radius - rise)], 1)
@@ -142,6 +158,7 @@ def hypar(*, span: float = 10.0, rise: float = 2.0, divisions: int = 20) -> TriM
     _positive(span=span, rise=rise)
     if divisions < 2:
         raise InputError(f"surface parameter divisions = {divisions} must be >= 2")
+    _not_too_fine(2 * divisions**2, "divisions")
     nodes = _plan_grid(span, span, divisions, divisions)
     nodes[:, 2] = rise * (2 * nodes[:, 0] / span) * (2 * nodes[:, 1] / span)
     mesh, _ = clean_mesh(nodes, grid_triangles(divisions, divisions), name="hypar")
@@ -159,7 +176,8 @@ def courtyard(*, length: float = 30.0, width: float = 20.0, opening_length: floa
     if opening_length >= length or opening_width >= width:
         raise InputError("the courtyard opening must be smaller than the roof")
     nx = max(6, divisions)
-    ny = max(6, int(round(nx * width / length)))
+    ny = max(6, int(round(min(nx * width / length, MAX_TEMPLATE_TRIANGLES))))
+    _not_too_fine(2 * nx * ny, "divisions", "width", "length")
     xs = np.unique(np.concatenate([np.linspace(-length / 2, length / 2, nx + 1),
                                    [-opening_length / 2, opening_length / 2]]))
     ys = np.unique(np.concatenate([np.linspace(-width / 2, width / 2, ny + 1),

@@ -75,6 +75,7 @@ def mutated_projects(draw) -> str:
 @settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(text=mutated_projects())
 @example(text='[surface]\ntemplate = "vault"\n[surface.parameters]\ndivisions = -1\n')  # found by this test
+@example(text='[surface]\ntemplate = "vault"\n[surface.parameters]\ndivisions = 1_000\n')  # found by this test: 24 GB
 def test_a_mutated_project_is_valid_or_one_message(tmp_path_factory, text):
     folder = tmp_path_factory.mktemp("project")
     (folder / "project.toml").write_text(text, encoding="utf-8")

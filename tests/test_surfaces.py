@@ -218,3 +218,21 @@ def test_bad_template_parameters():
         parametric.cap(span=-1)
     with pytest.raises(InputError, match="divisions"):
         parametric.mockup(divisions=5)
+    for name in ("mockup", "cap", "vault", "hypar", "courtyard"):  # inf passed "> 0" and reached Delaunay as NaN
+        with pytest.raises(InputError, match="rise.*positive and finite"):
+            getattr(parametric, name)(rise=float("inf")) if name != "cap" else parametric.cap(span_to_rise=np.inf)
+
+
+@pytest.mark.parametrize("name, fine", [("mockup", {"divisions": 1000}), ("cap", {"rings": 400}),
+                                        ("vault", {"divisions": 1000}), ("vault", {"length": 1e9}),
+                                        ("hypar", {"divisions": 1000}), ("courtyard", {"divisions": 1000})])
+def test_a_template_refuses_parameters_that_would_fill_the_memory(name, fine):
+    """A mistyped parameter (divisions = 1_000, a length of 1e9 m) is refused by the triangle count it
+    would build, before any array is made: the refusal names the parameter and the count, which is
+    the mesh's own (2 per grid bay, 6 k per cap ring k summed)."""
+    with pytest.raises(InputError, match=f"{next(iter(fine))}.*triangles") as refused:
+        getattr(parametric, name)(**fine)
+    assert refused.value.hint.startswith("lower surface.parameters.")
+    # just under the bound the same template builds, with the count the check predicted
+    assert len(parametric.hypar(divisions=316).faces) == 2 * 316**2 <= parametric.MAX_TEMPLATE_TRIANGLES
+    assert len(parametric.cap(rings=20).faces) == 6 * 20**2
