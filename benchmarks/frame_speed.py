@@ -26,7 +26,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from engine import beam_elements  # noqa: E402
 from engine import frame as frame_module  # noqa: E402
+from engine.corotational import PathSettings  # noqa: E402
 from engine.frame import FrameModel  # noqa: E402
 from engine.supports import Supports  # noqa: E402
 
@@ -94,12 +96,12 @@ def _assembly_seconds(frame: FrameModel) -> float:
     """Element kernels (local stiffness, transformation) and the sparse global stiffness, ours."""
     from engine.linalg import congruent
 
-    f = frame_module
+    b = beam_elements
     start = time.perf_counter()
-    el = f._elements(frame)
-    lengths, rotations = f._geometry(el, el.nodes)
-    T = f._transformation(rotations)
-    f._assemble(congruent(T, f._local_stiffness(lengths, el)), f._dofs(el.connectivity), 6 * len(el.nodes))
+    el = b.element_mesh(frame)
+    lengths, rotations = b.element_geometry(el, el.nodes)
+    T = b.transformation(rotations)
+    b.assemble(congruent(T, b.local_stiffness(lengths, el)), b.element_dofs(el.connectivity), 6 * len(el.nodes))
     return time.perf_counter() - start
 
 
@@ -113,7 +115,7 @@ def _pyfe3d_seconds(frame: FrameModel) -> str:
         return "pyfe3d: not importable"
     import scipy.sparse as sp
 
-    el = frame_module._elements(frame)
+    el = beam_elements.element_mesh(frame)
     start = time.perf_counter()
     prop = BeamProp()
     prop.A, prop.E, prop.G = float(el.A[0]), float(el.E[0]), float(el.G[0])
@@ -181,7 +183,7 @@ def _opensees_model(ops, frame: FrameModel, supports: Supports, loads: np.ndarra
     """Our element mesh in OpenSees (the beams' internal nodes included): elasticBeamColumn
     elements with the given geometric transformation, local x-z plane through our ``up`` vector,
     the vertical nodal loads in a linear pattern, UmfPack."""
-    el = frame_module._elements(frame)
+    el = beam_elements.element_mesh(frame)
     ops.wipe()
     ops.model("basic", "-ndm", 3, "-ndf", 6)
     for k, p in enumerate(el.nodes):
@@ -303,6 +305,8 @@ def main() -> int:
     parser.add_argument("--path-nodes", type=int, default=300,
                         help="model size for the non-linear path beside OpenSees's (0: none)")
     parser.add_argument("--no-peers", action="store_true")
+    parser.add_argument("--full-newton", action="store_true",
+                        help="also follow the path with a factor at every corrector iteration, for comparison")
     args = parser.parse_args()
     frame, supports, loads = model(args.nodes, args.elements_per_beam)
     n_all = len(frame.nodes) + len(frame.beams) * (args.elements_per_beam - 1)
@@ -322,18 +326,22 @@ def main() -> int:
     print(f"10 buckling modes  {t_buckling:7.2f} s   lambda_1..3 = {np.round(buckling.factors[:3], 3).tolist()}")
     print(f"linear + 10 modes  {t_linear + t_buckling:7.2f} s   (target < 10 s)")
     control = int(np.argmax(np.abs(linear.displacements[:, 2])))
-    if args.steps > 0:
+    # the path with the corrector reusing its factor (the default), then with a factor at every
+    # iteration (full Newton, the scheme before 2026-12-03) as the reference in the same run
+    for label, reuse in [("non-linear path", True), ("  full Newton", False)][:2 if args.full_newton else 1]:
+        if args.steps <= 0:
+            break
         start = time.perf_counter()
-        run = frame_module.nonlinear_static(frame, supports, loads, control=(control, 2), max_load_factor=1e9,
-                                            max_steps=args.steps)
+        run = frame_module.nonlinear_static(frame, supports, loads, control=(control, 2), settings=PathSettings(
+            max_load_factor=1e9, max_steps=args.steps, reuse_factor=reuse))
         t_nonlinear = time.perf_counter() - start
-        limit = None if run.limit_load_factor is None else round(run.limit_load_factor, 3)
+        limit = None if run.limit_load_factor is None else round(run.limit_load_factor, 4)
         negative = np.flatnonzero(run.negative_pivots > 0)
         pivots = (f"first negative pivot at load factor {run.path[negative[0], 0]:.3f}" if len(negative)
                   else "no negative pivot")
-        print(f"non-linear path    {t_nonlinear:7.2f} s   {len(run.path) - 1} steps ({int(run.iterations.sum())} "
-              f"iterations), largest load factor {run.path[:, 0].max():.3f}, limit {limit}, {pivots}, "
-              f"converged {run.converged}")
+        print(f"{label:<18} {t_nonlinear:7.2f} s   {len(run.path) - 1} steps ({int(run.iterations.sum())} "
+              f"iterations, {run.factorisations} factorisations), largest load factor {run.path[:, 0].max():.3f}, "
+              f"limit {limit}, {pivots}, converged {run.converged}")
     print(f"peak memory        {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:7.0f} MiB")
     if not args.no_peers:
         pynite_nodes = args.nodes if args.pynite_nodes is None else args.pynite_nodes

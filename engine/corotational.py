@@ -45,7 +45,8 @@ class NonlinearResult:
     tangent stiffness at each point of the path (0 while stable; one more past a limit point or a
     bifurcation); displacements (n,6) at the limit point (or the last step); converged: False when
     a step failed to converge even at 1/256 of its arc; load_factors (s,); iterations (s,): Newton
-    iterations of each step; monitored (s, k): the ``monitor`` DOFs along the path."""
+    iterations of each step; monitored (s, k): the ``monitor`` DOFs along the path; factorisations:
+    how many tangent stiffnesses were factored along the whole path (the dead load's included)."""
 
     path: np.ndarray
     limit_load_factor: float | None
@@ -55,6 +56,7 @@ class NonlinearResult:
     load_factors: np.ndarray = field(default_factory=lambda: np.zeros(0))
     iterations: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     monitored: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    factorisations: int = 0
 
 
 
@@ -200,12 +202,17 @@ def _update(x: np.ndarray, triads: np.ndarray, du: np.ndarray) -> tuple[np.ndarr
 class PathSettings:
     """Where the path stops and how closely it is followed: at ``max_load_factor``, after
     ``max_steps`` steps, or ``steps_past_limit`` steps past the first limit point; ``tolerance``:
-    the residual norm relative to the norm of the applied load."""
+    the residual norm relative to the norm of the applied load. ``reuse_factor``: the corrector
+    iterates on the last factored tangent while each iteration at least halves the residual
+    (modified Newton, refactored where it does not), instead of factoring at every iteration (full
+    Newton, False); both converge to the same equilibria, the first with a fraction of the
+    factorisations."""
 
     max_load_factor: float = 10.0
     max_steps: int = 80
     tolerance: float = 1e-5
     steps_past_limit: int = 3
+    reuse_factor: bool = True
 
 
 def nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *, control: tuple[int, int],
@@ -230,7 +237,8 @@ def nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *
     factor is found within a small step. ``tolerance``: residual norm relative to the norm of
     the applied load. ``negative_pivots`` tells a limit point (a pivot turns negative at the
     maximum) from a bifurcation (pivots turn negative while the load still rises). ``settings``
-    (PathSettings), when given, replaces the four stopping and tolerance keywords.
+    (PathSettings), when given, replaces the four stopping and tolerance keywords and sets whether
+    the corrector reuses the factored tangent (by default it does).
     """
     if settings is None:
         settings = PathSettings(max_load_factor=max_load_factor, max_steps=max_steps, tolerance=tolerance,
@@ -251,6 +259,13 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
         raise InputError(f"frame: control ({node}, {dof}) must be a node 0..{n - 1} and a DOF 0..5")
     cr = _Corotational(model, supports)
     free = cr.free
+    factored = 0
+
+    def factor(cache):
+        """The factored tangent at an element state, or None where it is singular."""
+        nonlocal factored
+        factored += 1
+        return factor_or_none(cr.tangent(cache), cr.el, free)
     F_ref = np.zeros(6 * cr.n_all)
     F_ref[:6 * n] = loads.ravel()
     F_dead = np.zeros(6 * cr.n_all)
@@ -275,7 +290,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             r = target - f_int
             if np.linalg.norm(r[free]) < tolerance * scale:
                 return x, triads
-            lu = factor_or_none(cr.tangent(cache), cr.el, free)
+            lu = factor(cache)
             if lu is None:
                 return None
             du = np.zeros(6 * cr.n_all)
@@ -293,6 +308,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     # first step size from a linear prediction reaching about max_load_factor / 20
     _, cache = residual(x, triads, 0.0)
     lu = factor_free_stiffness(cr.tangent(cache), cr.el, free)
+    factored += 1
     u_ref = np.zeros(6 * cr.n_all)
     u_ref[free] = lu.solve(F_ref[free])
     arc = float(np.linalg.norm(u_ref[free]) * min(max_load_factor, 10.0) / 20.0)
@@ -308,7 +324,6 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     pivots = [0]
     factors = [0.0]
     iterations = [0]
-    desired_iterations = 5
     refinements, arc_cap = 0, np.inf      # steps redone shorter near a critical point (at most 3)
     previous: np.ndarray | None = None
     limit = None
@@ -323,6 +338,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
         except RuntimeError:
             converged_all = False
             break
+        factored += 1
         pivots[-1] = negatives                               # pivots of the tangent at this state
         du_f = np.zeros(6 * cr.n_all)
         du_f[free] = lu.solve(F_ref[free])
@@ -352,23 +368,43 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             lam_try += d_lam
             ok = False
             correction_norm = np.inf
-            for _iteration in range(25):
+            # modified Newton: the step's factor (with its solve for the reference load) serves
+            # the corrector while each iteration at least halves the residual, refreshed at the
+            # current state after 8 uses. Where an iteration does not halve it (a strongly
+            # non-linear step: Lee's frame, a cantilever rolled up by an end moment), the corrector
+            # starts again from the prediction as full Newton, a factor at every iteration: the
+            # scheme throughout with reuse_factor off.
+            full = not settings.reuse_factor
+            lu_i, df = (None, None) if full else (lu, du_f)
+            predicted = (x_try, t_try, lam_try, total)
+            first: tuple | None = None
+            last_error, reused, restarted_at = np.inf, 0, 0
+            for _iteration in range(25 if full else 40):
                 r, cache = residual(x_try, t_try, lam_try)
                 # relative to the load applied now; a tiny last correction also ends the iterations
                 # when round-off (very stiff short elements) keeps the residual above the tolerance
                 applied = max(float(np.linalg.norm(F_dead[free] + lam_try * F_ref[free])), 1e-12 * scale)
-                error = np.linalg.norm(r[free]) / applied
+                error = float(np.linalg.norm(r[free])) / applied
                 if error < tolerance or (error < 1e3 * tolerance
                                          and correction_norm < 1e-10 * np.linalg.norm(total[free])):
                     ok = True
                     break
-                lu_i = factor_or_none(cr.tangent(cache), cr.el, free)
-                if lu_i is None:
-                    break
+                if first is None:
+                    first = (r, cache, error)
+                elif not full and error > 0.5 * last_error:
+                    x_try, t_try, lam_try, total = predicted
+                    r, cache, error = first
+                    full, correction_norm, restarted_at = True, np.inf, _iteration
+                if full or lu_i is None or df is None or reused >= 8:
+                    lu_i = factor(cache)
+                    if lu_i is None:
+                        break
+                    df = np.zeros(6 * cr.n_all)
+                    df[free] = lu_i.solve(F_ref[free])
+                    reused = 0
+                last_error, reused = float(error), reused + 1
                 dr = np.zeros(6 * cr.n_all)
-                df = np.zeros(6 * cr.n_all)
                 dr[free] = lu_i.solve(r[free])
-                df[free] = lu_i.solve(F_ref[free])
                 # cylindrical constraint |total + dr + dl df| = arc
                 a = df[free] @ df[free]
                 b = 2 * df[free] @ (total[free] + dr[free])
@@ -416,8 +452,10 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
         pivots.append(negatives)                             # provisional: set at the next step
         factors.append(lam)
         iterations.append(_iteration)
-        # automatic step size: aim at about `desired` corrector iterations per step
-        arc = min(arc * float(np.clip(np.sqrt(desired_iterations / max(_iteration, 1)), 0.5, 2.0)), arc_cap)
+        # automatic step size: aim at about 5 full Newton iterations per step, or 7 on a reused
+        # factor (they converge linearly), counted from the corrector's restart where it had one
+        desired = 5 if full else 7
+        arc = min(arc * float(np.clip(np.sqrt(desired / max(_iteration - restarted_at, 1)), 0.5, 2.0)), arc_cap)
         if limit is not None:
             past += 1
             if past >= steps_past_limit:
@@ -427,10 +465,11 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     if len(path) > 1:                                        # pivots of the final state
         try:
             pivots[-1] = factor_with_inertia(cr.tangent(residual(x, triads, lam)[1]), cr.el, free)[1]
+            factored += 1
         except RuntimeError:
             pass
-    log.info("non-linear path: %d steps, %d Newton iterations, load factor %.4g, limit %s%s", len(path) - 1,
-             int(np.sum(iterations)), lam, "none" if limit is None else f"{limit:.4g}",
+    log.info("non-linear path: %d steps, %d Newton iterations, %d factorisations, load factor %.4g, limit %s%s",
+             len(path) - 1, int(np.sum(iterations)), factored, lam, "none" if limit is None else f"{limit:.4g}",
              "" if converged_all else ", a step did not converge")
     if limit_state is None:
         limit_state = (x, triads)
@@ -440,5 +479,5 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     displacements[:, 3:] = _rotation_vectors(lt)
     return NonlinearResult(path=np.array(path), limit_load_factor=limit, negative_pivots=np.array(pivots),
                            displacements=displacements[:n], converged=converged_all, load_factors=np.array(factors),
-                           iterations=np.array(iterations),
+                           iterations=np.array(iterations), factorisations=factored,
                            monitored=np.array(monitored, dtype=float).reshape(len(path), len(watch)))
