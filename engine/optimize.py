@@ -53,6 +53,7 @@ closeness limit undoes part of their planarity.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Callable
 
@@ -69,6 +70,8 @@ from .planarise import PlanariseSettings, planarise
 from .projections import face_corners, lengthen_short_beams, open_narrow_corners
 from .proximity import closest_point_on_triangles
 from .symmetry import PARTNER_REACH, mirror_partners, symmetrise_points
+
+log = logging.getLogger(__name__)
 
 __all__ = ["OptimizeSettings", "OptimizeResult", "optimize", "regular_targets", "planar_targets",
            "optimize_quality", "grid_quality", "lengthen_short_beams"]
@@ -700,6 +703,7 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
         return x
 
     step, done, accepted, rejected = 0.0, 0, 0, 0
+    stopped_non_finite = False
     first_final = next((i for i, (t, f) in enumerate(plan) if f == 0.0 and t == FINAL_PLANARITY), len(plan))
     history_g: list[np.ndarray] = []
     history_f: list[np.ndarray] = []
@@ -731,6 +735,13 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
             del history_g[:-ANDERSON_DEPTH - 1], history_f[:-ANDERSON_DEPTH - 1]
             previous_energy, previous_plain = energy, plain
         new = symmetric(hold_limits(new))
+        if not np.all(np.isfinite(new)):
+            # a step that left the reals (seen once under symmetry planes, never reproduced): the
+            # iterations end at the last finite grid, and the quality says so
+            log.warning("optimize: iteration %d gave non-finite nodes; kept the grid of iteration %d",
+                        iteration + 1, done)
+            stopped_non_finite = True
+            break
         step = float(np.linalg.norm(new - x, axis=1).max())
         x = new
         done = iteration + 1
@@ -740,7 +751,11 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
         x = previous_plain  # never end on an accelerated point that raised the energy
     if done:
         for _ in range(FINAL_HOLD_ROUNDS):  # the limits once more, to convergence of the sweeps
-            x = symmetric(hold_limits(x, sweeps=10))
+            held = symmetric(hold_limits(x, sweeps=10))
+            if not np.all(np.isfinite(held)):
+                stopped_non_finite = True
+                break
+            x = held
     end = {"steps": 0, "rejected_steps": 0, "factorisations": 0, "planarity_weight": 0.0, "reached": False}
     repair_splits = 0
     ran_end_game = planar_panels and settings.planarity_iterations > 0
@@ -763,10 +778,16 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
             if progress is not None:
                 progress(f"optimize: planarity step {base + steps}", None)
 
-        x, report = planarise(x, groups, interior=interior, sliding=sliding, closest=surface.closest_normals,
-                              slide=boundary.closest, centering=C, regular=regular, beams=polymesh.edges,
-                              settings=end_settings, reference=given.nodes, progress=said)
-        x = symmetric(x)
+        planarised, report = planarise(x, groups, interior=interior, sliding=sliding,
+                                       closest=surface.closest_normals, slide=boundary.closest, centering=C,
+                                       regular=regular, beams=polymesh.edges, settings=end_settings,
+                                       reference=given.nodes, progress=said)
+        planarised = symmetric(planarised)
+        if not np.all(np.isfinite(planarised)):
+            log.warning("optimize: the planarity end game gave non-finite nodes; kept the grid before it")
+            stopped_non_finite = True
+            break
+        x = planarised
         factorisations += report.factorisations
         for key, value in (("steps", report.iterations), ("rejected_steps", report.rejected_steps),
                            ("factorisations", report.factorisations)):
@@ -786,8 +807,13 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
     if done:
         # the closeness band is a soft constraint: bring stray nodes back within the hard limit
         moving = interior | sliding
-        x[moving] = _into_band(x[moving], *surface.closest(x[moving]), CLOSENESS_LIMIT * surface.diagonal)
-        x = symmetric(x)
+        banded = x.copy()
+        banded[moving] = _into_band(x[moving], *surface.closest(x[moving]), CLOSENESS_LIMIT * surface.diagonal)
+        banded = symmetric(banded)
+        if np.all(np.isfinite(banded)):
+            x = banded
+        else:
+            stopped_non_finite = True
 
     result = polymesh.replace_nodes(x)
     before = grid_quality(given, mesh, field, figures=before)
@@ -802,5 +828,6 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
                "planarity_reached": bool(after["planarity_max_rel"] <= settings.planarity_tolerance),
                "corner_splits": corner_splits, "edge_splits": edge_splits, "repair_splits": repair_splits,
                "split_beams": new_beams.tolist(), "split_length_m": split_length, "grading": grading_record,
+               "stopped_non_finite": stopped_non_finite,
                "end_game": end if ran_end_game else None}
     return OptimizeResult(polymesh=result, quality=quality)

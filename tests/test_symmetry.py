@@ -131,3 +131,34 @@ def test_symmetric_grid_keeps_valence_three(tmp_path, template, n_cells):
         assert _interior_valence3_share(grid) >= 0.95, folder
         for normal in normals:
             assert _deviation(grid.nodes, grid.beam_lengths, normal) <= TOLERANCE, (folder, normal)
+
+
+@pytest.mark.parametrize("bad_call", [3, 25])
+def test_a_step_that_leaves_the_reals_ends_the_optimisation_at_the_last_finite_grid(monkeypatch, bad_call):
+    """A symmetrisation that returns NaN (at the 3rd call, in the iterations; at the 25th, past
+    them) does not reach the grid: the optimiser keeps the last finite nodes, the quality says it
+    stopped, and the optimize stage's test for an unsettled symmetric run sees it."""
+    import engine.optimize as optimize_module
+    from workflow.stages.optimize import _unsettled
+
+    mesh, field = _mirrored_height_field()
+    plane = ((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
+    grid = remesh(mesh, field, RemeshSettings(n_cells=30, symmetry_planes=(plane,))).polymesh
+    real = optimize_module.symmetrise_points
+    calls = {"n": 0}
+
+    def failing(*args, **kwargs):
+        calls["n"] += 1
+        x = real(*args, **kwargs)
+        if calls["n"] == bad_call:
+            x[0] = np.nan
+        return x
+
+    monkeypatch.setattr(optimize_module, "symmetrise_points", failing)
+    result = optimize(grid, mesh, field, OptimizeSettings(iterations=20, symmetry_planes=(plane,)))
+    assert calls["n"] >= bad_call
+    assert np.all(np.isfinite(result.polymesh.nodes))
+    assert result.quality["stopped_non_finite"] and _unsettled(result)
+    monkeypatch.setattr(optimize_module, "symmetrise_points", real)
+    clean = optimize(grid, mesh, field, OptimizeSettings(iterations=20, symmetry_planes=(plane,)))
+    assert not clean.quality["stopped_non_finite"] and not _unsettled(clean)

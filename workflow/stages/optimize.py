@@ -92,6 +92,12 @@ def beam_length_limits(project: Project):
     return lambda grid: MIN_LENGTH_MARGIN * required_beam_lengths_m(grid, limits)
 
 
+def _unsettled(result: OptimizeResult) -> bool:
+    """Whether an optimisation under symmetry planes stopped at a step that left the reals (the
+    engine then keeps the last finite grid) or, before the engine checked that, ended non-finite."""
+    return bool(result.quality.get("stopped_non_finite")) or not np.all(np.isfinite(result.polymesh.nodes))
+
+
 def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: Project,
         ctx: StageContext) -> OptimizedGrid:
     grid = GridKind(project.remesh.grid)
@@ -106,7 +112,7 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
     settings = optimize_settings(project)
     limits = beam_length_limits(project)
     result = optimize(polymesh, surface.mesh, field, settings, progress=ctx.step, beam_length_limits=limits)
-    if settings.symmetry_planes and not np.all(np.isfinite(result.polymesh.nodes)):
+    if settings.symmetry_planes and _unsettled(result):
         # the mirror pairs did not settle: optimised without keeping the symmetry (optimize.json's
         # symmetry record measures what is left of it)
         ctx.step("the symmetric optimisation did not settle: optimising without the symmetry planes")
@@ -143,8 +149,11 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
         """``result`` with ``grid`` (after ``record``'s collapses and flips) optimised again."""
         ctx.step(f"{record['collapsed_beams']} short beams collapsed, {record['flipped_beams']} flipped: "
                  f"optimising {when}")
-        again = optimize(grid, surface.mesh, field, dataclasses.replace(settings, split_cells=False),
-                         progress=ctx.step, beam_length_limits=limits)
+        again_settings = dataclasses.replace(settings, split_cells=False)
+        again = optimize(grid, surface.mesh, field, again_settings, progress=ctx.step, beam_length_limits=limits)
+        if again_settings.symmetry_planes and _unsettled(again):
+            again = optimize(grid, surface.mesh, field, dataclasses.replace(again_settings, symmetry_planes=()),
+                             progress=ctx.step, beam_length_limits=limits)
         return dataclasses.replace(result, polymesh=again.polymesh, quality={
             **again.quality, "before": result.quality["before"], "grading": result.quality.get("grading")})
 
