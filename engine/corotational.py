@@ -389,6 +389,8 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
                                          and correction_norm < 1e-10 * np.linalg.norm(total[free])):
                     ok = True
                     break
+                if full and _iteration - restarted_at >= 25:          # as many as full Newton takes
+                    break
                 if first is None:
                     first = (r, cache, error)
                 elif not full and error > 0.5 * last_error:
@@ -452,10 +454,10 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
         pivots.append(negatives)                             # provisional: set at the next step
         factors.append(lam)
         iterations.append(_iteration)
-        # automatic step size: aim at about 5 full Newton iterations per step, or 7 on a reused
-        # factor (they converge linearly), counted from the corrector's restart where it had one
-        desired = 5 if full else 7
-        arc = min(arc * float(np.clip(np.sqrt(desired / max(_iteration - restarted_at, 1)), 0.5, 2.0)), arc_cap)
+        # automatic step size: aim at about 5 corrector iterations per step, counted from the
+        # corrector's restart where it had one (more on a reused factor, which converges linearly,
+        # would let the arcs grow until full Newton fails from the prediction near a critical point)
+        arc = min(arc * float(np.clip(np.sqrt(5 / max(_iteration - restarted_at, 1)), 0.5, 2.0)), arc_cap)
         if limit is not None:
             past += 1
             if past >= steps_past_limit:
