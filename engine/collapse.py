@@ -9,8 +9,9 @@ buildable length). A collapse is made only where the result stays a valid polygo
   (that triangle disappears; its other two beams become one);
 - every cell holding both ends has them next to each other (no cell is pinched in two);
 - two boundary nodes merge only along a boundary beam (the surface is not pinched);
-- two corners never merge, no node loses its last cell, and no node gets more than MAX_VALENCE beams
-  (MAX_BOUNDARY_VALENCE on the boundary).
+- two corners never merge (but as the last resort, a bare corner of the outline into its neighbour
+  corner: ``merge_corners``), no node loses its last cell, and no node gets more than MAX_VALENCE
+  beams (MAX_BOUNDARY_VALENCE on the boundary).
 
 The merged node keeps the place of its more constrained end (corner, then support, then boundary),
 else takes the midpoint; it keeps the flags of both ends. Collapses of one pass touch disjoint
@@ -83,10 +84,15 @@ def _rank(polymesh: PolyMesh) -> np.ndarray:
     return np.select([polymesh.corners, polymesh.supports, polymesh.boundary], [3, 2, 1], 0)
 
 
-def collapse_beams(polymesh: PolyMesh, beams: np.ndarray) -> tuple[PolyMesh, int]:
+def collapse_beams(polymesh: PolyMesh, beams: np.ndarray, *, merge_corners: bool = False) -> tuple[PolyMesh, int]:
     """Collapse, in the order given, those of ``beams`` (indices into ``polymesh.edges``) that can be
     collapsed validly and touch no node near an earlier collapse of this call. Returns the new grid
-    (unused nodes dropped, the others renumbered in order) and the number collapsed."""
+    (unused nodes dropped, the others renumbered in order) and the number collapsed.
+
+    ``merge_corners``: two corners may merge along a boundary beam where one of them holds that
+    beam and one other only (a corner of the outline with no inner beam): it goes, and the other
+    corner stays where it is. For the last resort, where two corners lie closer than a beam can be
+    built: the outline is cut at the corner by less than that beam."""
     edges = polymesh.edges
     n = polymesh.n_nodes
     faces, node_faces = _cells_at_nodes(polymesh)
@@ -108,9 +114,13 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray) -> tuple[PolyMesh, int
     collapsed = 0
     for beam in np.asarray(beams, dtype=int):
         a, b = map(int, edges[beam])
-        if busy[a] or busy[b] or (polymesh.corners[a] and polymesh.corners[b]):
+        if busy[a] or busy[b]:
             continue
         if polymesh.boundary[a] and polymesh.boundary[b] and uses.get((a, b), 0) != 1:
+            continue
+        corner_pair = bool(polymesh.corners[a] and polymesh.corners[b])
+        if corner_pair and not (merge_corners and polymesh.boundary[a] and polymesh.boundary[b]
+                                and min(len(neighbours[a]), len(neighbours[b])) == 2):
             continue
         shared = set(node_faces[a]) & set(node_faces[b])
         triangles, valid = [], True
@@ -137,7 +147,9 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray) -> tuple[PolyMesh, int
         if len(set(node_faces[a]) | set(node_faces[b])) == len(triangles):
             continue
         keep, drop = (a, b) if rank[a] >= rank[b] else (b, a)
-        if rank[a] == rank[b]:
+        if corner_pair:  # the corner with inner beams stays; the bare one goes
+            keep, drop = (b, a) if len(neighbours[a]) == 2 else (a, b)
+        elif rank[a] == rank[b]:
             x[keep] = 0.5 * (x[a] + x[b])
         target[drop] = keep
         removed_faces.update(triangles)

@@ -297,6 +297,31 @@ def test_corners_stay_put_and_two_corners_never_merge():
     assert done == 1 and np.allclose(result.nodes[result.corners], corner_at)
 
 
+def test_as_the_last_resort_a_bare_corner_merges_into_the_next_corner():
+    """Two corners of the outline 0.1 m apart (gen44-hole-v at 60 cells had two 145 mm apart under
+    steel joints that take 222 mm, and their joints clashed): with ``merge_corners`` the corner that
+    holds only its two boundary beams goes into the other, which stays where it was; two corners
+    that both hold an inner beam still never merge. Counted with V - E + F, the plate stays a disc."""
+    nodes = np.array([[0.0, 0, 0], [0.1, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0], [1, 1, 0]])
+    faces = (np.array([0, 1, 5, 4]), np.array([1, 2, 3, 5]))
+    corners = np.array([True, True, True, True, True, False])
+    grid = PolyMesh(nodes=nodes, faces=faces, boundary=np.ones(6, bool), corners=corners)
+    short = np.flatnonzero(grid.beam_lengths < 0.5)
+    assert len(short) == 1 and set(grid.edges[short[0]]) == {0, 1}
+    assert collapse_beams(grid, short)[1] == 0, "corners never merge by default"
+    merged, done = collapse_beams(grid, short, merge_corners=True)
+    assert done == 1 and merged.n_nodes == 5
+    assert np.allclose(merged.nodes[merged.corners], nodes[[1, 2, 3, 4]])   # node 0 gone, node 1 in place
+    assert merged.beam_lengths.min() >= 0.9
+    assert merged.n_nodes - len(merged.edges) + merged.n_faces == 1
+    # a strip of three cells whose bottom beam 1-2 is short between two corners of three beams each
+    strip = np.array([[0.0, 0, 0], [1, 0, 0], [1.1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0], [1.1, 1, 0], [2, 1, 0]])
+    both = PolyMesh(nodes=strip, faces=(np.array([0, 1, 5, 4]), np.array([1, 2, 6, 5]), np.array([2, 3, 7, 6])),
+                    boundary=np.ones(8, bool), corners=np.ones(8, bool))
+    pair = np.flatnonzero([set(e) == {1, 2} for e in both.edges])
+    assert collapse_beams(both, pair, merge_corners=True)[1] == 0
+
+
 def test_the_mockups_required_lengths_follow_its_joints():
     """Beams between 120-degree joints need 2 set-backs + the cut; at a narrow node more."""
     grid = _honeycomb(4, 4, side=0.05)  # 50 mm beams: shorter than sockets of 12 mm tubes take

@@ -177,6 +177,8 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
         if removed:
             ctx.step(f"{removed} beams too short or too close to another at a joint removed or collapsed")
             ctx.report_findings([removed_finding(removed, result.polymesh)])
+        if result.quality.get("corners_merged"):
+            ctx.report_findings([corners_finding(result.quality["corners_merged"], build_limits_of(project))])
             buildable.update({**grid_figures(result.polymesh),
                               "short_beams_left": short_count(result.polymesh, project)})
     buildable.update({"collapsed_beams": collapsed, "flipped_beams": flipped, "removed_beams": removed,
@@ -224,14 +226,19 @@ def without_unbuildable_beams(result: OptimizeResult, project: Project, surface:
     """(result, removed): ``result`` with the beams still shorter than their joints and the shortest
     cut take removed where their two cells can become one, collapsed where the removals freed their
     end nodes, and one beam of each pair closer than the joint's smallest angle removed
-    (engine.collapse: remove_short_beams, collapse_beams, open_narrow_joints), in rounds while that
+    (engine.collapse: remove_short_beams, collapse_beams, open_narrow_joints), a corner of the outline
+    with no inner beam merged into the next corner where the two lie closer than that, in rounds while that
     changes the grid; its "after" figures are measured again. ``removed`` counts the beams removed
     and collapsed. No node moves but those of the collapses, so nothing is optimised again."""
     limits = build_limits_of(project)
-    grid, removed = result.polymesh, 0
+    grid, removed, corners = result.polymesh, 0, 0
     for _ in range(LAST_RESORT_ROUNDS):
         grid, gone, left = remove_short_beams(grid, lambda g: required_beam_lengths_m(g, limits))
         grid, merged = collapse_beams(grid, left) if len(left) else (grid, 0)
+        if len(left) and not merged:
+            # two corners of the outline closer than a beam can be built: the bare one goes
+            grid, merged = collapse_beams(grid, left, merge_corners=True)
+            corners += merged
         grid, straightened = dissolve_kinks(grid)
         grid, opened, _ = open_narrow_joints(grid, np.radians(limits.min_angle_deg))
         grid, more = dissolve_kinks(grid)
@@ -241,7 +248,20 @@ def without_unbuildable_beams(result: OptimizeResult, project: Project, surface:
     if not removed:
         return result, 0
     after = grid_quality(grid, surface.mesh, field)
-    return dataclasses.replace(result, polymesh=grid, quality={**result.quality, "after": after}), removed
+    return dataclasses.replace(result, polymesh=grid, quality={**result.quality, "after": after,
+                                                               "corners_merged": corners}), removed
+
+
+def corners_finding(merged: int, limits) -> dict:
+    """The finding that corners of the outline closer than a buildable beam were merged (JSON-ready)."""
+    return Finding(kind="corners_merged", parts=["outline"], measure=merged, limit=0, unit="corners",
+                   stage="optimize",
+                   message=(f"{merged} corner(s) of the outline lay closer to the next corner than the shortest "
+                            f"buildable beam ({limits.min_cut_length_mm:.0f} mm of cut plus both joints): each was "
+                            "merged into that corner, so the outline is cut there by less than one beam"),
+                   fix="keep the corners apart in the surface's outline, or smaller joints ([fabrication.joints] "
+                       "sleeve_length) or a shorter [fabrication.beams] min_cut_length if the fabricator accepts "
+                       "it").to_dict()
 
 
 def removed_finding(removed: int, grid: PolyMesh) -> dict:
