@@ -331,14 +331,21 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     past = 0
     converged_all = True
     saved = None                      # the state before the last step, to redo it shorter
+    # with reuse_factor, the factor of the corrector's last iteration where it was made there: one
+    # correction (under the tolerance) from the step's end, it serves the next step's predictor and
+    # its pivots count the negative eigenvalues there
+    carried: tuple | None = None
     for _step in range(max_steps):
-        _, cache = residual(x, triads, lam)
-        try:
-            lu, negatives = factor_with_inertia(cr.tangent(cache), cr.el, free)
-        except RuntimeError:
-            converged_all = False
-            break
-        factored += 1
+        if carried is not None:
+            (lu, negatives), carried = carried, None
+        else:
+            _, cache = residual(x, triads, lam)
+            try:
+                lu, negatives = factor_with_inertia(cr.tangent(cache), cr.el, free)
+            except RuntimeError:
+                converged_all = False
+                break
+            factored += 1
         pivots[-1] = negatives                               # pivots of the tangent at this state
         du_f = np.zeros(6 * cr.n_all)
         du_f[free] = lu.solve(F_ref[free])
@@ -378,7 +385,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             lu_i, df = (None, None) if full else (lu, du_f)
             predicted = (x_try, t_try, lam_try, total)
             first: tuple | None = None
-            last_error, reused, restarted_at = np.inf, 0, 0
+            last_error, reused, restarted_at, fresh = np.inf, 0, 0, False
             for _iteration in range(25 if full else 40):
                 r, cache = residual(x_try, t_try, lam_try)
                 # relative to the load applied now; a tiny last correction also ends the iterations
@@ -397,13 +404,15 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
                     x_try, t_try, lam_try, total = predicted
                     r, cache, error = first
                     full, correction_norm, restarted_at = True, np.inf, _iteration
-                if full or lu_i is None or df is None or reused >= 8:
+                fresh = full or lu_i is None or df is None or reused >= 8
+                if fresh:
                     lu_i = factor(cache)
                     if lu_i is None:
                         break
                     df = np.zeros(6 * cr.n_all)
                     df[free] = lu_i.solve(F_ref[free])
                     reused = 0
+                assert lu_i is not None and df is not None
                 last_error, reused = float(error), reused + 1
                 dr = np.zeros(6 * cr.n_all)
                 dr[free] = lu_i.solve(r[free])
@@ -429,12 +438,13 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
         if not accepted:
             converged_all = False
             break
+        landed = False
         if lam_try > max_load_factor >= lam and limit is None:
             # land exactly on the largest load factor asked for
             state = load_controlled(x, triads, F_dead + max_load_factor * F_ref)
             if state is not None:
                 x_try, t_try = state
-                lam_try = max_load_factor
+                lam_try, landed = max_load_factor, True
         if limit is None and lam_try < lam and lam > 0 and direction > 0 and refinements < 3:
             # the step went over a maximum of the load factor: redo it shorter, to land closer
             # to the peak (each time 0.3 of the arc; the arc is then held until the limit)
@@ -449,6 +459,8 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             limit_state = (x.copy(), triads.copy())
             arc_cap = np.inf
         x, triads, lam = x_try, t_try, lam_try
+        if settings.reuse_factor and fresh and lu_i is not None and not landed:
+            carried = (lu_i, lu_i.negative_pivots)
         path.append([lam, displacement_of(x, triads)])
         monitored.append(watched(x, triads))
         pivots.append(negatives)                             # provisional: set at the next step

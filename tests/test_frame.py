@@ -779,8 +779,9 @@ def test_a_reused_factor_finds_the_published_limit_with_no_more_factorisations(p
     """The corrector on a reused factor (modified Newton, the default) and on a factor at every
     iteration (full Newton) meet the same published limit load (star dome: the reduced model's;
     Lee's frame 18.5 EI / L^2; the deep arch 8.97 EI / R^2) and agree with each other to 1e-4; the
-    reuse never factors more, and on the shallow star dome about half as often. Where the reused
-    factor does not contract (Lee's frame, the deep arch) the corrector is full Newton again."""
+    reuse factors less often, on the shallow star dome about half as often. Where the reused factor
+    does not contract (Lee's frame, the deep arch) the corrector is full Newton again, and the
+    factor of its last iteration starts the next step."""
     from engine.corotational import PathSettings
 
     model, supports, loads, control, largest, published, rel = problem()
@@ -789,6 +790,6 @@ def test_a_reused_factor_finds_the_published_limit_with_no_more_factorisations(p
     for run in runs.values():
         assert run.converged and run.limit_load_factor == pytest.approx(published, rel=rel)
     assert runs[True].limit_load_factor == pytest.approx(runs[False].limit_load_factor, rel=1e-4)
-    assert runs[True].factorisations <= runs[False].factorisations
+    assert runs[True].factorisations < runs[False].factorisations
     if problem is _star_dome:
         assert runs[True].factorisations < 0.6 * runs[False].factorisations
