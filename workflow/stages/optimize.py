@@ -93,9 +93,21 @@ def beam_length_limits(project: Project):
 
 
 def _unsettled(result: OptimizeResult) -> bool:
-    """Whether an optimisation under symmetry planes stopped at a step that left the reals (the
-    engine then keeps the last finite grid) or, before the engine checked that, ended non-finite."""
+    """Whether an optimisation stopped at a step that left the reals (the engine then keeps the last
+    finite grid) or ended with a grid that is not finite."""
     return bool(result.quality.get("stopped_non_finite")) or not np.all(np.isfinite(result.polymesh.nodes))
+
+
+def _optimised(grid: PolyMesh, surface: SurfaceResult, field: GuidingField, settings: OptimizeSettings,
+               limits, ctx: StageContext) -> tuple[OptimizeResult, OptimizeSettings]:
+    """(result, settings used): ``grid`` optimised, and again without the symmetry planes where the
+    symmetric optimisation did not settle (optimize.json's symmetry record measures what is left)."""
+    result = optimize(grid, surface.mesh, field, settings, progress=ctx.step, beam_length_limits=limits)
+    if settings.symmetry_planes and _unsettled(result):
+        ctx.step("the symmetric optimisation did not settle: optimising without the symmetry planes")
+        settings = dataclasses.replace(settings, symmetry_planes=())
+        result = optimize(grid, surface.mesh, field, settings, progress=ctx.step, beam_length_limits=limits)
+    return result, settings
 
 
 def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: Project,
@@ -111,13 +123,7 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
     ctx.step("local/global iterations and the planarity end game")
     settings = optimize_settings(project)
     limits = beam_length_limits(project)
-    result = optimize(polymesh, surface.mesh, field, settings, progress=ctx.step, beam_length_limits=limits)
-    if settings.symmetry_planes and _unsettled(result):
-        # the mirror pairs did not settle: optimised without keeping the symmetry (optimize.json's
-        # symmetry record measures what is left of it)
-        ctx.step("the symmetric optimisation did not settle: optimising without the symmetry planes")
-        settings = dataclasses.replace(settings, symmetry_planes=())
-        result = optimize(polymesh, surface.mesh, field, settings, progress=ctx.step, beam_length_limits=limits)
+    result, settings = _optimised(polymesh, surface, field, settings, limits, ctx)
     grading_kept, share_kept = True, short_share(result.polymesh, project)
     share = share_kept
     if share_kept > GRADED_SHORT_SHARE:
@@ -149,11 +155,7 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
         """``result`` with ``grid`` (after ``record``'s collapses and flips) optimised again."""
         ctx.step(f"{record['collapsed_beams']} short beams collapsed, {record['flipped_beams']} flipped: "
                  f"optimising {when}")
-        again_settings = dataclasses.replace(settings, split_cells=False)
-        again = optimize(grid, surface.mesh, field, again_settings, progress=ctx.step, beam_length_limits=limits)
-        if again_settings.symmetry_planes and _unsettled(again):
-            again = optimize(grid, surface.mesh, field, dataclasses.replace(again_settings, symmetry_planes=()),
-                             progress=ctx.step, beam_length_limits=limits)
+        again, _ = _optimised(grid, surface, field, dataclasses.replace(settings, split_cells=False), limits, ctx)
         return dataclasses.replace(result, polymesh=again.polymesh, quality={
             **again.quality, "before": result.quality["before"], "grading": result.quality.get("grading")})
 
