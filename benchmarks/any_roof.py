@@ -42,7 +42,9 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _cli import ROOT, gridshell_command  # noqa: E402
+
 TEMPLATES = ("mockup", "cap", "vault", "hypar", "courtyard")
 STAGES = ("surface", "shell", "field", "remesh", "optimize", "analysis", "fabrication", "report")
 REAL_SURFACES = Path(os.environ.get("GRIDSHELL_SURFACES", ROOT.parent / "shared" / "data" / "surfaces"))
@@ -69,13 +71,6 @@ class Row:
     case: Case
     cells: int
     values: dict = field(default_factory=dict)
-
-
-def _gridshell() -> list[str]:
-    for candidate in (ROOT / ".venv" / "bin" / "gridshell", Path(sys.executable).parent / "gridshell"):
-        if candidate.is_file():
-            return [str(candidate)]
-    return [sys.executable, "-m", "workflow.cli"]
 
 
 # ------------------------------------------------------------------------------------------ cases and projects
@@ -146,8 +141,8 @@ def _project_file(case: Case, cells: int, out: Path) -> Path:
         base = folder / "project.toml"
         with _INIT_LOCK:
             if not base.is_file():
-                done = subprocess.run([*_gridshell(), "init", str(folder), "--template", case.template, "--force"],
-                                      capture_output=True, text=True, cwd=ROOT)
+                command = [*gridshell_command(), "init", str(folder), "--template", case.template, "--force"]
+                done = subprocess.run(command, capture_output=True, text=True, cwd=ROOT)
                 if done.returncode != 0:
                     raise RuntimeError(f"gridshell init --template {case.template}: " + _last_line(done.stderr))
         text = _with_cells(base.read_text(encoding="utf-8"), cells)
@@ -287,7 +282,7 @@ def run_one(case: Case, cells: int, out: Path, timeout: float, min_cut_mm: float
         v.update({"status": "no project", "error": str(exc)})
         return row
     shutil.rmtree(run_dir, ignore_errors=True)
-    command = [*_gridshell(), "run", str(project), "--out", str(run_dir), "--quiet"]
+    command = [*gridshell_command(), "run", str(project), "--out", str(run_dir), "--quiet"]
     started = time.perf_counter()
     process = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                start_new_session=True)

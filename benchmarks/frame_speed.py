@@ -328,9 +328,8 @@ def main() -> int:
     control = int(np.argmax(np.abs(linear.displacements[:, 2])))
     # the path with the corrector reusing its factor (the default), then with a factor at every
     # iteration (full Newton, the scheme before 2026-12-03) as the reference in the same run
-    for label, reuse in [("non-linear path", True), ("  full Newton", False)][:2 if args.full_newton else 1]:
-        if args.steps <= 0:
-            break
+    schemes = [("non-linear path", True)] + ([("  full Newton", False)] if args.full_newton else [])
+    for label, reuse in schemes if args.steps > 0 else []:
         start = time.perf_counter()
         run = frame_module.nonlinear_static(frame, supports, loads, control=(control, 2), settings=PathSettings(
             max_load_factor=1e9, max_steps=args.steps, reuse_factor=reuse))

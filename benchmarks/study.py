@@ -43,7 +43,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _cli import ROOT, gridshell_command  # noqa: E402
+
 sys.path.insert(0, str(ROOT))
 
 REAL_SURFACES = Path(os.environ.get("GRIDSHELL_SURFACES", ROOT.parent / "shared" / "data" / "surfaces"))
@@ -52,13 +54,6 @@ LATTICES = ("quad", "quad45", "triangular", "statics_quad")
 VORONOI = ("voronoi", "isotropic")
 #: (D, A) pairs of the statics question besides the default (2, 2)
 PAIRS = ((1.0, 1.0), (2.0, 1.0), (1.0, 2.0), (3.0, 3.0))
-
-
-def _gridshell() -> list[str]:
-    for candidate in (ROOT / ".venv" / "bin" / "gridshell", Path(sys.executable).parent / "gridshell"):
-        if candidate.is_file():
-            return [str(candidate)]
-    return [sys.executable, "-m", "workflow.cli"]
 
 
 def height_field_roofs() -> list[Path]:
@@ -154,7 +149,7 @@ def run_sweep(path: Path, workers: int | None) -> list[dict]:
     grid's size rank correlation and L_tot added."""
     import pandas as pd
 
-    command = [*_gridshell(), "sweep", str(path), "--out", str(path.parent / "out"), "--quiet"]
+    command = [*gridshell_command(), "sweep", str(path), "--out", str(path.parent / "out"), "--quiet"]
     if workers:
         command += ["--workers", str(workers)]
     started = time.perf_counter()
