@@ -736,7 +736,8 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
             previous_energy, previous_plain = energy, plain
         new = symmetric(hold_limits(new))
         if not np.all(np.isfinite(new)):
-            # a step that left the reals (seen once under symmetry planes, never reproduced): the
+            # a step that left the reals (a guard: the one CI failure that led to it was the plot of
+            # workflow/plots/remesh.py, reading matplotlib's uninitialised padding): the
             # iterations end at the last finite grid, and the quality says so
             log.warning("optimize: iteration %d gave non-finite nodes; kept the grid of iteration %d",
                         iteration + 1, done)

@@ -43,7 +43,11 @@ def plot_gridshell(polymesh: PolyMesh, path: Path, *, color_by: str = "degree", 
         raise ValueError(f"color_by must be 'degree' or 'planarity', got {color_by!r}")
     fig = plt.figure(figsize=(13, 6))
     ax3 = fig.add_subplot(1, 2, 1, projection="3d")
-    ax3.add_collection3d(Poly3DCollection(polygons, facecolors=colours, edgecolors="#222222", linewidths=0.4))
+    # autolim=False: matplotlib 3.11 pads cells of fewer sides with uninitialised memory and takes the
+    # axis limits from the padding too (limits of +-1e308 at random, then "Axis limits cannot be NaN or
+    # Inf"); frame_3d sets the limits from the nodes
+    ax3.add_collection3d(Poly3DCollection(polygons, facecolors=colours, edgecolors="#222222", linewidths=0.4),
+                         autolim=False)
     frame_3d(ax3, nodes)
     ax3.view_init(elev=32, azim=-60)
     ax3.set_axis_off()
