@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from engine.collapse import collapse_beams, dissolve_kinks, open_narrow_joints, remove_short_beams
 from engine.field import GuidingField
@@ -21,7 +22,7 @@ from engine.findings import Finding
 from engine.grids import LATTICES, GridKind, isotropic_field
 from engine.mesh import PolyMesh
 from engine.optimize import OptimizeResult, OptimizeSettings, grid_quality, optimize
-from engine.parts import panel_id
+from engine.parts import joint_id, panel_id
 from engine.symmetry import symmetrised_grid, symmetry_record
 from fabrication.files import write_text_atomic
 from fabrication.limits import required_beam_lengths_m
@@ -179,8 +180,8 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
         if removed:
             ctx.step(f"{removed} beams too short or too close to another at a joint removed or collapsed")
             ctx.report_findings([removed_finding(removed, result.polymesh)])
-        if result.quality.get("corners_merged"):
-            ctx.report_findings([corners_finding(result.quality["corners_merged"], build_limits_of(project))])
+        if result.quality.get("corner_merges"):
+            ctx.report_findings([corners_finding(result.quality["corner_merges"], build_limits_of(project))])
             buildable.update({**grid_figures(result.polymesh),
                               "short_beams_left": short_count(result.polymesh, project)})
     buildable.update({"collapsed_beams": collapsed, "flipped_beams": flipped, "removed_beams": removed,
@@ -234,13 +235,16 @@ def without_unbuildable_beams(result: OptimizeResult, project: Project, surface:
     and collapsed. No node moves but those of the collapses, so nothing is optimised again."""
     limits = build_limits_of(project)
     grid, removed, corners = result.polymesh, 0, 0
+    merges: list[tuple[np.ndarray, np.ndarray]] = []  # (corner kept, corner merged into it), m
     for _ in range(LAST_RESORT_ROUNDS):
         grid, gone, left = remove_short_beams(grid, lambda g: required_beam_lengths_m(g, limits))
         grid, merged = collapse_beams(grid, left) if len(left) else (grid, 0)
         if len(left) and not merged:
             # two corners of the outline closer than a beam can be built: the bare one goes
+            before = grid.nodes[grid.corners]
             grid, merged = collapse_beams(grid, left, merge_corners=True)
             corners += merged
+            merges += _corner_merges(before, grid.nodes[grid.corners])
         grid, straightened = dissolve_kinks(grid)
         grid, opened, _ = open_narrow_joints(grid, np.radians(limits.min_angle_deg))
         grid, more = dissolve_kinks(grid)
@@ -250,17 +254,35 @@ def without_unbuildable_beams(result: OptimizeResult, project: Project, surface:
     if not removed:
         return result, 0
     after = grid_quality(grid, surface.mesh, field)
-    return dataclasses.replace(result, polymesh=grid, quality={**result.quality, "after": after,
-                                                               "corners_merged": corners}), removed
+    quality = {**result.quality, "after": after, "corners_merged": corners}
+    if merges:  # the kept corners by their joints in the grid as it leaves the stage (corners do not move)
+        at = cKDTree(grid.nodes)
+        quality["corner_merges"] = [{"joint": joint_id(int(at.query(kept)[1])), "kept_m": kept.tolist(),
+                                     "merged_m": gone.tolist(), "distance_m": float(np.linalg.norm(kept - gone))}
+                                    for kept, gone in merges]
+    return dataclasses.replace(result, polymesh=grid, quality=quality), removed
 
 
-def corners_finding(merged: int, limits) -> dict:
-    """The finding that corners of the outline closer than a buildable beam were merged (JSON-ready)."""
-    return Finding(kind="corners_merged", parts=["outline"], measure=merged, limit=0, unit="corners",
-                   stage="optimize",
-                   message=(f"{merged} corner(s) of the outline lay closer to the next corner than the shortest "
-                            f"buildable beam ({limits.min_cut_length_mm:.0f} mm of cut plus both joints): each was "
-                            "merged into that corner, so the outline is cut there by less than one beam"),
+def _corner_merges(before: np.ndarray, after: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(kept, merged) corner positions of a corner merge: each corner of ``before`` that is not in
+    ``after`` went into the nearest corner that is (collapse_beams leaves the kept corner in place)."""
+    if not len(after):
+        return []
+    tree = cKDTree(after)
+    distance, nearest = tree.query(before)
+    return [(after[j], before[i]) for i, j in enumerate(nearest) if distance[i] > 1e-9]
+
+
+def corners_finding(merges: list[dict], limits) -> dict:
+    """The finding that corners of the outline closer than a buildable beam were merged, naming the
+    joints they were merged into (``merges``: optimize.json's ``corner_merges``; JSON-ready)."""
+    where = ", ".join(f"{m['distance_m'] * 1000:.0f} mm from {m['joint']}" for m in merges)
+    return Finding(kind="corners_merged", parts=[m["joint"] for m in merges] or ["outline"], measure=len(merges),
+                   limit=0, unit="corners", stage="optimize",
+                   message=(f"{len(merges)} corner(s) of the outline lay closer to the next corner than the "
+                            f"shortest buildable beam ({limits.min_cut_length_mm:.0f} mm of cut plus both joints; "
+                            f"{where}): each was merged into that corner's joint, so the outline is cut there "
+                            "by less than one beam"),
                    fix="keep the corners apart in the surface's outline, or smaller joints ([fabrication.joints] "
                        "sleeve_length) or a shorter [fabrication.beams] min_cut_length if the fabricator accepts "
                        "it").to_dict()
