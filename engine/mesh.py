@@ -29,8 +29,15 @@ def unique_edges(faces: list[np.ndarray] | np.ndarray) -> np.ndarray:
     if isinstance(faces, np.ndarray) and faces.ndim == 2:
         directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=-1).reshape(-1, 2)
     else:
-        parts = [np.stack([f, np.roll(f, -1)], axis=-1) for f in faces if len(f)]
-        directed = np.concatenate(parts) if parts else np.zeros((0, 2), dtype=np.int64)
+        loops = [np.asarray(f) for f in faces if len(f)]
+        if loops:  # every node to the next of its loop, all loops at once
+            flat = np.concatenate(loops)
+            sizes = np.array([len(f) for f in loops])
+            following = np.arange(len(flat)) + 1
+            following[np.cumsum(sizes) - 1] -= sizes
+            directed = np.column_stack([flat, flat[following]])
+        else:
+            directed = np.zeros((0, 2), dtype=np.int64)
     edges = np.sort(directed.astype(np.int64), axis=1)
     return np.unique(edges, axis=0) if len(edges) else edges
 
@@ -301,6 +308,15 @@ class PolyMesh:
         return out
 
     def replace_nodes(self, nodes: np.ndarray) -> "PolyMesh":
-        """A copy with moved nodes and the same topology and flags."""
-        return PolyMesh(nodes=nodes, faces=self.faces, boundary=self.boundary,
-                        supports=self.supports, corners=self.corners)
+        """A copy with moved nodes and the same topology and flags (and the topology already
+        worked out: beams, degrees, valences, boundary cells)."""
+        moved = PolyMesh(nodes=nodes, faces=self.faces, boundary=self.boundary,
+                         supports=self.supports, corners=self.corners)
+        for name in _TOPOLOGY:
+            if name in self.__dict__:
+                moved.__dict__[name] = self.__dict__[name]
+        return moved
+
+
+#: PolyMesh's cached properties that depend on its faces only (kept by replace_nodes)
+_TOPOLOGY = ("edges", "face_degrees", "valence", "face_boundary")

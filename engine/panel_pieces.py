@@ -31,9 +31,9 @@ class PanelPiece:
     loop: np.ndarray
 
 
-def _plane_coordinates(points: np.ndarray) -> np.ndarray:
-    """(k,2) coordinates of points in their best-fit plane."""
-    centroid, normal = best_fit_plane(points)
+def _plane_coordinates(points: np.ndarray, plane: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """(k,2) coordinates of points in their best-fit plane (``plane``: that plane if known)."""
+    centroid, normal = best_fit_plane(points) if plane is None else plane
     u = np.cross(normal, [1.0, 0.0, 0.0])
     if np.linalg.norm(u) < 0.1:
         u = np.cross(normal, [0.0, 1.0, 0.0])
@@ -50,27 +50,34 @@ def piece_flatness(points: np.ndarray) -> tuple[float, bool]:
     """(largest node distance from the best-fit plane (m), convex in that plane) of a node loop."""
     if len(points) == 3:
         return 0.0, True
-    centroid, normal = best_fit_plane(points)
+    return _flatness(points)[:2]
+
+
+def _flatness(points: np.ndarray) -> tuple[float, bool, np.ndarray]:
+    """piece_flatness of a loop of 4 or more nodes, and the nodes' coordinates in that plane (k, 2)."""
+    plane = best_fit_plane(points)
+    centroid, normal = plane
     distance = float(np.abs((points - centroid) @ normal).max())
-    local = _plane_coordinates(points)
+    local = _plane_coordinates(points, plane)
     edge = np.roll(local, -1, axis=0) - local
     turn = edge[:, 0] * np.roll(edge[:, 1], -1) - edge[:, 1] * np.roll(edge[:, 0], -1)
     area = _signed_area(local)
     scale = float(np.einsum("ij,ij->", edge, edge)) / len(points)
     convex = bool(np.all(turn * np.sign(area) >= -1e-9 * scale))
-    return distance, convex
+    return distance, convex, local
 
 
 def planar_pieces(nodes: np.ndarray, loop: np.ndarray, tolerance: float) -> list[np.ndarray]:
     """Node loops (sub-loops of ``loop``) that are each planar within ``tolerance`` (m) and convex,
     the fewest the recursive diagonal split finds; ``[loop]`` when the cell already is."""
     loop = np.asarray(loop, dtype=np.int64)
-    distance, convex = piece_flatness(nodes[loop])
-    if len(loop) == 3 or (distance <= tolerance and convex):
+    if len(loop) == 3:
+        return [loop]
+    distance, convex, local = _flatness(nodes[loop])
+    if distance <= tolerance and convex:
         return [loop]
     k = len(loop)
     best = None
-    local = _plane_coordinates(nodes[loop])
     cell = Polygon(local)
     if not cell.is_valid:  # a self-intersecting outline in its plane: no diagonal is safe
         cell = None

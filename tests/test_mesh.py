@@ -1,0 +1,36 @@
+"""The grid's topology: beams of polygon loops, and moved copies that keep it."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine.mesh import PolyMesh, unique_edges
+
+
+def _loops(seed: int) -> list[np.ndarray]:
+    """Random polygon loops of 3-9 nodes over 40 nodes (any topology: only the edges count here)."""
+    rng = np.random.default_rng(seed)
+    return [rng.choice(40, size=rng.integers(3, 10), replace=False) for _ in range(30)]
+
+
+def test_the_beams_of_polygon_loops_are_each_pair_of_consecutive_nodes_once():
+    for seed in range(5):
+        loops = _loops(seed)
+        expected = sorted({tuple(sorted((int(f[i]), int(f[(i + 1) % len(f)])))) for f in loops for i in range(len(f))})
+        edges = unique_edges(loops)
+        assert edges.dtype == np.int64
+        assert [tuple(e) for e in edges.tolist()] == expected
+    assert unique_edges([]).shape == (0, 2)
+
+
+def test_moved_nodes_keep_the_topology_and_measure_their_own_lengths():
+    hexagon = np.array([[np.cos(t), np.sin(t), 0.0] for t in np.arange(6) * np.pi / 3])
+    grid = PolyMesh(nodes=np.vstack([hexagon, [[0.0, 0.0, 0.0]]]), faces=([0, 1, 2, 6], [2, 3, 4, 5, 0, 6]))
+    edges, valence = grid.edges, grid.valence
+    assert grid.beam_lengths.min() > 0.99
+    moved = grid.replace_nodes(2.0 * grid.nodes)
+    assert moved.edges is edges and moved.valence is valence
+    chords = moved.nodes[edges[:, 1]] - moved.nodes[edges[:, 0]]
+    assert np.array_equal(moved.beam_lengths, np.linalg.norm(chords, axis=1))
+    np.testing.assert_allclose(moved.beam_lengths, 2.0 * grid.beam_lengths)
+    assert np.array_equal(moved.face_boundary, grid.face_boundary)
