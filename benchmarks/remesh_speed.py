@@ -74,8 +74,9 @@ def _one_clustering(mesh, field, cells: int, repeat: int) -> tuple[float, int]:
     """Seconds (median) and sweeps of one anisotropic clustering from the grown seed lattice."""
     from engine import voronoi
     from engine.clustering import cluster_vertices
+    from engine.fine_mesh import _refine
 
-    fine = voronoi._refine(mesh, field, cells)
+    fine = _refine(mesh, field, cells)
     seeds = voronoi._initial_seeds(fine, cells, np.random.default_rng(0))
     labels = voronoi._grow_clusters(fine, seeds)
     adjacency = voronoi._adjacency(fine)

@@ -304,7 +304,8 @@ def lattice_grid(mesh: TriMesh, kind: str, spacing: float, support_vertices: np.
     if len(corner_points):
         distance, _ = cKDTree(corner_points).query(plan)
         outline_vertex = distance < 1e-6 * spacing
-    from .voronoi import _support_nodes, surface_corners
+    from .cell_extraction import support_nodes
+    from .fine_mesh import surface_corners
 
     kept = sorted(surface_corners(mesh).tolist())
     corners = np.zeros(len(plan), dtype=bool)
@@ -321,7 +322,7 @@ def lattice_grid(mesh: TriMesh, kind: str, spacing: float, support_vertices: np.
         _, nearest = cKDTree(mesh.vertices[:, :2]).query(plan[np.isnan(z)])
         z[np.isnan(z)] = mesh.vertices[nearest, 2]
     nodes = np.c_[plan, z]
-    supports = _support_nodes(mesh, nodes, on_boundary, support_vertices)
+    supports = support_nodes(mesh, nodes, on_boundary, support_vertices)
     return PolyMesh(nodes=nodes, faces=tuple(faces), boundary=on_boundary, supports=supports, corners=corners)
 
 

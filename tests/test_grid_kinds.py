@@ -78,7 +78,8 @@ def test_quad45_beams_run_at_45_degrees_to_the_quad_beams_on_a_rectangle():
 
 
 def test_the_isotropic_control_does_not_follow_the_field_and_the_voronoi_grid_does():
-    from engine.voronoi import RemeshSettings, polymesh_quality, remesh
+    from engine.grid_quality import polymesh_quality
+    from engine.voronoi import RemeshSettings, remesh
 
     mesh = _rectangle(rise=1.0, nx=40, ny=25)
     field = _graded_field(mesh, ratio=3.0)

@@ -9,9 +9,10 @@ import pytest
 
 from engine.errors import GridshellError, InputError
 from engine.field import GuidingField
+from engine.fine_mesh import surface_corners
 from engine.mesh import TriMesh
 from engine.parametric import courtyard, grid_triangles
-from engine.voronoi import RemeshSettings, remesh, surface_corners
+from engine.voronoi import RemeshSettings, remesh
 
 
 def _square(n: int = 20, side: float = 2.0) -> TriMesh:
@@ -140,7 +141,7 @@ def test_cell_count_target_met_within_one_percent(n_cells):
 
 
 def test_fine_surface_is_clustered_as_it_is_and_coarse_one_refined():
-    from engine.voronoi import VERTICES_PER_CELL, _refine
+    from engine.fine_mesh import VERTICES_PER_CELL, _refine
 
     mesh = _square(40)  # 1681 vertices
     field = _field(mesh)
@@ -183,7 +184,7 @@ def test_one_size_target_only():
 def _clustering_problem(seed: int = 3):
     """A curved patch with random positive weights, anisotropic metrics, 12 grown clusters."""
     from engine.clustering import mesh_adjacency
-    from engine.voronoi import _edges_of, _refine
+    from engine.fine_mesh import _edges_of, _refine
 
     rng = np.random.default_rng(seed)
     mesh = _square(16)
@@ -248,8 +249,8 @@ def test_clustering_lowers_the_energy_keeps_clusters_connected_and_its_running_m
 
 
 def test_vectorised_quality_figures_match_a_per_face_loop():
+    from engine.grid_quality import polymesh_quality
     from engine.mesh import best_fit_plane
-    from engine.voronoi import polymesh_quality
 
     mesh = _square(24, side=4.0)
     x = mesh.vertices[:, 0]
@@ -288,7 +289,9 @@ def test_cluster_adjacency_hexagon_share_is_the_grids():
     neighbouring clusters) equals the extracted grid's hexagon share of interior cells."""
     from dataclasses import replace
 
-    from engine.voronoi import _cluster, _interior_hexagon_share, _polygons, _refine
+    from engine.cell_extraction import _polygons
+    from engine.fine_mesh import _refine
+    from engine.voronoi import _cluster, _interior_hexagon_share
 
     mesh = _square(20, side=4.0)
     x = mesh.vertices[:, 0]
@@ -297,7 +300,7 @@ def test_cluster_adjacency_hexagon_share_is_the_grids():
     checked = 0
     for seed in range(3):
         for clusters in _cluster(fine, 60, replace(RemeshSettings(n_cells=60), seed=seed), keep=3):
-            polymesh = _polygons(mesh, fine, clusters, None)
+            polymesh = _polygons(mesh, fine, clusters.labels, clusters.centroids, None)
             interior = ~polymesh.face_boundary
             assert clusters.hexagon_share == _interior_hexagon_share(fine, clusters.labels, 60)
             assert clusters.hexagon_share == pytest.approx(np.mean(polymesh.face_degrees[interior] == 6), abs=1e-12)

@@ -65,7 +65,7 @@ def build_lattice(surface: SurfaceResult, field: GuidingField, project: Project,
 
 def run_remesh(surface: SurfaceResult, field: GuidingField, project: Project, ctx: StageContext) -> PolyMesh:
     """The remesh stage for a lattice: built, written and measured (against the field too)."""
-    from engine.voronoi import polymesh_quality
+    from engine.grid_quality import polymesh_quality
 
     from .polymesh_io import write_polymesh_obj
     from .remesh import grid_figures, short_share

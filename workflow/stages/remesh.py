@@ -20,12 +20,13 @@ import numpy as np
 from engine.collapse import CollapseReport, collapse_short_beams
 from engine.field import GuidingField, guiding_field
 from engine.findings import Finding
+from engine.grid_quality import polymesh_quality
 from engine.grid_stress import surface_membrane_forces
 from engine.grids import LATTICES, GridKind, isotropic_field
 from engine.mesh import PolyMesh
 from engine.structure import node_normals
 from engine.symmetry import symmetrised_grid, symmetry_record
-from engine.voronoi import RemeshResult, RemeshSettings, polymesh_quality, remesh
+from engine.voronoi import RemeshResult, RemeshSettings, remesh
 from fabrication.files import write_text_atomic
 from fabrication.limits import node_smallest_angles, required_beam_lengths_m
 
