@@ -20,7 +20,8 @@ from .symmetry import reflect
 __all__ = ["MIRROR_MATCH", "ON_PLANE", "SEED_SNAP", "JUNCTION_ROUNDS"]
 
 #: Two vertices are mirrors of each other when one's image lies within this share of the mean
-#: edge length of the other: the clustered mesh must be symmetric for its clusters to be.
+#: edge length of the surface's mesh (not of its subdivision: subdividing a mesh does not make it
+#: more or less symmetric): the clustered mesh must be symmetric for its clusters to be.
 MIRROR_MATCH = 0.5
 #: A vertex within this share of the mean edge length of a plane is on it.
 ON_PLANE = 0.01
@@ -67,7 +68,9 @@ def _mirrors(fine: _Fine, planes: tuple) -> _Mirrors | None:
         fine.tree = cKDTree(fine.vertices)
     x = fine.vertices
     edge = float(np.linalg.norm(x[fine.edges[:, 1]] - x[fine.edges[:, 0]], axis=1).mean())
-    tolerance = MIRROR_MATCH * edge
+    # the surface's mean edge: each subdivision quarters the triangles and halves the edges
+    surface_edge = edge * max(1.0, float(np.sqrt(len(x) / max(fine.n_surface_vertices, 1))))
+    tolerance = MIRROR_MATCH * surface_edge
     every = np.arange(len(x))
     maps, sides = [], []
     for plane, normal in zip(planes, normals):
