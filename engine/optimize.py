@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from functools import partial
 from typing import Callable
 
 import numpy as np
@@ -520,7 +521,7 @@ def grid_quality(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, 
     return out
 
 
-# ----------------------------------------------------------------------------- driver
+# ----------------------------------------------------------------------------- (a) set-up
 
 def _check(polymesh: PolyMesh, mesh: TriMesh) -> None:
     if polymesh.n_nodes == 0 or polymesh.n_faces == 0:
@@ -551,6 +552,401 @@ def _schedule(settings: OptimizeSettings) -> tuple[float, list[tuple[float, floa
     plan = [(t0 + (1 - t0) * (i / max(main, 1)), fair) for i in range(main)]
     return shape, plan + [(FINAL_PLANARITY, 0.0)] * final
 
+
+@dataclass(frozen=True, kw_only=True)
+class _GlobalStep:
+    """The global step's constant system: centering rows C, neighbour mean, shape and node weights,
+    damping, the plan of blends (t, f), A (3n x 3n), the basis B of the free DOFs and the factor of
+    B^T A B (None: nothing to solve)."""
+
+    C: sp.csr_matrix
+    neighbours: sp.csr_matrix
+    shape: float
+    node_weight: float
+    damping: float
+    plan: list[tuple[float, float]]
+    A3: sp.csr_matrix
+    B: sp.csr_matrix
+    solve: Callable[[np.ndarray], np.ndarray] | None
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Problem:
+    """What the phases share: the grid as split, its constraints, the surface and its boundary, the
+    mirror partners, the target areas, the fabrication limits and the global step."""
+
+    settings: OptimizeSettings
+    given: PolyMesh  # the grid as given
+    polymesh: PolyMesh  # the grid the iterations move: split where the boundary holds cells out of plane
+    new_beams: np.ndarray  # (b, 2) node ids of the splits' beams
+    corner_splits: int
+    edge_splits: int
+    with_end_game: bool
+    surface: _Surface
+    boundary: _Boundary
+    fixed: np.ndarray
+    sliding: np.ndarray
+    interior: np.ndarray
+    movable: np.ndarray
+    start: np.ndarray  # (n, 3) the first iterate: the nodes, sliding ones on the boundary
+    x0: np.ndarray  # a copy of it: what fairness and the target areas refer to
+    groups: dict[int, np.ndarray]
+    planes: tuple
+    partners: np.ndarray | None
+    field: GuidingField | None
+    nearest_vertex: cKDTree | None
+    areas: dict[int, np.ndarray | None]
+    grading: dict
+    corners: np.ndarray
+    min_corner: float  # rad
+    beam_length_limits: Callable[[PolyMesh], np.ndarray] | None
+    system: _GlobalStep
+    mean_length: float  # of the grid as given, m
+    band: float  # the closeness band of the iterations, m
+
+
+def _target_areas(groups: dict[int, np.ndarray], grid: PolyMesh, x0: np.ndarray, settings: OptimizeSettings,
+                  field: GuidingField | None,
+                  nearest_vertex: cKDTree | None) -> tuple[dict[int, np.ndarray | None], dict]:
+    """(the cells' target areas (None: each cell's current area), the grading's slopes): the grid's grading,
+    following the field among neighbouring cells and compressed as far as the joints demand (graded_areas)."""
+    grading: dict = {"given_slope": None, "target_slope": None}
+    if not settings.keep_grading:
+        return {k: None for k in groups}, grading
+    ids = _group_ids(grid.faces)
+    area, centroid = np.zeros(grid.n_faces), np.zeros((grid.n_faces, 3))
+    for k, f in groups.items():
+        area[ids[k]] = cell_areas(x0[f])
+        centroid[ids[k]] = x0[f].mean(axis=1)
+    sizes = (field.size[nearest_vertex.query(centroid)[1]]
+             if nearest_vertex is not None and field is not None else None)
+    target, grading["given_slope"], grading["target_slope"] = graded_areas(
+        area, sizes, ~grid.face_boundary, _cell_adjacency(grid.faces),
+        min_side=settings.min_beam_length, quantile=settings.grading_quantile)
+    return {k: target[ids[k]] for k in groups}, grading
+
+
+def _global_step_system(settings: OptimizeSettings, groups: dict[int, np.ndarray], edges: np.ndarray, n: int,
+                        interior: np.ndarray, sliding: np.ndarray, tangents: np.ndarray) -> _GlobalStep:
+    """The global step's matrix, the same every iteration, factored once (when the plan has steps)."""
+    C = _centering(groups, n)
+    neighbours = _neighbour_mean(edges, n)
+    shape, plan = _schedule(settings)
+    node_weight = settings.closeness_weight + settings.fairness_weight
+    damping = DAMPING * max(shape + node_weight, 1.0)
+    A = shape * (C.T @ C) + (node_weight + damping) * sp.eye(n)
+    A3 = sp.kron(A, sp.eye(3), format="csr")
+    B = _reduction(n, interior, sliding, tangents)
+    solve = spla.factorized((B.T @ A3 @ B).tocsc()) if B.shape[1] and plan else None
+    return _GlobalStep(C=C, neighbours=neighbours, shape=shape, node_weight=node_weight, damping=damping, plan=plan,
+                       A3=A3, B=B, solve=solve)
+
+
+def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, settings: OptimizeSettings,
+            surface: _Surface, before: dict,
+            beam_length_limits: Callable[[PolyMesh], np.ndarray] | None) -> _Problem:
+    """The problem: boundary cells split (planar panels), corners and supports fixed, boundary nodes
+    sliding, the rest interior; the mirror partners, the target areas and the global step."""
+    planar_panels = settings.planar and settings.planarity_weight > 0 and settings.iterations > 0
+    given = polymesh
+    new_beams = np.zeros((0, 2), dtype=np.int64)
+    corner_splits = edge_splits = 0
+    if planar_panels and settings.split_cells:
+        tolerance = settings.planarity_tolerance * before["mean_beam_length_m"]
+        splits = split_boundary_cells(polymesh, hold=SPLIT_HOLD * END_BAND * surface.diagonal,
+                                      straightness=SPLIT_STRAIGHTNESS * tolerance)
+        polymesh, new_beams = splits.polymesh, splits.new_beams
+        corner_splits, edge_splits = splits.corner_splits, splits.edge_splits
+    n = polymesh.n_nodes
+    fixed = polymesh.corners | polymesh.supports
+    boundary = _Boundary(mesh)
+    sliding = polymesh.boundary & ~fixed
+    if sliding.any() and not len(boundary.segments):
+        raise InputError("optimize: the grid-shell has boundary nodes but the surface has no boundary",
+                         hint="closed surfaces: clear the boundary flags of the grid-shell")
+    interior = ~polymesh.boundary & ~fixed
+    x = np.array(polymesh.nodes, dtype=float)
+    tangents = np.zeros((n, 3))
+    if sliding.any() and settings.iterations > 0:
+        x[sliding], tangents[sliding] = boundary.closest(x[sliding])
+    groups = _groups(polymesh.faces)
+    x0 = x.copy()
+    planes = tuple(settings.symmetry_planes)
+    partners = mirror_partners(x, planes, PARTNER_REACH * float(polymesh.beam_lengths.mean())) if planes else None
+    nearest_vertex = cKDTree(mesh.vertices) if field is not None and settings.follow_field else None
+    areas, grading = _target_areas(groups, polymesh, x0, settings, field, nearest_vertex)
+    return _Problem(settings=settings, given=given, polymesh=polymesh, new_beams=new_beams,
+                    corner_splits=corner_splits, edge_splits=edge_splits,
+                    with_end_game=planar_panels and settings.planarity_iterations > 0,
+                    surface=surface, boundary=boundary, fixed=fixed, sliding=sliding, interior=interior,
+                    movable=interior | sliding, start=x, x0=x0, groups=groups, planes=planes, partners=partners,
+                    field=field, nearest_vertex=nearest_vertex, areas=areas, grading=grading,
+                    corners=face_corners(polymesh.faces), min_corner=float(np.radians(settings.min_corner_angle_deg)),
+                    beam_length_limits=beam_length_limits,
+                    system=_global_step_system(settings, groups, polymesh.edges, n, interior, sliding, tangents),
+                    mean_length=max(before["mean_beam_length_m"], 1e-300), band=CLOSENESS_BAND * surface.diagonal)
+
+
+# ----------------------------------------------------------------------------- (b) local/global iterations
+
+def _symmetric(p: _Problem, x: np.ndarray) -> np.ndarray:
+    """x with mirror pairs at their mirrored mean, boundary nodes back on the boundary."""
+    if p.partners is None:
+        return x
+    x = symmetrise_points(x, p.planes, p.partners, p.fixed)
+    if p.sliding.any():
+        x[p.sliding] = p.boundary.closest(x[p.sliding])[0]
+    return x
+
+
+def _hold_limits(p: _Problem, x: np.ndarray, sweeps: int = 3) -> np.ndarray:
+    """x with narrow corners opened and short beams lengthened, boundary nodes back on the boundary."""
+    if p.min_corner > 0:
+        x = open_narrow_corners(x, p.corners, p.min_corner, p.movable, sweeps=sweeps)
+    minimum = p.settings.min_beam_length
+    if p.beam_length_limits is not None:
+        minimum = np.maximum(minimum, p.beam_length_limits(p.polymesh.replace_nodes(x)))
+    if np.any(np.asarray(minimum) > 0):
+        x = lengthen_short_beams(x, p.polymesh.edges, minimum, p.movable, sweeps=sweeps)
+    if p.sliding.any():
+        x[p.sliding] = p.boundary.closest(x[p.sliding])[0]
+    return x
+
+
+def _local_step(p: _Problem, x: np.ndarray, t: float, f: float) -> tuple[np.ndarray, float]:
+    """Right-hand side of the global step at x and the energy of the current phase at x
+    (planarity share t, fairness share f)."""
+    s, settings = p.system, p.settings
+    points = {k: x[faces] for k, faces in p.groups.items()}
+    target = np.zeros((s.C.shape[0], 3))
+    if s.shape > 0:
+        if t < 1.0:
+            target += (1 - t) * _stack(p.groups, {k: regular_targets(cells, settings.max_cell_stretch, p.areas[k])
+                                                  for k, cells in points.items()})
+        if t > 0.0:
+            target += t * _stack(p.groups, {k: planar_targets(cells) for k, cells in points.items()})
+    node_target = _into_band(x, *p.surface.closest(x), p.band)
+    if f > 0:
+        # keep_grading: a smooth displacement, so that sizes keep their grading; else the grid
+        smooth = p.x0 + s.neighbours @ (x - p.x0) if settings.keep_grading else s.neighbours @ x
+        node_target[p.interior] = (1 - f) * node_target[p.interior] + f * smooth[p.interior]
+    energy = s.shape * float(np.sum((s.C @ x - target) ** 2)) + s.node_weight * float(np.sum((x - node_target) ** 2))
+    return s.shape * (s.C.T @ target) + s.node_weight * node_target + s.damping * x, energy
+
+
+def _global_step(p: _Problem, x: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """The least-squares fit of the targets ``rhs`` from x over the free DOFs, boundary nodes back on the boundary."""
+    s = p.system
+    assert s.solve is not None  # factored whenever the plan has steps to solve
+    residual = rhs.ravel() - s.A3 @ x.ravel()
+    new = x + (s.B @ s.solve(s.B.T @ residual)).reshape(p.polymesh.n_nodes, 3)
+    if p.sliding.any():
+        new[p.sliding] = p.boundary.closest(new[p.sliding])[0]
+    return new
+
+
+def _anderson(p: _Problem, x: np.ndarray, plain: np.ndarray, history_g: list[np.ndarray],
+              history_f: list[np.ndarray]) -> np.ndarray | None:
+    """Anderson's extrapolation of the plain step from x over the last ANDERSON_DEPTH + 1 iterates
+    (the histories are extended and trimmed); None while they hold a single one."""
+    g, r = plain.ravel(), (plain - x).ravel()
+    history_g.append(g)
+    history_f.append(r)
+    new = None
+    if len(history_f) > 1:
+        dF = np.diff(np.array(history_f[-ANDERSON_DEPTH - 1:]), axis=0).T
+        dG = np.diff(np.array(history_g[-ANDERSON_DEPTH - 1:]), axis=0).T
+        theta = np.linalg.lstsq(dF, r, rcond=None)[0]
+        new = (g - dG @ theta).reshape(p.polymesh.n_nodes, 3)
+        if p.sliding.any():
+            new[p.sliding] = p.boundary.closest(new[p.sliding])[0]
+    del history_g[:-ANDERSON_DEPTH - 1], history_f[:-ANDERSON_DEPTH - 1]
+    return new
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Iterated:
+    """The nodes after the local/global iterations; how many were done, the last one's largest node
+    move (m), the Anderson steps taken and rejected, and whether a step left the reals."""
+
+    x: np.ndarray
+    done: int
+    step: float
+    accepted: int
+    rejected: int
+    stopped_non_finite: bool
+
+
+def _local_global(p: _Problem, progress: Callable[[str, float | None], None] | None) -> _Iterated:
+    """The local/global iterations along the plan, the final ones Anderson-accelerated (a point that
+    raises the energy falls back to the plain step), the fabrication limits held after each step."""
+    plan = p.system.plan
+    x = p.start
+    step, done, accepted, rejected = 0.0, 0, 0, 0
+    stopped_non_finite = False
+    first_final = next((i for i, (t, f) in enumerate(plan) if f == 0.0 and t == FINAL_PLANARITY), len(plan))
+    history_g: list[np.ndarray] = []
+    history_f: list[np.ndarray] = []
+    previous_energy, previous_plain = np.inf, None
+    for iteration, (t, f) in enumerate(plan if p.system.solve is not None else []):
+        accelerate = ANDERSON_DEPTH > 0 and iteration >= first_final
+        rhs, energy = _local_step(p, x, t, f)
+        if accelerate and previous_plain is not None and energy > previous_energy:
+            # the accelerated point raised the energy: fall back to the plain step, restart the history
+            rejected += 1
+            x = previous_plain
+            history_g.clear()
+            history_f.clear()
+            rhs, energy = _local_step(p, x, t, f)
+        plain = _global_step(p, x, rhs)
+        new = plain
+        if accelerate:
+            extrapolated = _anderson(p, x, plain, history_g, history_f)
+            if extrapolated is not None:
+                new, accepted = extrapolated, accepted + 1
+            previous_energy, previous_plain = energy, plain
+        new = _symmetric(p, _hold_limits(p, new))
+        if not np.all(np.isfinite(new)):
+            # a step that left the reals (a guard: the one CI failure that led to it was the plot of
+            # workflow/plots/remesh.py, reading matplotlib's uninitialised padding): the
+            # iterations end at the last finite grid, and the quality says so
+            log.warning("optimize: iteration %d gave non-finite nodes; kept the grid of iteration %d",
+                        iteration + 1, done)
+            stopped_non_finite = True
+            break
+        step = float(np.linalg.norm(new - x, axis=1).max())
+        x = new
+        done = iteration + 1
+        if progress is not None:
+            progress(f"optimize: iteration {done}/{len(plan)}", done / len(plan))
+    if previous_plain is not None and _local_step(p, x, *plan[-1])[1] > previous_energy:
+        x = previous_plain  # never end on an accelerated point that raised the energy
+    if done:
+        for _ in range(FINAL_HOLD_ROUNDS):  # the limits once more, to convergence of the sweeps
+            held = _symmetric(p, _hold_limits(p, x, sweeps=10))
+            if not np.all(np.isfinite(held)):
+                stopped_non_finite = True
+                break
+            x = held
+    return _Iterated(x=x, done=done, step=step, accepted=accepted, rejected=rejected,
+                     stopped_non_finite=stopped_non_finite)
+
+
+# ----------------------------------------------------------------------------- (c) planarity end game
+
+@dataclass(frozen=True, kw_only=True)
+class _EndGame:
+    """The nodes and the grid after the end game and its repair rounds, the new beams in all, the
+    repairs' share of them, the end game's record (steps, rejected_steps, factorisations,
+    planarity_weight, reached) and whether it left the reals."""
+
+    x: np.ndarray
+    polymesh: PolyMesh
+    new_beams: np.ndarray
+    repair_splits: int
+    record: dict
+    stopped_non_finite: bool
+
+
+def _regular_rows(x: np.ndarray, *, groups: dict[int, np.ndarray], areas: dict[int, np.ndarray | None],
+                  max_stretch: float) -> np.ndarray:
+    """(rows, 3) mean-free regular targets of the cells ``groups`` at x, in the row order of _centering."""
+    return _stack(groups, {k: regular_targets(x[faces], max_stretch, areas[k]) for k, faces in groups.items()})
+
+
+def _said_step(progress: Callable[[str, float | None], None] | None, base: int, steps: int) -> None:
+    """Reports planarity step ``base + steps``."""
+    if progress is not None:
+        progress(f"optimize: planarity step {base + steps}", None)
+
+
+def _end_game(p: _Problem, x: np.ndarray, progress: Callable[[str, float | None], None] | None) -> _EndGame:
+    """The planarity end game (engine.planarise) from x; boundary cells it leaves beyond the tolerance
+    lose their boundary triangle and it resumes, at most REPAIR_ROUNDS times."""
+    settings, surface = p.settings, p.surface
+    polymesh, new_beams, groups, C = p.polymesh, p.new_beams, p.groups, p.system.C
+    end = {"steps": 0, "rejected_steps": 0, "factorisations": 0, "planarity_weight": 0.0, "reached": False}
+    repair_splits = 0
+    stopped_non_finite = False
+    for attempt in range(REPAIR_ROUNDS + 1 if p.with_end_game else 0):
+        # the tolerance on the grid as split (new beams change the mean beam length)
+        tolerance = settings.planarity_tolerance * float(polymesh.beam_lengths.mean())
+        end_settings = PlanariseSettings(tolerance=tolerance, band=END_BAND * surface.diagonal,
+                                         limit=CLOSENESS_LIMIT * surface.diagonal,
+                                         regularity_weight=SHAPE_SCALE * settings.regularity_weight,
+                                         closeness_weight=settings.closeness_weight,
+                                         iterations=settings.planarity_iterations,
+                                         min_beam_length=settings.min_beam_length,
+                                         min_angle_deg=settings.min_corner_angle_deg)
+        areas = _target_areas(groups, polymesh, p.x0, settings, p.field, p.nearest_vertex)[0]
+        regular = partial(_regular_rows, groups=groups, areas=areas, max_stretch=settings.max_cell_stretch)
+        said = partial(_said_step, progress, int(end["steps"]))
+        planarised, report = planarise(x, groups, interior=p.interior, sliding=p.sliding,
+                                       closest=surface.closest_normals, slide=p.boundary.closest, centering=C,
+                                       regular=regular, beams=polymesh.edges, settings=end_settings,
+                                       reference=p.given.nodes, progress=said)
+        planarised = _symmetric(p, planarised)
+        if not np.all(np.isfinite(planarised)):
+            log.warning("optimize: the planarity end game gave non-finite nodes; kept the grid before it")
+            stopped_non_finite = True
+            break
+        x = planarised
+        for key, value in (("steps", report.iterations), ("rejected_steps", report.rejected_steps),
+                           ("factorisations", report.factorisations)):
+            end[key] += value
+        end["planarity_weight"], end["reached"] = max(end["planarity_weight"], report.planarity_weight), report.reached
+        if report.reached or not settings.split_cells or attempt == REPAIR_ROUNDS:
+            break
+        # boundary cells the end game could not make planar lose their boundary triangle
+        current = polymesh.replace_nodes(x.copy())
+        failing = np.flatnonzero(current.face_boundary & (current.face_planarity() > tolerance))
+        current, cut = cut_boundary_triangles(current, failing)
+        if not len(cut):
+            break
+        polymesh, new_beams, repair_splits = current, np.r_[new_beams, cut], repair_splits + len(cut)
+        groups = _groups(polymesh.faces)
+        C = _centering(groups, polymesh.n_nodes)
+    return _EndGame(x=x, polymesh=polymesh, new_beams=new_beams, repair_splits=repair_splits, record=end,
+                    stopped_non_finite=stopped_non_finite)
+
+
+# ----------------------------------------------------------------------------- (d) closeness band, (e) record
+
+def _within_closeness_limit(p: _Problem, x: np.ndarray) -> tuple[np.ndarray, bool]:
+    """(x with the nodes beyond the hard closeness limit brought back to it: the band is a soft
+    constraint, whether that left the reals: then x as it was)."""
+    banded = x.copy()
+    banded[p.movable] = _into_band(x[p.movable], *p.surface.closest(x[p.movable]),
+                                   CLOSENESS_LIMIT * p.surface.diagonal)
+    banded = _symmetric(p, banded)
+    if np.all(np.isfinite(banded)):
+        return banded, False
+    return x, True
+
+
+def _quality_record(p: _Problem, mesh: TriMesh, field: GuidingField | None, before: dict, result: PolyMesh,
+                    iterated: _Iterated, end: _EndGame, stopped_non_finite: bool) -> dict:
+    """The quality dict of :func:`optimize` (its docstring lists the keys)."""
+    before = grid_quality(p.given, mesh, field, figures=before)
+    after = grid_quality(result, mesh, field, surface=p.surface)
+    x, new_beams = result.nodes, end.new_beams
+    split_length = float(np.linalg.norm(x[new_beams[:, 1]] - x[new_beams[:, 0]], axis=1).sum())
+    converged = end.record["reached"] if p.with_end_game else bool(iterated.step <= 1e-4 * p.mean_length)
+    settings = p.settings
+    return {"before": before, "after": after, "iterations": iterated.done,
+            "converged": bool(converged), "final_step_rel": iterated.step / p.mean_length,
+            "factorisations": int(p.system.solve is not None) + end.record["factorisations"],
+            "planar": bool(settings.planar),
+            "accelerated_steps": iterated.accepted, "rejected_steps": iterated.rejected,
+            "planarity_tolerance_rel": settings.planarity_tolerance,
+            "planarity_reached": bool(after["planarity_max_rel"] <= settings.planarity_tolerance),
+            "corner_splits": p.corner_splits, "edge_splits": p.edge_splits, "repair_splits": end.repair_splits,
+            "split_beams": new_beams.tolist(), "split_length_m": split_length, "grading": p.grading,
+            "stopped_non_finite": stopped_non_finite,
+            "end_game": end.record if p.with_end_game else None}
+
+
+# ----------------------------------------------------------------------------- driver
 
 def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, settings: OptimizeSettings, *,
              progress: Callable[[str, float | None], None] | None = None,
@@ -583,252 +979,13 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
     _check(polymesh, mesh)
     surface = _Surface(mesh)
     before = optimize_quality(polymesh, surface=surface)
-    given = polymesh
-    planar_panels = settings.planar and settings.planarity_weight > 0 and settings.iterations > 0
-    tolerance = settings.planarity_tolerance * before["mean_beam_length_m"]
-    new_beams = np.zeros((0, 2), dtype=np.int64)
-    corner_splits = edge_splits = 0
-    if planar_panels and settings.split_cells:
-        splits = split_boundary_cells(polymesh, hold=SPLIT_HOLD * END_BAND * surface.diagonal,
-                                      straightness=SPLIT_STRAIGHTNESS * tolerance)
-        polymesh, new_beams = splits.polymesh, splits.new_beams
-        corner_splits, edge_splits = splits.corner_splits, splits.edge_splits
-    n = polymesh.n_nodes
-    fixed = polymesh.corners | polymesh.supports
-    boundary = _Boundary(mesh)
-    sliding = polymesh.boundary & ~fixed
-    if sliding.any() and not len(boundary.segments):
-        raise InputError("optimize: the grid-shell has boundary nodes but the surface has no boundary",
-                         hint="closed surfaces: clear the boundary flags of the grid-shell")
-    interior = ~polymesh.boundary & ~fixed
-    x = np.array(polymesh.nodes, dtype=float)
-    tangents = np.zeros((n, 3))
-    if sliding.any() and settings.iterations > 0:
-        x[sliding], tangents[sliding] = boundary.closest(x[sliding])
-
-    groups = _groups(polymesh.faces)
-    x0 = x.copy()
-    planes = tuple(settings.symmetry_planes)
-    partners = mirror_partners(x, planes, PARTNER_REACH * float(polymesh.beam_lengths.mean())) if planes else None
-
-    def symmetric(x: np.ndarray) -> np.ndarray:
-        """x with mirror pairs at their mirrored mean, boundary nodes back on the boundary."""
-        if partners is None:
-            return x
-        x = symmetrise_points(x, planes, partners, fixed)
-        if sliding.any():
-            x[sliding] = boundary.closest(x[sliding])[0]
-        return x
-
-    nearest_vertex = cKDTree(mesh.vertices) if field is not None and settings.follow_field else None
-    grading: dict = {"given_slope": None, "target_slope": None}
-
-    def given_areas(groups: dict[int, np.ndarray], grid: PolyMesh) -> dict[int, np.ndarray | None]:
-        """The cells' target areas (None: each cell's current area): the grid's grading, following the
-        field among neighbouring cells and compressed as far as the joints demand (graded_areas)."""
-        if not settings.keep_grading:
-            return {k: None for k in groups}
-        ids = _group_ids(grid.faces)
-        area, centroid = np.zeros(grid.n_faces), np.zeros((grid.n_faces, 3))
-        for k, f in groups.items():
-            area[ids[k]] = cell_areas(x0[f])
-            centroid[ids[k]] = x0[f].mean(axis=1)
-        sizes = (field.size[nearest_vertex.query(centroid)[1]]
-                 if nearest_vertex is not None and field is not None else None)
-        target, grading["given_slope"], grading["target_slope"] = graded_areas(
-            area, sizes, ~grid.face_boundary, _cell_adjacency(grid.faces),
-            min_side=settings.min_beam_length, quantile=settings.grading_quantile)
-        return {k: target[ids[k]] for k in groups}
-
-    areas0 = given_areas(groups, polymesh)
-    grading_record = dict(grading)
-    C = _centering(groups, n)
-    neighbours = _neighbour_mean(polymesh.edges, n)
-    shape, plan = _schedule(settings)
-    node_weight = settings.closeness_weight + settings.fairness_weight
-    damping = DAMPING * max(shape + node_weight, 1.0)
-    A = shape * (C.T @ C) + (node_weight + damping) * sp.eye(n)
-    A3 = sp.kron(A, sp.eye(3), format="csr")
-    B = _reduction(n, interior, sliding, tangents)
-    factorisations = 0
-    solve = None
-    if B.shape[1] and plan:
-        solve = spla.factorized((B.T @ A3 @ B).tocsc())
-        factorisations = 1
-
-    mean_length = max(before["mean_beam_length_m"], 1e-300)
-    band = CLOSENESS_BAND * surface.diagonal
-
-    def local(x: np.ndarray, t: float, f: float) -> tuple[np.ndarray, float]:
-        """Right-hand side of the global step at x and the energy of the current phase at x."""
-        points = {k: x[faces] for k, faces in groups.items()}
-        target = np.zeros((C.shape[0], 3))
-        if shape > 0:
-            if t < 1.0:
-                target += (1 - t) * _stack(groups, {k: regular_targets(p, settings.max_cell_stretch, areas0[k])
-                                                    for k, p in points.items()})
-            if t > 0.0:
-                target += t * _stack(groups, {k: planar_targets(p) for k, p in points.items()})
-        node_target = _into_band(x, *surface.closest(x), band)
-        if f > 0:
-            # keep_grading: a smooth displacement, so that sizes keep their grading; else the grid
-            smooth = x0 + neighbours @ (x - x0) if settings.keep_grading else neighbours @ x
-            node_target[interior] = (1 - f) * node_target[interior] + f * smooth[interior]
-        energy = shape * float(np.sum((C @ x - target) ** 2)) + node_weight * float(np.sum((x - node_target) ** 2))
-        return shape * (C.T @ target) + node_weight * node_target + damping * x, energy
-
-    def solve_global(x: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-        assert solve is not None  # factored whenever the plan has steps to solve
-        residual = rhs.ravel() - A3 @ x.ravel()
-        new = x + (B @ solve(B.T @ residual)).reshape(n, 3)
-        if sliding.any():
-            new[sliding] = boundary.closest(new[sliding])[0]
-        return new
-
-    corners = face_corners(polymesh.faces)
-    movable = interior | sliding
-    min_corner = np.radians(settings.min_corner_angle_deg)
-
-    def hold_limits(x: np.ndarray, sweeps: int = 3) -> np.ndarray:
-        """x with narrow corners opened and short beams lengthened, boundary nodes back on the boundary."""
-        if min_corner > 0:
-            x = open_narrow_corners(x, corners, min_corner, movable, sweeps=sweeps)
-        minimum = settings.min_beam_length
-        if beam_length_limits is not None:
-            minimum = np.maximum(minimum, beam_length_limits(polymesh.replace_nodes(x)))
-        if np.any(np.asarray(minimum) > 0):
-            x = lengthen_short_beams(x, polymesh.edges, minimum, movable, sweeps=sweeps)
-        if sliding.any():
-            x[sliding] = boundary.closest(x[sliding])[0]
-        return x
-
-    step, done, accepted, rejected = 0.0, 0, 0, 0
-    stopped_non_finite = False
-    first_final = next((i for i, (t, f) in enumerate(plan) if f == 0.0 and t == FINAL_PLANARITY), len(plan))
-    history_g: list[np.ndarray] = []
-    history_f: list[np.ndarray] = []
-    previous_energy, previous_plain = np.inf, None
-    for iteration, (t, f) in enumerate(plan if solve is not None else []):
-        accelerate = ANDERSON_DEPTH > 0 and iteration >= first_final
-        rhs, energy = local(x, t, f)
-        if accelerate and previous_plain is not None and energy > previous_energy:
-            # the accelerated point raised the energy: fall back to the plain step, restart the history
-            rejected += 1
-            x = previous_plain
-            history_g.clear()
-            history_f.clear()
-            rhs, energy = local(x, t, f)
-        plain = solve_global(x, rhs)
-        new = plain
-        if accelerate:
-            g, r = plain.ravel(), (plain - x).ravel()
-            history_g.append(g)
-            history_f.append(r)
-            if len(history_f) > 1:
-                dF = np.diff(np.array(history_f[-ANDERSON_DEPTH - 1:]), axis=0).T
-                dG = np.diff(np.array(history_g[-ANDERSON_DEPTH - 1:]), axis=0).T
-                theta = np.linalg.lstsq(dF, r, rcond=None)[0]
-                new = (g - dG @ theta).reshape(n, 3)
-                if sliding.any():
-                    new[sliding] = boundary.closest(new[sliding])[0]
-                accepted += 1
-            del history_g[:-ANDERSON_DEPTH - 1], history_f[:-ANDERSON_DEPTH - 1]
-            previous_energy, previous_plain = energy, plain
-        new = symmetric(hold_limits(new))
-        if not np.all(np.isfinite(new)):
-            # a step that left the reals (a guard: the one CI failure that led to it was the plot of
-            # workflow/plots/remesh.py, reading matplotlib's uninitialised padding): the
-            # iterations end at the last finite grid, and the quality says so
-            log.warning("optimize: iteration %d gave non-finite nodes; kept the grid of iteration %d",
-                        iteration + 1, done)
-            stopped_non_finite = True
-            break
-        step = float(np.linalg.norm(new - x, axis=1).max())
-        x = new
-        done = iteration + 1
-        if progress is not None:
-            progress(f"optimize: iteration {done}/{len(plan)}", done / len(plan))
-    if previous_plain is not None and local(x, *plan[-1])[1] > previous_energy:
-        x = previous_plain  # never end on an accelerated point that raised the energy
-    if done:
-        for _ in range(FINAL_HOLD_ROUNDS):  # the limits once more, to convergence of the sweeps
-            held = symmetric(hold_limits(x, sweeps=10))
-            if not np.all(np.isfinite(held)):
-                stopped_non_finite = True
-                break
-            x = held
-    end = {"steps": 0, "rejected_steps": 0, "factorisations": 0, "planarity_weight": 0.0, "reached": False}
-    repair_splits = 0
-    ran_end_game = planar_panels and settings.planarity_iterations > 0
-    for attempt in range(REPAIR_ROUNDS + 1 if ran_end_game else 0):
-        # the tolerance on the grid as split (new beams change the mean beam length)
-        tolerance = settings.planarity_tolerance * float(polymesh.beam_lengths.mean())
-        end_settings = PlanariseSettings(tolerance=tolerance, band=END_BAND * surface.diagonal,
-                                         limit=CLOSENESS_LIMIT * surface.diagonal,
-                                         regularity_weight=SHAPE_SCALE * settings.regularity_weight,
-                                         closeness_weight=settings.closeness_weight,
-                                         iterations=settings.planarity_iterations,
-                                         min_beam_length=settings.min_beam_length,
-                                         min_angle_deg=settings.min_corner_angle_deg)
-
-        def regular(x: np.ndarray, groups: dict = groups, areas: dict = given_areas(groups, polymesh)) -> np.ndarray:
-            return _stack(groups, {k: regular_targets(x[faces], settings.max_cell_stretch, areas[k])
-                                   for k, faces in groups.items()})
-
-        def said(steps: int, base: int = int(end["steps"])) -> None:
-            if progress is not None:
-                progress(f"optimize: planarity step {base + steps}", None)
-
-        planarised, report = planarise(x, groups, interior=interior, sliding=sliding,
-                                       closest=surface.closest_normals, slide=boundary.closest, centering=C,
-                                       regular=regular, beams=polymesh.edges, settings=end_settings,
-                                       reference=given.nodes, progress=said)
-        planarised = symmetric(planarised)
-        if not np.all(np.isfinite(planarised)):
-            log.warning("optimize: the planarity end game gave non-finite nodes; kept the grid before it")
-            stopped_non_finite = True
-            break
-        x = planarised
-        factorisations += report.factorisations
-        for key, value in (("steps", report.iterations), ("rejected_steps", report.rejected_steps),
-                           ("factorisations", report.factorisations)):
-            end[key] += value
-        end["planarity_weight"], end["reached"] = max(end["planarity_weight"], report.planarity_weight), report.reached
-        if report.reached or not settings.split_cells or attempt == REPAIR_ROUNDS:
-            break
-        # boundary cells the end game could not make planar lose their boundary triangle
-        current = polymesh.replace_nodes(x.copy())
-        failing = np.flatnonzero(current.face_boundary & (current.face_planarity() > tolerance))
-        current, cut = cut_boundary_triangles(current, failing)
-        if not len(cut):
-            break
-        polymesh, new_beams, repair_splits = current, np.r_[new_beams, cut], repair_splits + len(cut)
-        groups = _groups(polymesh.faces)
-        C = _centering(groups, n)
-    if done:
-        # the closeness band is a soft constraint: bring stray nodes back within the hard limit
-        moving = interior | sliding
-        banded = x.copy()
-        banded[moving] = _into_band(x[moving], *surface.closest(x[moving]), CLOSENESS_LIMIT * surface.diagonal)
-        banded = symmetric(banded)
-        if np.all(np.isfinite(banded)):
-            x = banded
-        else:
-            stopped_non_finite = True
-
-    result = polymesh.replace_nodes(x)
-    before = grid_quality(given, mesh, field, figures=before)
-    after = grid_quality(result, mesh, field, surface=surface)
-    split_length = float(np.linalg.norm(x[new_beams[:, 1]] - x[new_beams[:, 0]], axis=1).sum())
-    converged = end["reached"] if ran_end_game else bool(step <= 1e-4 * mean_length)
-    quality = {"before": before, "after": after, "iterations": done,
-               "converged": bool(converged), "final_step_rel": step / mean_length,
-               "factorisations": factorisations, "planar": bool(settings.planar),
-               "accelerated_steps": accepted, "rejected_steps": rejected,
-               "planarity_tolerance_rel": settings.planarity_tolerance,
-               "planarity_reached": bool(after["planarity_max_rel"] <= settings.planarity_tolerance),
-               "corner_splits": corner_splits, "edge_splits": edge_splits, "repair_splits": repair_splits,
-               "split_beams": new_beams.tolist(), "split_length_m": split_length, "grading": grading_record,
-               "stopped_non_finite": stopped_non_finite,
-               "end_game": end if ran_end_game else None}
+    problem = _set_up(polymesh, mesh, field, settings, surface, before, beam_length_limits)
+    iterated = _local_global(problem, progress)
+    end = _end_game(problem, iterated.x, progress)
+    x, stopped_in_band = end.x, False
+    if iterated.done:
+        x, stopped_in_band = _within_closeness_limit(problem, x)
+    result = end.polymesh.replace_nodes(x)
+    stopped = iterated.stopped_non_finite or end.stopped_non_finite or stopped_in_band
+    quality = _quality_record(problem, mesh, field, before, result, iterated, end, stopped)
     return OptimizeResult(polymesh=result, quality=quality)
