@@ -49,6 +49,10 @@ For planar panels (``planar``) two more steps, both reported in the quality reco
 The local/global iterations alone stall at a few per cent of the mean beam length: they are
 block-coordinate descent on the same energy, first order, and the final pull-back onto the
 closeness limit undoes part of their planarity.
+
+The pieces of the iterations (the cells' targets and target areas, the closest points on the surface
+and its boundary, the global step's operators) are in :mod:`engine.local_global`; here are the
+settings, the quality figures and the phases of :func:`optimize`.
 """
 
 from __future__ import annotations
@@ -66,10 +70,27 @@ from scipy.spatial import cKDTree
 from .boundary_splits import cut_boundary_triangles, split_boundary_cells
 from .errors import InputError
 from .field import GuidingField
+from .local_global import (
+    ClosestBoundaryPoints,
+    ClosestSurfacePoints,
+    cell_adjacency,
+    cell_areas,
+    cell_frames,
+    cell_ids_by_degree,
+    cells_by_degree,
+    centering_rows,
+    free_dof_basis,
+    graded_areas,
+    into_band,
+    neighbour_mean,
+    planar_targets,
+    regular_targets,
+    stacked_targets,
+    unstretched_cells,
+)
 from .mesh import PolyMesh, TriMesh
 from .planarise import PlanariseSettings, planarise
 from .projections import face_corners, lengthen_short_beams, open_narrow_corners
-from .proximity import closest_point_on_triangles
 from .symmetry import PARTNER_REACH, mirror_partners, symmetrise_points
 
 log = logging.getLogger(__name__)
@@ -171,288 +192,15 @@ END_BAND = 0.004
 SPLIT_HOLD = 0.5
 #: Boundary nodes within this share of the planarity tolerance of a line count as on it.
 SPLIT_STRAIGHTNESS = 0.5
-#: Side of the regular hexagon of unit area (a side is this times the square root of the area).
-HEXAGON_SIDE = float(np.sqrt(2.0 / (3.0 * np.sqrt(3.0))))
 #: Rounds in which boundary cells that the end game left beyond the tolerance lose the triangle
 #: at their boundary beam (one new beam each) before the end game resumes.
 REPAIR_ROUNDS = 2
 
 
-def _into_band(points: np.ndarray, closest: np.ndarray, distance: np.ndarray, band: float) -> np.ndarray:
-    """(p,3) closeness targets: the points themselves within ``band`` (m) of the surface, else the
-    point at distance ``band`` on the way to their closest surface point."""
-    factor = np.minimum(1.0, band / np.maximum(distance, 1e-300))
-    return closest + (points - closest) * factor[:, None]
-
-
-# ----------------------------------------------------------------------------- local steps
-
-def _groups(faces: tuple[np.ndarray, ...]) -> dict[int, np.ndarray]:
-    """Faces grouped by degree: {k: (f_k, k) node ids}."""
-    groups: dict[int, list[np.ndarray]] = {}
-    for face in faces:
-        groups.setdefault(len(face), []).append(face)
-    return {k: np.array(v, dtype=np.int64) for k, v in sorted(groups.items())}
-
-
-def _group_ids(faces: tuple[np.ndarray, ...]) -> dict[int, np.ndarray]:
-    """Face ids grouped by degree, in the order of :func:`_groups`: {k: (f_k,) face ids}."""
-    ids: dict[int, list[int]] = {}
-    for i, face in enumerate(faces):
-        ids.setdefault(len(face), []).append(i)
-    return {k: np.array(v, dtype=np.int64) for k, v in sorted(ids.items())}
-
-
-def _cell_adjacency(faces: tuple[np.ndarray, ...]) -> sp.csr_matrix:
-    """(f, f) 0/1 matrix of the cells that share a beam."""
-    owner = np.repeat(np.arange(len(faces)), [len(f) for f in faces])
-    directed = np.concatenate([np.stack([f, np.roll(f, -1)], axis=-1) for f in faces])
-    key = np.sort(directed, axis=1)
-    order = np.lexsort((key[:, 1], key[:, 0]))
-    key, owner = key[order], owner[order]
-    same = np.all(key[1:] == key[:-1], axis=1)
-    a, b = owner[:-1][same], owner[1:][same]
-    f = len(faces)
-    adjacency = sp.csr_matrix((np.ones(2 * len(a)), (np.r_[a, b], np.r_[b, a])), shape=(f, f))
-    adjacency.data[:] = 1.0
-    return adjacency
-
-
-def graded_areas(areas: np.ndarray, sizes: np.ndarray | None, interior: np.ndarray,
-                 adjacency: sp.csr_matrix, *, min_side: float = 0.0,
-                 quantile: float = 0.2) -> tuple[np.ndarray, float, float]:
-    """(target areas (f,), the grid's grading slope, the targets' slope): the area each cell's
-    regularity target takes.
-
-    ``areas`` are the cells' areas as given (the remesher's grading), ``sizes`` the field's target
-    size h at each cell (None: the cells' own sqrt(area)). The grid's grading slope sigma is the
-    log-log slope of sqrt(area) against h over the interior cells (1 where the remesher follows the
-    field). An interior cell's target follows the field among its neighbours: h^(2 sigma) times the
-    area its neighbourhood (the cells around it and itself) has per unit of h^(2 sigma), so the
-    local cell count keeps its area and the size follows the field instead of the remesher's noise.
-    Boundary cells (cut by the boundary) keep their area.
-
-    ``min_side``: the shortest beam the joints take (m). Where the smallest interior cells (their
-    ``quantile``) would have a regular hexagon's side shorter than that, the grading is compressed
-    monotonically, sizes going as h^s with s < sigma over the whole grid (total area kept), until
-    they do not: the order of the sizes, which is the field's grading, stays. Where even equal
-    sizes would not do, the grid is too fine for its joints whatever its grading (the remesh
-    coarsens such grids, the optimize stage reports them): the grading is then not compressed.
-    """
-    areas = np.asarray(areas, dtype=float)
-    n = len(areas)
-    h = np.sqrt(areas) if sizes is None else np.asarray(sizes, dtype=float)
-    interior = np.asarray(interior, dtype=bool)
-    pick = interior if interior.sum() >= 4 else np.ones(n, dtype=bool)
-    log_h = np.log(h[pick])
-    sigma = 1.0
-    if sizes is not None and np.ptp(log_h) > 1e-6:
-        sigma = float(np.clip(0.5 * np.polyfit(log_h, np.log(areas[pick]), 1)[0], 0.0, 1.0))
-    local = areas.copy()
-    if sizes is not None and interior.sum() >= 2:
-        inner = interior.astype(float)
-        ring = adjacency + sp.eye(n, format="csr")
-        weight = h ** (2 * sigma)
-        budget, demand = ring @ (areas * inner), ring @ (weight * inner)
-        ok = interior & (demand > 0)
-        local[ok] = weight[ok] * budget[ok] / demand[ok]
-        local[ok] *= areas[ok].sum() / local[ok].sum()  # the interior cells' area as given
-    total = float(areas.sum())
-    h_ref = float(np.exp(np.mean(log_h)))
-
-    def compressed(slope: float) -> np.ndarray:
-        out = local * (h / h_ref) ** (2 * (slope - sigma))
-        return out * (total / max(float(out.sum()), 1e-300))
-
-    def margin(slope: float) -> float:
-        side = np.sqrt(compressed(slope)[pick]) * HEXAGON_SIDE
-        return float(np.quantile(side, quantile)) - min_side
-
-    slope = sigma
-    if min_side > 0 and margin(sigma) < 0 <= margin(0.0):
-        lo, hi = 0.0, sigma  # margin(lo) >= 0 > margin(hi)
-        for _ in range(30):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (lo, mid) if margin(mid) < 0 else (mid, hi)
-        slope = lo
-    return compressed(slope), sigma, slope
-
-
-def cell_areas(points: np.ndarray) -> np.ndarray:
-    """(f,) areas of (f,k,3) cells (the vector area's length: the area projected on the best-fit plane), m2."""
-    return 0.5 * np.linalg.norm(np.cross(points, np.roll(points, -1, axis=1)).sum(axis=1), axis=1)
-
-
-def _frames(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Centroids (f,3), in-plane axes (f,2,3) and normals (f,3) of (f,k,3) point sets (PCA)."""
-    centroid = points.mean(axis=1)
-    _, _, vt = np.linalg.svd(points - centroid[:, None], full_matrices=False)
-    return centroid, vt[:, :2], vt[:, 2]
-
-
-def planar_targets(points: np.ndarray) -> np.ndarray:
-    """(f,k,3) nodes of (f,k,3) cells projected onto each cell's best-fit plane, m."""
-    points = np.asarray(points, dtype=float)
-    centroid, _, normal = _frames(points)
-    offset = np.einsum("fki,fi->fk", points - centroid[:, None], normal)
-    return points - offset[..., None] * normal[:, None]
-
-
-def _unstretched(points: np.ndarray):
-    """In-plane principal coordinates of (f,k,3) cells divided by the sqrt-eigenvalue spreads:
-    (unstretched (f,k,2), spread (f,2), vectors (f,2,2), axes (f,2,3), centroid (f,3))."""
-    k = points.shape[1]
-    centroid, axes, _ = _frames(points)
-    local = np.einsum("fki,fji->fkj", points - centroid[:, None], axes)
-    covariance = np.einsum("fki,fkj->fij", local, local) / k
-    values, vectors = np.linalg.eigh(covariance)
-    spread = np.sqrt(np.maximum(values, 1e-300))
-    principal = np.einsum("fki,fij->fkj", local, vectors)
-    return principal / spread[:, None, :], spread, vectors, axes, centroid
-
-
-def regular_targets(points: np.ndarray, max_stretch: float = np.inf, areas: np.ndarray | None = None) -> np.ndarray:
-    """(f,k,3) targets of (f,k,3) cells: the regular k-gon of equal area best fitting each cell
-    after un-stretching it by its PCA axes, stretched back by at most ``max_stretch`` (the ratio
-    of the two principal spreads, kept at their product, so the area stays). A regular cell, and
-    a regular cell stretched affinely within ``max_stretch``, is its own target (either
-    orientation); a sliver's target is the regular cell stretched ``max_stretch`` times."""
-    points = np.asarray(points, dtype=float)
-    f, k, _ = points.shape
-    unstretched, spread, vectors, axes, centroid = _unstretched(points)
-    if np.isfinite(max_stretch):
-        mean = np.sqrt(spread[:, 0] * spread[:, 1])
-        ratio = np.minimum(spread[:, 1] / np.maximum(spread[:, 0], 1e-300), max(float(max_stretch), 1.0))
-        spread = np.stack([mean / np.sqrt(ratio), mean * np.sqrt(ratio)], axis=1)
-    angle = 2 * np.pi * np.arange(k) / k
-    template = np.broadcast_to(np.stack([np.cos(angle), np.sin(angle)], axis=1), (f, k, 2))
-    signed = 0.5 * np.sum(unstretched[:, :, 0] * np.roll(unstretched[:, :, 1], -1, axis=1)
-                          - np.roll(unstretched[:, :, 0], -1, axis=1) * unstretched[:, :, 1], axis=1)
-    template = np.where((signed < 0)[:, None, None], template * [1.0, -1.0], template)
-    unit_area = 0.5 * k * np.sin(2 * np.pi / k)
-    if areas is None:
-        scale = np.sqrt(np.abs(signed) / unit_area)
-    else:  # the given area: in the un-stretched frame, divided by the spreads' product
-        scale = np.sqrt(np.asarray(areas, float) / (spread[:, 0] * spread[:, 1]) / unit_area)
-    # best rotation of the template onto the cell (2-D Procrustes, node j <-> template corner j)
-    dot = np.einsum("fki,fki->f", template, unstretched)
-    cross = np.einsum("fk,fk->f", template[:, :, 0], unstretched[:, :, 1]) - np.einsum(
-        "fk,fk->f", template[:, :, 1], unstretched[:, :, 0])
-    phi = np.arctan2(cross, dot)
-    c, s = np.cos(phi)[:, None], np.sin(phi)[:, None]
-    rotated = np.stack([c * template[:, :, 0] - s * template[:, :, 1],
-                        s * template[:, :, 0] + c * template[:, :, 1]], axis=2)
-    fitted = rotated * scale[:, None, None]
-    back = np.einsum("fkj,fij->fki", fitted * spread[:, None, :], vectors)
-    return centroid[:, None] + np.einsum("fkj,fji->fki", back, axes)
-
-
-# ----------------------------------------------------------------------------- projections
-
-class _Surface:
-    """Closest points on a triangle mesh with the candidate index built once."""
-
-    def __init__(self, mesh: TriMesh, candidates: int = 16):
-        self.corners = mesh.vertices[mesh.faces]
-        self.normals = mesh.face_normals
-        self.diagonal = float(mesh.diagonal)
-        self.tree = cKDTree(self.corners.mean(axis=1))
-        self.k = min(candidates, len(mesh.faces))
-
-    def _nearest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(closest points (p,3), distances (p,), triangle ids (p,))."""
-        p = len(points)
-        _, cand = self.tree.query(points, k=self.k)
-        cand = np.asarray(cand).reshape(p, self.k)
-        flat = cand.ravel()
-        repeated = np.repeat(points, self.k, axis=0)
-        q = closest_point_on_triangles(repeated, self.corners[flat, 0], self.corners[flat, 1], self.corners[flat, 2])
-        distance = np.linalg.norm(q - repeated, axis=1).reshape(p, self.k)
-        best = np.argmin(distance, axis=1)
-        rows = np.arange(p)
-        return q.reshape(p, self.k, 3)[rows, best], distance[rows, best], cand[rows, best]
-
-    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(closest points (p,3), distances (p,))."""
-        q, distance, _ = self._nearest(points)
-        return q, distance
-
-    def closest_normals(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(closest points (p,3), unit normals of the triangles they lie on (p,3))."""
-        q, _, triangle = self._nearest(points)
-        return q, self.normals[triangle]
-
-
-class _Boundary:
-    """Closest points on the surface's boundary polylines and the segment directions there."""
-
-    def __init__(self, mesh: TriMesh, candidates: int = 16):
-        segments = [np.stack([mesh.vertices[loop], mesh.vertices[np.roll(loop, -1)]], axis=1)
-                    for loop in mesh.boundary_loops]
-        self.segments = np.concatenate(segments) if segments else np.zeros((0, 2, 3))
-        if len(self.segments):
-            self.tree = cKDTree(self.segments.mean(axis=1))
-        self.k = min(candidates, len(self.segments))
-
-    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(closest points (p,3), unit direction of the segment they lie on (p,3))."""
-        p = len(points)
-        _, cand = self.tree.query(points, k=self.k)
-        cand = np.asarray(cand).reshape(p, self.k)
-        a, b = self.segments[cand, 0], self.segments[cand, 1]
-        d = b - a
-        length2 = np.maximum(np.einsum("pki,pki->pk", d, d), 1e-300)
-        t = np.clip(np.einsum("pki,pki->pk", points[:, None] - a, d) / length2, 0.0, 1.0)
-        q = a + t[..., None] * d
-        best = np.argmin(np.einsum("pki,pki->pk", q - points[:, None], q - points[:, None]), axis=1)
-        rows = np.arange(p)
-        direction = d[rows, best] / np.sqrt(length2[rows, best])[:, None]
-        return q[rows, best], direction
-
-
-# ----------------------------------------------------------------------------- operators
-
-def _centering(groups: dict[int, np.ndarray], n: int) -> sp.csr_matrix:
-    """Rows x_j - mean of its cell for every cell corner, stacked over the degree groups (r, n)."""
-    rows, cols, vals, offset = [], [], [], 0
-    for k, faces in groups.items():
-        f = len(faces)
-        row = offset + np.arange(f * k).reshape(f, k)
-        rows.append(np.repeat(row.ravel(), k))
-        cols.append(np.repeat(faces, k, axis=0).ravel())
-        vals.append(np.tile((np.eye(k) - 1.0 / k).ravel(), f))
-        offset += f * k
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(offset, n))
-
-
-def _stack(groups: dict[int, np.ndarray], targets: dict[int, np.ndarray]) -> np.ndarray:
-    """Mean-free targets (r,3) of every cell corner, in the row order of _centering."""
-    return np.concatenate([(targets[k] - targets[k].mean(axis=1, keepdims=True)).reshape(-1, 3) for k in groups])
-
-
-def _neighbour_mean(edges: np.ndarray, n: int) -> sp.csr_matrix:
-    """(n, n) operator: mean of each node's neighbours (a node without neighbours: itself)."""
-    adjacency = sp.csr_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
-                                                          np.r_[edges[:, 1], edges[:, 0]])), shape=(n, n))
-    degree = np.asarray(adjacency.sum(axis=1)).ravel()
-    lonely = degree == 0
-    return (sp.diags(1.0 / np.maximum(degree, 1.0)) @ adjacency + sp.diags(lonely.astype(float))).tocsr()
-
-
-def _reduction(n: int, interior: np.ndarray, sliding: np.ndarray, tangents: np.ndarray) -> sp.csr_matrix:
-    """(3n, m) basis of the admissible displacements: 3 DOFs per free interior node, one along
-    the boundary tangent per sliding node, none for fixed nodes (x flattened node-major)."""
-    free = np.flatnonzero(interior)
-    slide = np.flatnonzero(sliding)
-    rows = np.r_[(3 * free[:, None] + np.arange(3)).ravel(), (3 * slide[:, None] + np.arange(3)).ravel()]
-    cols = np.r_[np.arange(3 * len(free)), 3 * len(free) + np.repeat(np.arange(len(slide)), 3)]
-    vals = np.r_[np.ones(3 * len(free)), tangents[slide].ravel()]
-    return sp.csr_matrix((vals, (rows, cols)), shape=(3 * n, 3 * len(free) + len(slide)))
-
-
 # ----------------------------------------------------------------------------- quality
 
-def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface: _Surface | None = None) -> dict:
+def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *,
+                     surface: ClosestSurfacePoints | None = None) -> dict:
     """Figures of a grid-shell (JSON-ready): planarity_max_m, planarity_p95_m (largest node distance
     from a cell's best-fit plane), planarity_max_rel, planarity_p95_rel (to the mean beam length),
     regularity (mean over cells of std/mean of edge lengths after un-stretching the cell's own
@@ -463,9 +211,9 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface
     lengths = polymesh.beam_lengths
     mean_length = float(lengths.mean()) if len(lengths) else 0.0
     planarity, regularity, smallest, nonconvex = [], [], 180.0, 0
-    for k, faces in _groups(polymesh.faces).items():
+    for k, faces in cells_by_degree(polymesh.faces).items():
         points = x[faces]
-        centroid, axes, normal = _frames(points)
+        centroid, axes, normal = cell_frames(points)
         distance = np.abs(np.einsum("fki,fi->fk", points - centroid[:, None], normal)).max(axis=1)
         planarity.append(distance if k > 3 else np.zeros(len(faces)))
         if k > 3:
@@ -477,7 +225,7 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface
                                 - np.roll(local[:, :, 0], -1, axis=1) * local[:, :, 1], axis=1)
             size = np.einsum("fki,fki->f", edge, edge) / k
             nonconvex += int(np.sum(np.any(turn * np.sign(area)[:, None] < -1e-9 * size[:, None], axis=1)))
-        unstretched = _unstretched(points)[0]
+        unstretched = unstretched_cells(points)[0]
         edges = np.linalg.norm(unstretched - np.roll(unstretched, -1, axis=1), axis=2)
         regularity.append(edges.std(axis=1) / np.maximum(edges.mean(axis=1), 1e-300))
         a, b = np.roll(points, 1, axis=1) - points, np.roll(points, -1, axis=1) - points
@@ -501,7 +249,7 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface
     if mesh is not None or surface is not None:
         if surface is None:
             assert mesh is not None
-            surface = _Surface(mesh)
+            surface = ClosestSurfacePoints(mesh)
         distance = surface.closest(x)[1]
         out["closeness_max_rel"] = float(distance.max() / surface.diagonal)
         out["closeness_mean_rel"] = float(distance.mean() / surface.diagonal)
@@ -509,7 +257,7 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface
 
 
 def grid_quality(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, *,
-                 surface: _Surface | None = None, figures: dict | None = None) -> dict:
+                 surface: ClosestSurfacePoints | None = None, figures: dict | None = None) -> dict:
     """:func:`optimize_quality` (or ``figures`` already measured) with the remesher's wider figures
     (cell degrees, sizes against the field: engine.voronoi.polymesh_quality) added."""
     from .voronoi import polymesh_quality
@@ -524,6 +272,8 @@ def grid_quality(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, 
 # ----------------------------------------------------------------------------- (a) set-up
 
 def _check(polymesh: PolyMesh, mesh: TriMesh) -> None:
+    """Refuses a grid without nodes or cells, with non-finite nodes or cells of fewer than three nodes,
+    and a surface without triangles."""
     if polymesh.n_nodes == 0 or polymesh.n_faces == 0:
         raise InputError("optimize: the grid-shell has no nodes or no cells",
                          hint="run the remesh stage first and check that it produced cells")
@@ -582,8 +332,8 @@ class _Problem:
     corner_splits: int
     edge_splits: int
     with_end_game: bool
-    surface: _Surface
-    boundary: _Boundary
+    surface: ClosestSurfacePoints
+    boundary: ClosestBoundaryPoints
     fixed: np.ndarray
     sliding: np.ndarray
     interior: np.ndarray
@@ -613,7 +363,7 @@ def _target_areas(groups: dict[int, np.ndarray], grid: PolyMesh, x0: np.ndarray,
     grading: dict = {"given_slope": None, "target_slope": None}
     if not settings.keep_grading:
         return {k: None for k in groups}, grading
-    ids = _group_ids(grid.faces)
+    ids = cell_ids_by_degree(grid.faces)
     area, centroid = np.zeros(grid.n_faces), np.zeros((grid.n_faces, 3))
     for k, f in groups.items():
         area[ids[k]] = cell_areas(x0[f])
@@ -621,7 +371,7 @@ def _target_areas(groups: dict[int, np.ndarray], grid: PolyMesh, x0: np.ndarray,
     sizes = (field.size[nearest_vertex.query(centroid)[1]]
              if nearest_vertex is not None and field is not None else None)
     target, grading["given_slope"], grading["target_slope"] = graded_areas(
-        area, sizes, ~grid.face_boundary, _cell_adjacency(grid.faces),
+        area, sizes, ~grid.face_boundary, cell_adjacency(grid.faces),
         min_side=settings.min_beam_length, quantile=settings.grading_quantile)
     return {k: target[ids[k]] for k in groups}, grading
 
@@ -629,21 +379,21 @@ def _target_areas(groups: dict[int, np.ndarray], grid: PolyMesh, x0: np.ndarray,
 def _global_step_system(settings: OptimizeSettings, groups: dict[int, np.ndarray], edges: np.ndarray, n: int,
                         interior: np.ndarray, sliding: np.ndarray, tangents: np.ndarray) -> _GlobalStep:
     """The global step's matrix, the same every iteration, factored once (when the plan has steps)."""
-    C = _centering(groups, n)
-    neighbours = _neighbour_mean(edges, n)
+    C = centering_rows(groups, n)
+    neighbours = neighbour_mean(edges, n)
     shape, plan = _schedule(settings)
     node_weight = settings.closeness_weight + settings.fairness_weight
     damping = DAMPING * max(shape + node_weight, 1.0)
     A = shape * (C.T @ C) + (node_weight + damping) * sp.eye(n)
     A3 = sp.kron(A, sp.eye(3), format="csr")
-    B = _reduction(n, interior, sliding, tangents)
+    B = free_dof_basis(n, interior, sliding, tangents)
     solve = spla.factorized((B.T @ A3 @ B).tocsc()) if B.shape[1] and plan else None
     return _GlobalStep(C=C, neighbours=neighbours, shape=shape, node_weight=node_weight, damping=damping, plan=plan,
                        A3=A3, B=B, solve=solve)
 
 
 def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, settings: OptimizeSettings,
-            surface: _Surface, before: dict,
+            surface: ClosestSurfacePoints, before: dict,
             beam_length_limits: Callable[[PolyMesh], np.ndarray] | None) -> _Problem:
     """The problem: boundary cells split (planar panels), corners and supports fixed, boundary nodes
     sliding, the rest interior; the mirror partners, the target areas and the global step."""
@@ -659,7 +409,7 @@ def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, setti
         corner_splits, edge_splits = splits.corner_splits, splits.edge_splits
     n = polymesh.n_nodes
     fixed = polymesh.corners | polymesh.supports
-    boundary = _Boundary(mesh)
+    boundary = ClosestBoundaryPoints(mesh)
     sliding = polymesh.boundary & ~fixed
     if sliding.any() and not len(boundary.segments):
         raise InputError("optimize: the grid-shell has boundary nodes but the surface has no boundary",
@@ -669,7 +419,7 @@ def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, setti
     tangents = np.zeros((n, 3))
     if sliding.any() and settings.iterations > 0:
         x[sliding], tangents[sliding] = boundary.closest(x[sliding])
-    groups = _groups(polymesh.faces)
+    groups = cells_by_degree(polymesh.faces)
     x0 = x.copy()
     planes = tuple(settings.symmetry_planes)
     partners = mirror_partners(x, planes, PARTNER_REACH * float(polymesh.beam_lengths.mean())) if planes else None
@@ -721,11 +471,11 @@ def _local_step(p: _Problem, x: np.ndarray, t: float, f: float) -> tuple[np.ndar
     target = np.zeros((s.C.shape[0], 3))
     if s.shape > 0:
         if t < 1.0:
-            target += (1 - t) * _stack(p.groups, {k: regular_targets(cells, settings.max_cell_stretch, p.areas[k])
-                                                  for k, cells in points.items()})
+            target += (1 - t) * stacked_targets(p.groups, {
+                k: regular_targets(cells, settings.max_cell_stretch, p.areas[k]) for k, cells in points.items()})
         if t > 0.0:
-            target += t * _stack(p.groups, {k: planar_targets(cells) for k, cells in points.items()})
-    node_target = _into_band(x, *p.surface.closest(x), p.band)
+            target += t * stacked_targets(p.groups, {k: planar_targets(cells) for k, cells in points.items()})
+    node_target = into_band(x, *p.surface.closest(x), p.band)
     if f > 0:
         # keep_grading: a smooth displacement, so that sizes keep their grading; else the grid
         smooth = p.x0 + s.neighbours @ (x - p.x0) if settings.keep_grading else s.neighbours @ x
@@ -777,7 +527,7 @@ class _Iterated:
     stopped_non_finite: bool
 
 
-def _local_global(p: _Problem, progress: Callable[[str, float | None], None] | None) -> _Iterated:
+def _iterate(p: _Problem, progress: Callable[[str, float | None], None] | None) -> _Iterated:
     """The local/global iterations along the plan, the final ones Anderson-accelerated (a point that
     raises the energy falls back to the plain step), the fabrication limits held after each step."""
     plan = p.system.plan
@@ -850,8 +600,8 @@ class _EndGame:
 
 def _regular_rows(x: np.ndarray, *, groups: dict[int, np.ndarray], areas: dict[int, np.ndarray | None],
                   max_stretch: float) -> np.ndarray:
-    """(rows, 3) mean-free regular targets of the cells ``groups`` at x, in the row order of _centering."""
-    return _stack(groups, {k: regular_targets(x[faces], max_stretch, areas[k]) for k, faces in groups.items()})
+    """(rows, 3) mean-free regular targets of the cells ``groups`` at x, in the row order of centering_rows."""
+    return stacked_targets(groups, {k: regular_targets(x[faces], max_stretch, areas[k]) for k, faces in groups.items()})
 
 
 def _said_step(progress: Callable[[str, float | None], None] | None, base: int, steps: int) -> None:
@@ -904,8 +654,8 @@ def _end_game(p: _Problem, x: np.ndarray, progress: Callable[[str, float | None]
         if not len(cut):
             break
         polymesh, new_beams, repair_splits = current, np.r_[new_beams, cut], repair_splits + len(cut)
-        groups = _groups(polymesh.faces)
-        C = _centering(groups, polymesh.n_nodes)
+        groups = cells_by_degree(polymesh.faces)
+        C = centering_rows(groups, polymesh.n_nodes)
     return _EndGame(x=x, polymesh=polymesh, new_beams=new_beams, repair_splits=repair_splits, record=end,
                     stopped_non_finite=stopped_non_finite)
 
@@ -916,7 +666,7 @@ def _within_closeness_limit(p: _Problem, x: np.ndarray) -> tuple[np.ndarray, boo
     """(x with the nodes beyond the hard closeness limit brought back to it: the band is a soft
     constraint, whether that left the reals: then x as it was)."""
     banded = x.copy()
-    banded[p.movable] = _into_band(x[p.movable], *p.surface.closest(x[p.movable]),
+    banded[p.movable] = into_band(x[p.movable], *p.surface.closest(x[p.movable]),
                                    CLOSENESS_LIMIT * p.surface.diagonal)
     banded = _symmetric(p, banded)
     if np.all(np.isfinite(banded)):
@@ -977,10 +727,10 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
     reached; see :mod:`engine.planarise`), None without it.
     """
     _check(polymesh, mesh)
-    surface = _Surface(mesh)
+    surface = ClosestSurfacePoints(mesh)
     before = optimize_quality(polymesh, surface=surface)
     problem = _set_up(polymesh, mesh, field, settings, surface, before, beam_length_limits)
-    iterated = _local_global(problem, progress)
+    iterated = _iterate(problem, progress)
     end = _end_game(problem, iterated.x, progress)
     x, stopped_in_band = end.x, False
     if iterated.done:
