@@ -49,12 +49,17 @@ For planar panels (``planar``) two more steps, both reported in the quality reco
 The local/global iterations alone stall at a few per cent of the mean beam length: they are
 block-coordinate descent on the same energy, first order, and the final pull-back onto the
 closeness limit undoes part of their planarity.
+
+The pieces of the iterations (the cells' targets and target areas, the closest points on the surface
+and its boundary, the global step's operators) are in :mod:`engine.local_global`; here are the
+settings, the quality figures and the phases of :func:`optimize`.
 """
 
 from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from functools import partial
 from typing import Callable
 
 import numpy as np
@@ -65,10 +70,27 @@ from scipy.spatial import cKDTree
 from .boundary_splits import cut_boundary_triangles, split_boundary_cells
 from .errors import InputError
 from .field import GuidingField
+from .local_global import (
+    ClosestBoundaryPoints,
+    ClosestSurfacePoints,
+    cell_adjacency,
+    cell_areas,
+    cell_frames,
+    cell_ids_by_degree,
+    cells_by_degree,
+    centering_rows,
+    free_dof_basis,
+    graded_areas,
+    into_band,
+    neighbour_mean,
+    planar_targets,
+    regular_targets,
+    stacked_targets,
+    unstretched_cells,
+)
 from .mesh import PolyMesh, TriMesh
 from .planarise import PlanariseSettings, planarise
 from .projections import face_corners, lengthen_short_beams, open_narrow_corners
-from .proximity import closest_point_on_triangles
 from .symmetry import PARTNER_REACH, mirror_partners, symmetrise_points
 
 log = logging.getLogger(__name__)
@@ -170,288 +192,15 @@ END_BAND = 0.004
 SPLIT_HOLD = 0.5
 #: Boundary nodes within this share of the planarity tolerance of a line count as on it.
 SPLIT_STRAIGHTNESS = 0.5
-#: Side of the regular hexagon of unit area (a side is this times the square root of the area).
-HEXAGON_SIDE = float(np.sqrt(2.0 / (3.0 * np.sqrt(3.0))))
 #: Rounds in which boundary cells that the end game left beyond the tolerance lose the triangle
 #: at their boundary beam (one new beam each) before the end game resumes.
 REPAIR_ROUNDS = 2
 
 
-def _into_band(points: np.ndarray, closest: np.ndarray, distance: np.ndarray, band: float) -> np.ndarray:
-    """(p,3) closeness targets: the points themselves within ``band`` (m) of the surface, else the
-    point at distance ``band`` on the way to their closest surface point."""
-    factor = np.minimum(1.0, band / np.maximum(distance, 1e-300))
-    return closest + (points - closest) * factor[:, None]
-
-
-# ----------------------------------------------------------------------------- local steps
-
-def _groups(faces: tuple[np.ndarray, ...]) -> dict[int, np.ndarray]:
-    """Faces grouped by degree: {k: (f_k, k) node ids}."""
-    groups: dict[int, list[np.ndarray]] = {}
-    for face in faces:
-        groups.setdefault(len(face), []).append(face)
-    return {k: np.array(v, dtype=np.int64) for k, v in sorted(groups.items())}
-
-
-def _group_ids(faces: tuple[np.ndarray, ...]) -> dict[int, np.ndarray]:
-    """Face ids grouped by degree, in the order of :func:`_groups`: {k: (f_k,) face ids}."""
-    ids: dict[int, list[int]] = {}
-    for i, face in enumerate(faces):
-        ids.setdefault(len(face), []).append(i)
-    return {k: np.array(v, dtype=np.int64) for k, v in sorted(ids.items())}
-
-
-def _cell_adjacency(faces: tuple[np.ndarray, ...]) -> sp.csr_matrix:
-    """(f, f) 0/1 matrix of the cells that share a beam."""
-    owner = np.repeat(np.arange(len(faces)), [len(f) for f in faces])
-    directed = np.concatenate([np.stack([f, np.roll(f, -1)], axis=-1) for f in faces])
-    key = np.sort(directed, axis=1)
-    order = np.lexsort((key[:, 1], key[:, 0]))
-    key, owner = key[order], owner[order]
-    same = np.all(key[1:] == key[:-1], axis=1)
-    a, b = owner[:-1][same], owner[1:][same]
-    f = len(faces)
-    adjacency = sp.csr_matrix((np.ones(2 * len(a)), (np.r_[a, b], np.r_[b, a])), shape=(f, f))
-    adjacency.data[:] = 1.0
-    return adjacency
-
-
-def graded_areas(areas: np.ndarray, sizes: np.ndarray | None, interior: np.ndarray,
-                 adjacency: sp.csr_matrix, *, min_side: float = 0.0,
-                 quantile: float = 0.2) -> tuple[np.ndarray, float, float]:
-    """(target areas (f,), the grid's grading slope, the targets' slope): the area each cell's
-    regularity target takes.
-
-    ``areas`` are the cells' areas as given (the remesher's grading), ``sizes`` the field's target
-    size h at each cell (None: the cells' own sqrt(area)). The grid's grading slope sigma is the
-    log-log slope of sqrt(area) against h over the interior cells (1 where the remesher follows the
-    field). An interior cell's target follows the field among its neighbours: h^(2 sigma) times the
-    area its neighbourhood (the cells around it and itself) has per unit of h^(2 sigma), so the
-    local cell count keeps its area and the size follows the field instead of the remesher's noise.
-    Boundary cells (cut by the boundary) keep their area.
-
-    ``min_side``: the shortest beam the joints take (m). Where the smallest interior cells (their
-    ``quantile``) would have a regular hexagon's side shorter than that, the grading is compressed
-    monotonically, sizes going as h^s with s < sigma over the whole grid (total area kept), until
-    they do not: the order of the sizes, which is the field's grading, stays. Where even equal
-    sizes would not do, the grid is too fine for its joints whatever its grading (the remesh
-    coarsens such grids, the optimize stage reports them): the grading is then not compressed.
-    """
-    areas = np.asarray(areas, dtype=float)
-    n = len(areas)
-    h = np.sqrt(areas) if sizes is None else np.asarray(sizes, dtype=float)
-    interior = np.asarray(interior, dtype=bool)
-    pick = interior if interior.sum() >= 4 else np.ones(n, dtype=bool)
-    log_h = np.log(h[pick])
-    sigma = 1.0
-    if sizes is not None and np.ptp(log_h) > 1e-6:
-        sigma = float(np.clip(0.5 * np.polyfit(log_h, np.log(areas[pick]), 1)[0], 0.0, 1.0))
-    local = areas.copy()
-    if sizes is not None and interior.sum() >= 2:
-        inner = interior.astype(float)
-        ring = adjacency + sp.eye(n, format="csr")
-        weight = h ** (2 * sigma)
-        budget, demand = ring @ (areas * inner), ring @ (weight * inner)
-        ok = interior & (demand > 0)
-        local[ok] = weight[ok] * budget[ok] / demand[ok]
-        local[ok] *= areas[ok].sum() / local[ok].sum()  # the interior cells' area as given
-    total = float(areas.sum())
-    h_ref = float(np.exp(np.mean(log_h)))
-
-    def compressed(slope: float) -> np.ndarray:
-        out = local * (h / h_ref) ** (2 * (slope - sigma))
-        return out * (total / max(float(out.sum()), 1e-300))
-
-    def margin(slope: float) -> float:
-        side = np.sqrt(compressed(slope)[pick]) * HEXAGON_SIDE
-        return float(np.quantile(side, quantile)) - min_side
-
-    slope = sigma
-    if min_side > 0 and margin(sigma) < 0 <= margin(0.0):
-        lo, hi = 0.0, sigma  # margin(lo) >= 0 > margin(hi)
-        for _ in range(30):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (lo, mid) if margin(mid) < 0 else (mid, hi)
-        slope = lo
-    return compressed(slope), sigma, slope
-
-
-def cell_areas(points: np.ndarray) -> np.ndarray:
-    """(f,) areas of (f,k,3) cells (the vector area's length: the area projected on the best-fit plane), m2."""
-    return 0.5 * np.linalg.norm(np.cross(points, np.roll(points, -1, axis=1)).sum(axis=1), axis=1)
-
-
-def _frames(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Centroids (f,3), in-plane axes (f,2,3) and normals (f,3) of (f,k,3) point sets (PCA)."""
-    centroid = points.mean(axis=1)
-    _, _, vt = np.linalg.svd(points - centroid[:, None], full_matrices=False)
-    return centroid, vt[:, :2], vt[:, 2]
-
-
-def planar_targets(points: np.ndarray) -> np.ndarray:
-    """(f,k,3) nodes of (f,k,3) cells projected onto each cell's best-fit plane, m."""
-    points = np.asarray(points, dtype=float)
-    centroid, _, normal = _frames(points)
-    offset = np.einsum("fki,fi->fk", points - centroid[:, None], normal)
-    return points - offset[..., None] * normal[:, None]
-
-
-def _unstretched(points: np.ndarray):
-    """In-plane principal coordinates of (f,k,3) cells divided by the sqrt-eigenvalue spreads:
-    (unstretched (f,k,2), spread (f,2), vectors (f,2,2), axes (f,2,3), centroid (f,3))."""
-    k = points.shape[1]
-    centroid, axes, _ = _frames(points)
-    local = np.einsum("fki,fji->fkj", points - centroid[:, None], axes)
-    covariance = np.einsum("fki,fkj->fij", local, local) / k
-    values, vectors = np.linalg.eigh(covariance)
-    spread = np.sqrt(np.maximum(values, 1e-300))
-    principal = np.einsum("fki,fij->fkj", local, vectors)
-    return principal / spread[:, None, :], spread, vectors, axes, centroid
-
-
-def regular_targets(points: np.ndarray, max_stretch: float = np.inf, areas: np.ndarray | None = None) -> np.ndarray:
-    """(f,k,3) targets of (f,k,3) cells: the regular k-gon of equal area best fitting each cell
-    after un-stretching it by its PCA axes, stretched back by at most ``max_stretch`` (the ratio
-    of the two principal spreads, kept at their product, so the area stays). A regular cell, and
-    a regular cell stretched affinely within ``max_stretch``, is its own target (either
-    orientation); a sliver's target is the regular cell stretched ``max_stretch`` times."""
-    points = np.asarray(points, dtype=float)
-    f, k, _ = points.shape
-    unstretched, spread, vectors, axes, centroid = _unstretched(points)
-    if np.isfinite(max_stretch):
-        mean = np.sqrt(spread[:, 0] * spread[:, 1])
-        ratio = np.minimum(spread[:, 1] / np.maximum(spread[:, 0], 1e-300), max(float(max_stretch), 1.0))
-        spread = np.stack([mean / np.sqrt(ratio), mean * np.sqrt(ratio)], axis=1)
-    angle = 2 * np.pi * np.arange(k) / k
-    template = np.broadcast_to(np.stack([np.cos(angle), np.sin(angle)], axis=1), (f, k, 2))
-    signed = 0.5 * np.sum(unstretched[:, :, 0] * np.roll(unstretched[:, :, 1], -1, axis=1)
-                          - np.roll(unstretched[:, :, 0], -1, axis=1) * unstretched[:, :, 1], axis=1)
-    template = np.where((signed < 0)[:, None, None], template * [1.0, -1.0], template)
-    unit_area = 0.5 * k * np.sin(2 * np.pi / k)
-    if areas is None:
-        scale = np.sqrt(np.abs(signed) / unit_area)
-    else:  # the given area: in the un-stretched frame, divided by the spreads' product
-        scale = np.sqrt(np.asarray(areas, float) / (spread[:, 0] * spread[:, 1]) / unit_area)
-    # best rotation of the template onto the cell (2-D Procrustes, node j <-> template corner j)
-    dot = np.einsum("fki,fki->f", template, unstretched)
-    cross = np.einsum("fk,fk->f", template[:, :, 0], unstretched[:, :, 1]) - np.einsum(
-        "fk,fk->f", template[:, :, 1], unstretched[:, :, 0])
-    phi = np.arctan2(cross, dot)
-    c, s = np.cos(phi)[:, None], np.sin(phi)[:, None]
-    rotated = np.stack([c * template[:, :, 0] - s * template[:, :, 1],
-                        s * template[:, :, 0] + c * template[:, :, 1]], axis=2)
-    fitted = rotated * scale[:, None, None]
-    back = np.einsum("fkj,fij->fki", fitted * spread[:, None, :], vectors)
-    return centroid[:, None] + np.einsum("fkj,fji->fki", back, axes)
-
-
-# ----------------------------------------------------------------------------- projections
-
-class _Surface:
-    """Closest points on a triangle mesh with the candidate index built once."""
-
-    def __init__(self, mesh: TriMesh, candidates: int = 16):
-        self.corners = mesh.vertices[mesh.faces]
-        self.normals = mesh.face_normals
-        self.diagonal = float(mesh.diagonal)
-        self.tree = cKDTree(self.corners.mean(axis=1))
-        self.k = min(candidates, len(mesh.faces))
-
-    def _nearest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(closest points (p,3), distances (p,), triangle ids (p,))."""
-        p = len(points)
-        _, cand = self.tree.query(points, k=self.k)
-        cand = np.asarray(cand).reshape(p, self.k)
-        flat = cand.ravel()
-        repeated = np.repeat(points, self.k, axis=0)
-        q = closest_point_on_triangles(repeated, self.corners[flat, 0], self.corners[flat, 1], self.corners[flat, 2])
-        distance = np.linalg.norm(q - repeated, axis=1).reshape(p, self.k)
-        best = np.argmin(distance, axis=1)
-        rows = np.arange(p)
-        return q.reshape(p, self.k, 3)[rows, best], distance[rows, best], cand[rows, best]
-
-    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(closest points (p,3), distances (p,))."""
-        q, distance, _ = self._nearest(points)
-        return q, distance
-
-    def closest_normals(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(closest points (p,3), unit normals of the triangles they lie on (p,3))."""
-        q, _, triangle = self._nearest(points)
-        return q, self.normals[triangle]
-
-
-class _Boundary:
-    """Closest points on the surface's boundary polylines and the segment directions there."""
-
-    def __init__(self, mesh: TriMesh, candidates: int = 16):
-        segments = [np.stack([mesh.vertices[loop], mesh.vertices[np.roll(loop, -1)]], axis=1)
-                    for loop in mesh.boundary_loops]
-        self.segments = np.concatenate(segments) if segments else np.zeros((0, 2, 3))
-        if len(self.segments):
-            self.tree = cKDTree(self.segments.mean(axis=1))
-        self.k = min(candidates, len(self.segments))
-
-    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(closest points (p,3), unit direction of the segment they lie on (p,3))."""
-        p = len(points)
-        _, cand = self.tree.query(points, k=self.k)
-        cand = np.asarray(cand).reshape(p, self.k)
-        a, b = self.segments[cand, 0], self.segments[cand, 1]
-        d = b - a
-        length2 = np.maximum(np.einsum("pki,pki->pk", d, d), 1e-300)
-        t = np.clip(np.einsum("pki,pki->pk", points[:, None] - a, d) / length2, 0.0, 1.0)
-        q = a + t[..., None] * d
-        best = np.argmin(np.einsum("pki,pki->pk", q - points[:, None], q - points[:, None]), axis=1)
-        rows = np.arange(p)
-        direction = d[rows, best] / np.sqrt(length2[rows, best])[:, None]
-        return q[rows, best], direction
-
-
-# ----------------------------------------------------------------------------- operators
-
-def _centering(groups: dict[int, np.ndarray], n: int) -> sp.csr_matrix:
-    """Rows x_j - mean of its cell for every cell corner, stacked over the degree groups (r, n)."""
-    rows, cols, vals, offset = [], [], [], 0
-    for k, faces in groups.items():
-        f = len(faces)
-        row = offset + np.arange(f * k).reshape(f, k)
-        rows.append(np.repeat(row.ravel(), k))
-        cols.append(np.repeat(faces, k, axis=0).ravel())
-        vals.append(np.tile((np.eye(k) - 1.0 / k).ravel(), f))
-        offset += f * k
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(offset, n))
-
-
-def _stack(groups: dict[int, np.ndarray], targets: dict[int, np.ndarray]) -> np.ndarray:
-    """Mean-free targets (r,3) of every cell corner, in the row order of _centering."""
-    return np.concatenate([(targets[k] - targets[k].mean(axis=1, keepdims=True)).reshape(-1, 3) for k in groups])
-
-
-def _neighbour_mean(edges: np.ndarray, n: int) -> sp.csr_matrix:
-    """(n, n) operator: mean of each node's neighbours (a node without neighbours: itself)."""
-    adjacency = sp.csr_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
-                                                          np.r_[edges[:, 1], edges[:, 0]])), shape=(n, n))
-    degree = np.asarray(adjacency.sum(axis=1)).ravel()
-    lonely = degree == 0
-    return (sp.diags(1.0 / np.maximum(degree, 1.0)) @ adjacency + sp.diags(lonely.astype(float))).tocsr()
-
-
-def _reduction(n: int, interior: np.ndarray, sliding: np.ndarray, tangents: np.ndarray) -> sp.csr_matrix:
-    """(3n, m) basis of the admissible displacements: 3 DOFs per free interior node, one along
-    the boundary tangent per sliding node, none for fixed nodes (x flattened node-major)."""
-    free = np.flatnonzero(interior)
-    slide = np.flatnonzero(sliding)
-    rows = np.r_[(3 * free[:, None] + np.arange(3)).ravel(), (3 * slide[:, None] + np.arange(3)).ravel()]
-    cols = np.r_[np.arange(3 * len(free)), 3 * len(free) + np.repeat(np.arange(len(slide)), 3)]
-    vals = np.r_[np.ones(3 * len(free)), tangents[slide].ravel()]
-    return sp.csr_matrix((vals, (rows, cols)), shape=(3 * n, 3 * len(free) + len(slide)))
-
-
 # ----------------------------------------------------------------------------- quality
 
-def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface: _Surface | None = None) -> dict:
+def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *,
+                     surface: ClosestSurfacePoints | None = None) -> dict:
     """Figures of a grid-shell (JSON-ready): planarity_max_m, planarity_p95_m (largest node distance
     from a cell's best-fit plane), planarity_max_rel, planarity_p95_rel (to the mean beam length),
     regularity (mean over cells of std/mean of edge lengths after un-stretching the cell's own
@@ -462,9 +211,9 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface
     lengths = polymesh.beam_lengths
     mean_length = float(lengths.mean()) if len(lengths) else 0.0
     planarity, regularity, smallest, nonconvex = [], [], 180.0, 0
-    for k, faces in _groups(polymesh.faces).items():
+    for k, faces in cells_by_degree(polymesh.faces).items():
         points = x[faces]
-        centroid, axes, normal = _frames(points)
+        centroid, axes, normal = cell_frames(points)
         distance = np.abs(np.einsum("fki,fi->fk", points - centroid[:, None], normal)).max(axis=1)
         planarity.append(distance if k > 3 else np.zeros(len(faces)))
         if k > 3:
@@ -476,7 +225,7 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface
                                 - np.roll(local[:, :, 0], -1, axis=1) * local[:, :, 1], axis=1)
             size = np.einsum("fki,fki->f", edge, edge) / k
             nonconvex += int(np.sum(np.any(turn * np.sign(area)[:, None] < -1e-9 * size[:, None], axis=1)))
-        unstretched = _unstretched(points)[0]
+        unstretched = unstretched_cells(points)[0]
         edges = np.linalg.norm(unstretched - np.roll(unstretched, -1, axis=1), axis=2)
         regularity.append(edges.std(axis=1) / np.maximum(edges.mean(axis=1), 1e-300))
         a, b = np.roll(points, 1, axis=1) - points, np.roll(points, -1, axis=1) - points
@@ -500,7 +249,7 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface
     if mesh is not None or surface is not None:
         if surface is None:
             assert mesh is not None
-            surface = _Surface(mesh)
+            surface = ClosestSurfacePoints(mesh)
         distance = surface.closest(x)[1]
         out["closeness_max_rel"] = float(distance.max() / surface.diagonal)
         out["closeness_mean_rel"] = float(distance.mean() / surface.diagonal)
@@ -508,7 +257,7 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *, surface
 
 
 def grid_quality(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, *,
-                 surface: _Surface | None = None, figures: dict | None = None) -> dict:
+                 surface: ClosestSurfacePoints | None = None, figures: dict | None = None) -> dict:
     """:func:`optimize_quality` (or ``figures`` already measured) with the remesher's wider figures
     (cell degrees, sizes against the field: engine.voronoi.polymesh_quality) added."""
     from .voronoi import polymesh_quality
@@ -520,9 +269,11 @@ def grid_quality(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, 
     return out
 
 
-# ----------------------------------------------------------------------------- driver
+# ----------------------------------------------------------------------------- (a) set-up
 
 def _check(polymesh: PolyMesh, mesh: TriMesh) -> None:
+    """Refuses a grid without nodes or cells, with non-finite nodes or cells of fewer than three nodes,
+    and a surface without triangles."""
     if polymesh.n_nodes == 0 or polymesh.n_faces == 0:
         raise InputError("optimize: the grid-shell has no nodes or no cells",
                          hint="run the remesh stage first and check that it produced cells")
@@ -551,6 +302,401 @@ def _schedule(settings: OptimizeSettings) -> tuple[float, list[tuple[float, floa
     plan = [(t0 + (1 - t0) * (i / max(main, 1)), fair) for i in range(main)]
     return shape, plan + [(FINAL_PLANARITY, 0.0)] * final
 
+
+@dataclass(frozen=True, kw_only=True)
+class _GlobalStep:
+    """The global step's constant system: centering rows C, neighbour mean, shape and node weights,
+    damping, the plan of blends (t, f), A (3n x 3n), the basis B of the free DOFs and the factor of
+    B^T A B (None: nothing to solve)."""
+
+    C: sp.csr_matrix
+    neighbours: sp.csr_matrix
+    shape: float
+    node_weight: float
+    damping: float
+    plan: list[tuple[float, float]]
+    A3: sp.csr_matrix
+    B: sp.csr_matrix
+    solve: Callable[[np.ndarray], np.ndarray] | None
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Problem:
+    """What the phases share: the grid as split, its constraints, the surface and its boundary, the
+    mirror partners, the target areas, the fabrication limits and the global step."""
+
+    settings: OptimizeSettings
+    given: PolyMesh  # the grid as given
+    polymesh: PolyMesh  # the grid the iterations move: split where the boundary holds cells out of plane
+    new_beams: np.ndarray  # (b, 2) node ids of the splits' beams
+    corner_splits: int
+    edge_splits: int
+    with_end_game: bool
+    surface: ClosestSurfacePoints
+    boundary: ClosestBoundaryPoints
+    fixed: np.ndarray
+    sliding: np.ndarray
+    interior: np.ndarray
+    movable: np.ndarray
+    start: np.ndarray  # (n, 3) the first iterate: the nodes, sliding ones on the boundary
+    x0: np.ndarray  # a copy of it: what fairness and the target areas refer to
+    groups: dict[int, np.ndarray]
+    planes: tuple
+    partners: np.ndarray | None
+    field: GuidingField | None
+    nearest_vertex: cKDTree | None
+    areas: dict[int, np.ndarray | None]
+    grading: dict
+    corners: np.ndarray
+    min_corner: float  # rad
+    beam_length_limits: Callable[[PolyMesh], np.ndarray] | None
+    system: _GlobalStep
+    mean_length: float  # of the grid as given, m
+    band: float  # the closeness band of the iterations, m
+
+
+def _target_areas(groups: dict[int, np.ndarray], grid: PolyMesh, x0: np.ndarray, settings: OptimizeSettings,
+                  field: GuidingField | None,
+                  nearest_vertex: cKDTree | None) -> tuple[dict[int, np.ndarray | None], dict]:
+    """(the cells' target areas (None: each cell's current area), the grading's slopes): the grid's grading,
+    following the field among neighbouring cells and compressed as far as the joints demand (graded_areas)."""
+    grading: dict = {"given_slope": None, "target_slope": None}
+    if not settings.keep_grading:
+        return {k: None for k in groups}, grading
+    ids = cell_ids_by_degree(grid.faces)
+    area, centroid = np.zeros(grid.n_faces), np.zeros((grid.n_faces, 3))
+    for k, f in groups.items():
+        area[ids[k]] = cell_areas(x0[f])
+        centroid[ids[k]] = x0[f].mean(axis=1)
+    sizes = (field.size[nearest_vertex.query(centroid)[1]]
+             if nearest_vertex is not None and field is not None else None)
+    target, grading["given_slope"], grading["target_slope"] = graded_areas(
+        area, sizes, ~grid.face_boundary, cell_adjacency(grid.faces),
+        min_side=settings.min_beam_length, quantile=settings.grading_quantile)
+    return {k: target[ids[k]] for k in groups}, grading
+
+
+def _global_step_system(settings: OptimizeSettings, groups: dict[int, np.ndarray], edges: np.ndarray, n: int,
+                        interior: np.ndarray, sliding: np.ndarray, tangents: np.ndarray) -> _GlobalStep:
+    """The global step's matrix, the same every iteration, factored once (when the plan has steps)."""
+    C = centering_rows(groups, n)
+    neighbours = neighbour_mean(edges, n)
+    shape, plan = _schedule(settings)
+    node_weight = settings.closeness_weight + settings.fairness_weight
+    damping = DAMPING * max(shape + node_weight, 1.0)
+    A = shape * (C.T @ C) + (node_weight + damping) * sp.eye(n)
+    A3 = sp.kron(A, sp.eye(3), format="csr")
+    B = free_dof_basis(n, interior, sliding, tangents)
+    solve = spla.factorized((B.T @ A3 @ B).tocsc()) if B.shape[1] and plan else None
+    return _GlobalStep(C=C, neighbours=neighbours, shape=shape, node_weight=node_weight, damping=damping, plan=plan,
+                       A3=A3, B=B, solve=solve)
+
+
+def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, settings: OptimizeSettings,
+            surface: ClosestSurfacePoints, before: dict,
+            beam_length_limits: Callable[[PolyMesh], np.ndarray] | None) -> _Problem:
+    """The problem: boundary cells split (planar panels), corners and supports fixed, boundary nodes
+    sliding, the rest interior; the mirror partners, the target areas and the global step."""
+    planar_panels = settings.planar and settings.planarity_weight > 0 and settings.iterations > 0
+    given = polymesh
+    new_beams = np.zeros((0, 2), dtype=np.int64)
+    corner_splits = edge_splits = 0
+    if planar_panels and settings.split_cells:
+        tolerance = settings.planarity_tolerance * before["mean_beam_length_m"]
+        splits = split_boundary_cells(polymesh, hold=SPLIT_HOLD * END_BAND * surface.diagonal,
+                                      straightness=SPLIT_STRAIGHTNESS * tolerance)
+        polymesh, new_beams = splits.polymesh, splits.new_beams
+        corner_splits, edge_splits = splits.corner_splits, splits.edge_splits
+    n = polymesh.n_nodes
+    fixed = polymesh.corners | polymesh.supports
+    boundary = ClosestBoundaryPoints(mesh)
+    sliding = polymesh.boundary & ~fixed
+    if sliding.any() and not len(boundary.segments):
+        raise InputError("optimize: the grid-shell has boundary nodes but the surface has no boundary",
+                         hint="closed surfaces: clear the boundary flags of the grid-shell")
+    interior = ~polymesh.boundary & ~fixed
+    x = np.array(polymesh.nodes, dtype=float)
+    tangents = np.zeros((n, 3))
+    if sliding.any() and settings.iterations > 0:
+        x[sliding], tangents[sliding] = boundary.closest(x[sliding])
+    groups = cells_by_degree(polymesh.faces)
+    x0 = x.copy()
+    planes = tuple(settings.symmetry_planes)
+    partners = mirror_partners(x, planes, PARTNER_REACH * float(polymesh.beam_lengths.mean())) if planes else None
+    nearest_vertex = cKDTree(mesh.vertices) if field is not None and settings.follow_field else None
+    areas, grading = _target_areas(groups, polymesh, x0, settings, field, nearest_vertex)
+    return _Problem(settings=settings, given=given, polymesh=polymesh, new_beams=new_beams,
+                    corner_splits=corner_splits, edge_splits=edge_splits,
+                    with_end_game=planar_panels and settings.planarity_iterations > 0,
+                    surface=surface, boundary=boundary, fixed=fixed, sliding=sliding, interior=interior,
+                    movable=interior | sliding, start=x, x0=x0, groups=groups, planes=planes, partners=partners,
+                    field=field, nearest_vertex=nearest_vertex, areas=areas, grading=grading,
+                    corners=face_corners(polymesh.faces), min_corner=float(np.radians(settings.min_corner_angle_deg)),
+                    beam_length_limits=beam_length_limits,
+                    system=_global_step_system(settings, groups, polymesh.edges, n, interior, sliding, tangents),
+                    mean_length=max(before["mean_beam_length_m"], 1e-300), band=CLOSENESS_BAND * surface.diagonal)
+
+
+# ----------------------------------------------------------------------------- (b) local/global iterations
+
+def _symmetric(p: _Problem, x: np.ndarray) -> np.ndarray:
+    """x with mirror pairs at their mirrored mean, boundary nodes back on the boundary."""
+    if p.partners is None:
+        return x
+    x = symmetrise_points(x, p.planes, p.partners, p.fixed)
+    if p.sliding.any():
+        x[p.sliding] = p.boundary.closest(x[p.sliding])[0]
+    return x
+
+
+def _hold_limits(p: _Problem, x: np.ndarray, sweeps: int = 3) -> np.ndarray:
+    """x with narrow corners opened and short beams lengthened, boundary nodes back on the boundary."""
+    if p.min_corner > 0:
+        x = open_narrow_corners(x, p.corners, p.min_corner, p.movable, sweeps=sweeps)
+    minimum = p.settings.min_beam_length
+    if p.beam_length_limits is not None:
+        minimum = np.maximum(minimum, p.beam_length_limits(p.polymesh.replace_nodes(x)))
+    if np.any(np.asarray(minimum) > 0):
+        x = lengthen_short_beams(x, p.polymesh.edges, minimum, p.movable, sweeps=sweeps)
+    if p.sliding.any():
+        x[p.sliding] = p.boundary.closest(x[p.sliding])[0]
+    return x
+
+
+def _local_step(p: _Problem, x: np.ndarray, t: float, f: float) -> tuple[np.ndarray, float]:
+    """Right-hand side of the global step at x and the energy of the current phase at x
+    (planarity share t, fairness share f)."""
+    s, settings = p.system, p.settings
+    points = {k: x[faces] for k, faces in p.groups.items()}
+    target = np.zeros((s.C.shape[0], 3))
+    if s.shape > 0:
+        if t < 1.0:
+            target += (1 - t) * stacked_targets(p.groups, {
+                k: regular_targets(cells, settings.max_cell_stretch, p.areas[k]) for k, cells in points.items()})
+        if t > 0.0:
+            target += t * stacked_targets(p.groups, {k: planar_targets(cells) for k, cells in points.items()})
+    node_target = into_band(x, *p.surface.closest(x), p.band)
+    if f > 0:
+        # keep_grading: a smooth displacement, so that sizes keep their grading; else the grid
+        smooth = p.x0 + s.neighbours @ (x - p.x0) if settings.keep_grading else s.neighbours @ x
+        node_target[p.interior] = (1 - f) * node_target[p.interior] + f * smooth[p.interior]
+    energy = s.shape * float(np.sum((s.C @ x - target) ** 2)) + s.node_weight * float(np.sum((x - node_target) ** 2))
+    return s.shape * (s.C.T @ target) + s.node_weight * node_target + s.damping * x, energy
+
+
+def _global_step(p: _Problem, x: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """The least-squares fit of the targets ``rhs`` from x over the free DOFs, boundary nodes back on the boundary."""
+    s = p.system
+    assert s.solve is not None  # factored whenever the plan has steps to solve
+    residual = rhs.ravel() - s.A3 @ x.ravel()
+    new = x + (s.B @ s.solve(s.B.T @ residual)).reshape(p.polymesh.n_nodes, 3)
+    if p.sliding.any():
+        new[p.sliding] = p.boundary.closest(new[p.sliding])[0]
+    return new
+
+
+def _anderson(p: _Problem, x: np.ndarray, plain: np.ndarray, history_g: list[np.ndarray],
+              history_f: list[np.ndarray]) -> np.ndarray | None:
+    """Anderson's extrapolation of the plain step from x over the last ANDERSON_DEPTH + 1 iterates
+    (the histories are extended and trimmed); None while they hold a single one."""
+    g, r = plain.ravel(), (plain - x).ravel()
+    history_g.append(g)
+    history_f.append(r)
+    new = None
+    if len(history_f) > 1:
+        dF = np.diff(np.array(history_f[-ANDERSON_DEPTH - 1:]), axis=0).T
+        dG = np.diff(np.array(history_g[-ANDERSON_DEPTH - 1:]), axis=0).T
+        theta = np.linalg.lstsq(dF, r, rcond=None)[0]
+        new = (g - dG @ theta).reshape(p.polymesh.n_nodes, 3)
+        if p.sliding.any():
+            new[p.sliding] = p.boundary.closest(new[p.sliding])[0]
+    del history_g[:-ANDERSON_DEPTH - 1], history_f[:-ANDERSON_DEPTH - 1]
+    return new
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Iterated:
+    """The nodes after the local/global iterations; how many were done, the last one's largest node
+    move (m), the Anderson steps taken and rejected, and whether a step left the reals."""
+
+    x: np.ndarray
+    done: int
+    step: float
+    accepted: int
+    rejected: int
+    stopped_non_finite: bool
+
+
+def _iterate(p: _Problem, progress: Callable[[str, float | None], None] | None) -> _Iterated:
+    """The local/global iterations along the plan, the final ones Anderson-accelerated (a point that
+    raises the energy falls back to the plain step), the fabrication limits held after each step."""
+    plan = p.system.plan
+    x = p.start
+    step, done, accepted, rejected = 0.0, 0, 0, 0
+    stopped_non_finite = False
+    first_final = next((i for i, (t, f) in enumerate(plan) if f == 0.0 and t == FINAL_PLANARITY), len(plan))
+    history_g: list[np.ndarray] = []
+    history_f: list[np.ndarray] = []
+    previous_energy, previous_plain = np.inf, None
+    for iteration, (t, f) in enumerate(plan if p.system.solve is not None else []):
+        accelerate = ANDERSON_DEPTH > 0 and iteration >= first_final
+        rhs, energy = _local_step(p, x, t, f)
+        if accelerate and previous_plain is not None and energy > previous_energy:
+            # the accelerated point raised the energy: fall back to the plain step, restart the history
+            rejected += 1
+            x = previous_plain
+            history_g.clear()
+            history_f.clear()
+            rhs, energy = _local_step(p, x, t, f)
+        plain = _global_step(p, x, rhs)
+        new = plain
+        if accelerate:
+            extrapolated = _anderson(p, x, plain, history_g, history_f)
+            if extrapolated is not None:
+                new, accepted = extrapolated, accepted + 1
+            previous_energy, previous_plain = energy, plain
+        new = _symmetric(p, _hold_limits(p, new))
+        if not np.all(np.isfinite(new)):
+            # a step that left the reals (a guard: the one CI failure that led to it was the plot of
+            # workflow/plots/remesh.py, reading matplotlib's uninitialised padding): the
+            # iterations end at the last finite grid, and the quality says so
+            log.warning("optimize: iteration %d gave non-finite nodes; kept the grid of iteration %d",
+                        iteration + 1, done)
+            stopped_non_finite = True
+            break
+        step = float(np.linalg.norm(new - x, axis=1).max())
+        x = new
+        done = iteration + 1
+        if progress is not None:
+            progress(f"optimize: iteration {done}/{len(plan)}", done / len(plan))
+    if previous_plain is not None and _local_step(p, x, *plan[-1])[1] > previous_energy:
+        x = previous_plain  # never end on an accelerated point that raised the energy
+    if done:
+        for _ in range(FINAL_HOLD_ROUNDS):  # the limits once more, to convergence of the sweeps
+            held = _symmetric(p, _hold_limits(p, x, sweeps=10))
+            if not np.all(np.isfinite(held)):
+                stopped_non_finite = True
+                break
+            x = held
+    return _Iterated(x=x, done=done, step=step, accepted=accepted, rejected=rejected,
+                     stopped_non_finite=stopped_non_finite)
+
+
+# ----------------------------------------------------------------------------- (c) planarity end game
+
+@dataclass(frozen=True, kw_only=True)
+class _EndGame:
+    """The nodes and the grid after the end game and its repair rounds, the new beams in all, the
+    repairs' share of them, the end game's record (steps, rejected_steps, factorisations,
+    planarity_weight, reached) and whether it left the reals."""
+
+    x: np.ndarray
+    polymesh: PolyMesh
+    new_beams: np.ndarray
+    repair_splits: int
+    record: dict
+    stopped_non_finite: bool
+
+
+def _regular_rows(x: np.ndarray, *, groups: dict[int, np.ndarray], areas: dict[int, np.ndarray | None],
+                  max_stretch: float) -> np.ndarray:
+    """(rows, 3) mean-free regular targets of the cells ``groups`` at x, in the row order of centering_rows."""
+    return stacked_targets(groups, {k: regular_targets(x[faces], max_stretch, areas[k]) for k, faces in groups.items()})
+
+
+def _said_step(progress: Callable[[str, float | None], None] | None, base: int, steps: int) -> None:
+    """Reports planarity step ``base + steps``."""
+    if progress is not None:
+        progress(f"optimize: planarity step {base + steps}", None)
+
+
+def _end_game(p: _Problem, x: np.ndarray, progress: Callable[[str, float | None], None] | None) -> _EndGame:
+    """The planarity end game (engine.planarise) from x; boundary cells it leaves beyond the tolerance
+    lose their boundary triangle and it resumes, at most REPAIR_ROUNDS times."""
+    settings, surface = p.settings, p.surface
+    polymesh, new_beams, groups, C = p.polymesh, p.new_beams, p.groups, p.system.C
+    end = {"steps": 0, "rejected_steps": 0, "factorisations": 0, "planarity_weight": 0.0, "reached": False}
+    repair_splits = 0
+    stopped_non_finite = False
+    for attempt in range(REPAIR_ROUNDS + 1 if p.with_end_game else 0):
+        # the tolerance on the grid as split (new beams change the mean beam length)
+        tolerance = settings.planarity_tolerance * float(polymesh.beam_lengths.mean())
+        end_settings = PlanariseSettings(tolerance=tolerance, band=END_BAND * surface.diagonal,
+                                         limit=CLOSENESS_LIMIT * surface.diagonal,
+                                         regularity_weight=SHAPE_SCALE * settings.regularity_weight,
+                                         closeness_weight=settings.closeness_weight,
+                                         iterations=settings.planarity_iterations,
+                                         min_beam_length=settings.min_beam_length,
+                                         min_angle_deg=settings.min_corner_angle_deg)
+        areas = _target_areas(groups, polymesh, p.x0, settings, p.field, p.nearest_vertex)[0]
+        regular = partial(_regular_rows, groups=groups, areas=areas, max_stretch=settings.max_cell_stretch)
+        said = partial(_said_step, progress, int(end["steps"]))
+        planarised, report = planarise(x, groups, interior=p.interior, sliding=p.sliding,
+                                       closest=surface.closest_normals, slide=p.boundary.closest, centering=C,
+                                       regular=regular, beams=polymesh.edges, settings=end_settings,
+                                       reference=p.given.nodes, progress=said)
+        planarised = _symmetric(p, planarised)
+        if not np.all(np.isfinite(planarised)):
+            log.warning("optimize: the planarity end game gave non-finite nodes; kept the grid before it")
+            stopped_non_finite = True
+            break
+        x = planarised
+        for key, value in (("steps", report.iterations), ("rejected_steps", report.rejected_steps),
+                           ("factorisations", report.factorisations)):
+            end[key] += value
+        end["planarity_weight"], end["reached"] = max(end["planarity_weight"], report.planarity_weight), report.reached
+        if report.reached or not settings.split_cells or attempt == REPAIR_ROUNDS:
+            break
+        # boundary cells the end game could not make planar lose their boundary triangle
+        current = polymesh.replace_nodes(x.copy())
+        failing = np.flatnonzero(current.face_boundary & (current.face_planarity() > tolerance))
+        current, cut = cut_boundary_triangles(current, failing)
+        if not len(cut):
+            break
+        polymesh, new_beams, repair_splits = current, np.r_[new_beams, cut], repair_splits + len(cut)
+        groups = cells_by_degree(polymesh.faces)
+        C = centering_rows(groups, polymesh.n_nodes)
+    return _EndGame(x=x, polymesh=polymesh, new_beams=new_beams, repair_splits=repair_splits, record=end,
+                    stopped_non_finite=stopped_non_finite)
+
+
+# ----------------------------------------------------------------------------- (d) closeness band, (e) record
+
+def _within_closeness_limit(p: _Problem, x: np.ndarray) -> tuple[np.ndarray, bool]:
+    """(x with the nodes beyond the hard closeness limit brought back to it: the band is a soft
+    constraint, whether that left the reals: then x as it was)."""
+    banded = x.copy()
+    banded[p.movable] = into_band(x[p.movable], *p.surface.closest(x[p.movable]),
+                                   CLOSENESS_LIMIT * p.surface.diagonal)
+    banded = _symmetric(p, banded)
+    if np.all(np.isfinite(banded)):
+        return banded, False
+    return x, True
+
+
+def _quality_record(p: _Problem, mesh: TriMesh, field: GuidingField | None, before: dict, result: PolyMesh,
+                    iterated: _Iterated, end: _EndGame, stopped_non_finite: bool) -> dict:
+    """The quality dict of :func:`optimize` (its docstring lists the keys)."""
+    before = grid_quality(p.given, mesh, field, figures=before)
+    after = grid_quality(result, mesh, field, surface=p.surface)
+    x, new_beams = result.nodes, end.new_beams
+    split_length = float(np.linalg.norm(x[new_beams[:, 1]] - x[new_beams[:, 0]], axis=1).sum())
+    converged = end.record["reached"] if p.with_end_game else bool(iterated.step <= 1e-4 * p.mean_length)
+    settings = p.settings
+    return {"before": before, "after": after, "iterations": iterated.done,
+            "converged": bool(converged), "final_step_rel": iterated.step / p.mean_length,
+            "factorisations": int(p.system.solve is not None) + end.record["factorisations"],
+            "planar": bool(settings.planar),
+            "accelerated_steps": iterated.accepted, "rejected_steps": iterated.rejected,
+            "planarity_tolerance_rel": settings.planarity_tolerance,
+            "planarity_reached": bool(after["planarity_max_rel"] <= settings.planarity_tolerance),
+            "corner_splits": p.corner_splits, "edge_splits": p.edge_splits, "repair_splits": end.repair_splits,
+            "split_beams": new_beams.tolist(), "split_length_m": split_length, "grading": p.grading,
+            "stopped_non_finite": stopped_non_finite,
+            "end_game": end.record if p.with_end_game else None}
+
+
+# ----------------------------------------------------------------------------- driver
 
 def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, settings: OptimizeSettings, *,
              progress: Callable[[str, float | None], None] | None = None,
@@ -581,254 +727,15 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
     reached; see :mod:`engine.planarise`), None without it.
     """
     _check(polymesh, mesh)
-    surface = _Surface(mesh)
+    surface = ClosestSurfacePoints(mesh)
     before = optimize_quality(polymesh, surface=surface)
-    given = polymesh
-    planar_panels = settings.planar and settings.planarity_weight > 0 and settings.iterations > 0
-    tolerance = settings.planarity_tolerance * before["mean_beam_length_m"]
-    new_beams = np.zeros((0, 2), dtype=np.int64)
-    corner_splits = edge_splits = 0
-    if planar_panels and settings.split_cells:
-        splits = split_boundary_cells(polymesh, hold=SPLIT_HOLD * END_BAND * surface.diagonal,
-                                      straightness=SPLIT_STRAIGHTNESS * tolerance)
-        polymesh, new_beams = splits.polymesh, splits.new_beams
-        corner_splits, edge_splits = splits.corner_splits, splits.edge_splits
-    n = polymesh.n_nodes
-    fixed = polymesh.corners | polymesh.supports
-    boundary = _Boundary(mesh)
-    sliding = polymesh.boundary & ~fixed
-    if sliding.any() and not len(boundary.segments):
-        raise InputError("optimize: the grid-shell has boundary nodes but the surface has no boundary",
-                         hint="closed surfaces: clear the boundary flags of the grid-shell")
-    interior = ~polymesh.boundary & ~fixed
-    x = np.array(polymesh.nodes, dtype=float)
-    tangents = np.zeros((n, 3))
-    if sliding.any() and settings.iterations > 0:
-        x[sliding], tangents[sliding] = boundary.closest(x[sliding])
-
-    groups = _groups(polymesh.faces)
-    x0 = x.copy()
-    planes = tuple(settings.symmetry_planes)
-    partners = mirror_partners(x, planes, PARTNER_REACH * float(polymesh.beam_lengths.mean())) if planes else None
-
-    def symmetric(x: np.ndarray) -> np.ndarray:
-        """x with mirror pairs at their mirrored mean, boundary nodes back on the boundary."""
-        if partners is None:
-            return x
-        x = symmetrise_points(x, planes, partners, fixed)
-        if sliding.any():
-            x[sliding] = boundary.closest(x[sliding])[0]
-        return x
-
-    nearest_vertex = cKDTree(mesh.vertices) if field is not None and settings.follow_field else None
-    grading: dict = {"given_slope": None, "target_slope": None}
-
-    def given_areas(groups: dict[int, np.ndarray], grid: PolyMesh) -> dict[int, np.ndarray | None]:
-        """The cells' target areas (None: each cell's current area): the grid's grading, following the
-        field among neighbouring cells and compressed as far as the joints demand (graded_areas)."""
-        if not settings.keep_grading:
-            return {k: None for k in groups}
-        ids = _group_ids(grid.faces)
-        area, centroid = np.zeros(grid.n_faces), np.zeros((grid.n_faces, 3))
-        for k, f in groups.items():
-            area[ids[k]] = cell_areas(x0[f])
-            centroid[ids[k]] = x0[f].mean(axis=1)
-        sizes = (field.size[nearest_vertex.query(centroid)[1]]
-                 if nearest_vertex is not None and field is not None else None)
-        target, grading["given_slope"], grading["target_slope"] = graded_areas(
-            area, sizes, ~grid.face_boundary, _cell_adjacency(grid.faces),
-            min_side=settings.min_beam_length, quantile=settings.grading_quantile)
-        return {k: target[ids[k]] for k in groups}
-
-    areas0 = given_areas(groups, polymesh)
-    grading_record = dict(grading)
-    C = _centering(groups, n)
-    neighbours = _neighbour_mean(polymesh.edges, n)
-    shape, plan = _schedule(settings)
-    node_weight = settings.closeness_weight + settings.fairness_weight
-    damping = DAMPING * max(shape + node_weight, 1.0)
-    A = shape * (C.T @ C) + (node_weight + damping) * sp.eye(n)
-    A3 = sp.kron(A, sp.eye(3), format="csr")
-    B = _reduction(n, interior, sliding, tangents)
-    factorisations = 0
-    solve = None
-    if B.shape[1] and plan:
-        solve = spla.factorized((B.T @ A3 @ B).tocsc())
-        factorisations = 1
-
-    mean_length = max(before["mean_beam_length_m"], 1e-300)
-    band = CLOSENESS_BAND * surface.diagonal
-
-    def local(x: np.ndarray, t: float, f: float) -> tuple[np.ndarray, float]:
-        """Right-hand side of the global step at x and the energy of the current phase at x."""
-        points = {k: x[faces] for k, faces in groups.items()}
-        target = np.zeros((C.shape[0], 3))
-        if shape > 0:
-            if t < 1.0:
-                target += (1 - t) * _stack(groups, {k: regular_targets(p, settings.max_cell_stretch, areas0[k])
-                                                    for k, p in points.items()})
-            if t > 0.0:
-                target += t * _stack(groups, {k: planar_targets(p) for k, p in points.items()})
-        node_target = _into_band(x, *surface.closest(x), band)
-        if f > 0:
-            # keep_grading: a smooth displacement, so that sizes keep their grading; else the grid
-            smooth = x0 + neighbours @ (x - x0) if settings.keep_grading else neighbours @ x
-            node_target[interior] = (1 - f) * node_target[interior] + f * smooth[interior]
-        energy = shape * float(np.sum((C @ x - target) ** 2)) + node_weight * float(np.sum((x - node_target) ** 2))
-        return shape * (C.T @ target) + node_weight * node_target + damping * x, energy
-
-    def solve_global(x: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-        assert solve is not None  # factored whenever the plan has steps to solve
-        residual = rhs.ravel() - A3 @ x.ravel()
-        new = x + (B @ solve(B.T @ residual)).reshape(n, 3)
-        if sliding.any():
-            new[sliding] = boundary.closest(new[sliding])[0]
-        return new
-
-    corners = face_corners(polymesh.faces)
-    movable = interior | sliding
-    min_corner = np.radians(settings.min_corner_angle_deg)
-
-    def hold_limits(x: np.ndarray, sweeps: int = 3) -> np.ndarray:
-        """x with narrow corners opened and short beams lengthened, boundary nodes back on the boundary."""
-        if min_corner > 0:
-            x = open_narrow_corners(x, corners, min_corner, movable, sweeps=sweeps)
-        minimum = settings.min_beam_length
-        if beam_length_limits is not None:
-            minimum = np.maximum(minimum, beam_length_limits(polymesh.replace_nodes(x)))
-        if np.any(np.asarray(minimum) > 0):
-            x = lengthen_short_beams(x, polymesh.edges, minimum, movable, sweeps=sweeps)
-        if sliding.any():
-            x[sliding] = boundary.closest(x[sliding])[0]
-        return x
-
-    step, done, accepted, rejected = 0.0, 0, 0, 0
-    stopped_non_finite = False
-    first_final = next((i for i, (t, f) in enumerate(plan) if f == 0.0 and t == FINAL_PLANARITY), len(plan))
-    history_g: list[np.ndarray] = []
-    history_f: list[np.ndarray] = []
-    previous_energy, previous_plain = np.inf, None
-    for iteration, (t, f) in enumerate(plan if solve is not None else []):
-        accelerate = ANDERSON_DEPTH > 0 and iteration >= first_final
-        rhs, energy = local(x, t, f)
-        if accelerate and previous_plain is not None and energy > previous_energy:
-            # the accelerated point raised the energy: fall back to the plain step, restart the history
-            rejected += 1
-            x = previous_plain
-            history_g.clear()
-            history_f.clear()
-            rhs, energy = local(x, t, f)
-        plain = solve_global(x, rhs)
-        new = plain
-        if accelerate:
-            g, r = plain.ravel(), (plain - x).ravel()
-            history_g.append(g)
-            history_f.append(r)
-            if len(history_f) > 1:
-                dF = np.diff(np.array(history_f[-ANDERSON_DEPTH - 1:]), axis=0).T
-                dG = np.diff(np.array(history_g[-ANDERSON_DEPTH - 1:]), axis=0).T
-                theta = np.linalg.lstsq(dF, r, rcond=None)[0]
-                new = (g - dG @ theta).reshape(n, 3)
-                if sliding.any():
-                    new[sliding] = boundary.closest(new[sliding])[0]
-                accepted += 1
-            del history_g[:-ANDERSON_DEPTH - 1], history_f[:-ANDERSON_DEPTH - 1]
-            previous_energy, previous_plain = energy, plain
-        new = symmetric(hold_limits(new))
-        if not np.all(np.isfinite(new)):
-            # a step that left the reals (a guard: the one CI failure that led to it was the plot of
-            # workflow/plots/remesh.py, reading matplotlib's uninitialised padding): the
-            # iterations end at the last finite grid, and the quality says so
-            log.warning("optimize: iteration %d gave non-finite nodes; kept the grid of iteration %d",
-                        iteration + 1, done)
-            stopped_non_finite = True
-            break
-        step = float(np.linalg.norm(new - x, axis=1).max())
-        x = new
-        done = iteration + 1
-        if progress is not None:
-            progress(f"optimize: iteration {done}/{len(plan)}", done / len(plan))
-    if previous_plain is not None and local(x, *plan[-1])[1] > previous_energy:
-        x = previous_plain  # never end on an accelerated point that raised the energy
-    if done:
-        for _ in range(FINAL_HOLD_ROUNDS):  # the limits once more, to convergence of the sweeps
-            held = symmetric(hold_limits(x, sweeps=10))
-            if not np.all(np.isfinite(held)):
-                stopped_non_finite = True
-                break
-            x = held
-    end = {"steps": 0, "rejected_steps": 0, "factorisations": 0, "planarity_weight": 0.0, "reached": False}
-    repair_splits = 0
-    ran_end_game = planar_panels and settings.planarity_iterations > 0
-    for attempt in range(REPAIR_ROUNDS + 1 if ran_end_game else 0):
-        # the tolerance on the grid as split (new beams change the mean beam length)
-        tolerance = settings.planarity_tolerance * float(polymesh.beam_lengths.mean())
-        end_settings = PlanariseSettings(tolerance=tolerance, band=END_BAND * surface.diagonal,
-                                         limit=CLOSENESS_LIMIT * surface.diagonal,
-                                         regularity_weight=SHAPE_SCALE * settings.regularity_weight,
-                                         closeness_weight=settings.closeness_weight,
-                                         iterations=settings.planarity_iterations,
-                                         min_beam_length=settings.min_beam_length,
-                                         min_angle_deg=settings.min_corner_angle_deg)
-
-        def regular(x: np.ndarray, groups: dict = groups, areas: dict = given_areas(groups, polymesh)) -> np.ndarray:
-            return _stack(groups, {k: regular_targets(x[faces], settings.max_cell_stretch, areas[k])
-                                   for k, faces in groups.items()})
-
-        def said(steps: int, base: int = int(end["steps"])) -> None:
-            if progress is not None:
-                progress(f"optimize: planarity step {base + steps}", None)
-
-        planarised, report = planarise(x, groups, interior=interior, sliding=sliding,
-                                       closest=surface.closest_normals, slide=boundary.closest, centering=C,
-                                       regular=regular, beams=polymesh.edges, settings=end_settings,
-                                       reference=given.nodes, progress=said)
-        planarised = symmetric(planarised)
-        if not np.all(np.isfinite(planarised)):
-            log.warning("optimize: the planarity end game gave non-finite nodes; kept the grid before it")
-            stopped_non_finite = True
-            break
-        x = planarised
-        factorisations += report.factorisations
-        for key, value in (("steps", report.iterations), ("rejected_steps", report.rejected_steps),
-                           ("factorisations", report.factorisations)):
-            end[key] += value
-        end["planarity_weight"], end["reached"] = max(end["planarity_weight"], report.planarity_weight), report.reached
-        if report.reached or not settings.split_cells or attempt == REPAIR_ROUNDS:
-            break
-        # boundary cells the end game could not make planar lose their boundary triangle
-        current = polymesh.replace_nodes(x.copy())
-        failing = np.flatnonzero(current.face_boundary & (current.face_planarity() > tolerance))
-        current, cut = cut_boundary_triangles(current, failing)
-        if not len(cut):
-            break
-        polymesh, new_beams, repair_splits = current, np.r_[new_beams, cut], repair_splits + len(cut)
-        groups = _groups(polymesh.faces)
-        C = _centering(groups, n)
-    if done:
-        # the closeness band is a soft constraint: bring stray nodes back within the hard limit
-        moving = interior | sliding
-        banded = x.copy()
-        banded[moving] = _into_band(x[moving], *surface.closest(x[moving]), CLOSENESS_LIMIT * surface.diagonal)
-        banded = symmetric(banded)
-        if np.all(np.isfinite(banded)):
-            x = banded
-        else:
-            stopped_non_finite = True
-
-    result = polymesh.replace_nodes(x)
-    before = grid_quality(given, mesh, field, figures=before)
-    after = grid_quality(result, mesh, field, surface=surface)
-    split_length = float(np.linalg.norm(x[new_beams[:, 1]] - x[new_beams[:, 0]], axis=1).sum())
-    converged = end["reached"] if ran_end_game else bool(step <= 1e-4 * mean_length)
-    quality = {"before": before, "after": after, "iterations": done,
-               "converged": bool(converged), "final_step_rel": step / mean_length,
-               "factorisations": factorisations, "planar": bool(settings.planar),
-               "accelerated_steps": accepted, "rejected_steps": rejected,
-               "planarity_tolerance_rel": settings.planarity_tolerance,
-               "planarity_reached": bool(after["planarity_max_rel"] <= settings.planarity_tolerance),
-               "corner_splits": corner_splits, "edge_splits": edge_splits, "repair_splits": repair_splits,
-               "split_beams": new_beams.tolist(), "split_length_m": split_length, "grading": grading_record,
-               "stopped_non_finite": stopped_non_finite,
-               "end_game": end if ran_end_game else None}
+    problem = _set_up(polymesh, mesh, field, settings, surface, before, beam_length_limits)
+    iterated = _iterate(problem, progress)
+    end = _end_game(problem, iterated.x, progress)
+    x, stopped_in_band = end.x, False
+    if iterated.done:
+        x, stopped_in_band = _within_closeness_limit(problem, x)
+    result = end.polymesh.replace_nodes(x)
+    stopped = iterated.stopped_non_finite or end.stopped_non_finite or stopped_in_band
+    quality = _quality_record(problem, mesh, field, before, result, iterated, end, stopped)
     return OptimizeResult(polymesh=result, quality=quality)
