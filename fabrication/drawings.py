@@ -16,13 +16,11 @@ import numpy as np
 from engine.errors import InputError
 from engine.mesh import PolyMesh
 from engine.parts import beam_id, joint_id, node_id, panel_id
-from fabrication.files import atomic_path, file_date, save_dxf
+from fabrication.dxf import PLAN_LAYERS, new_document, save_dxf
+from fabrication.files import atomic_path, file_date
 
-__all__ = ["write_plan_drawings", "node_id", "beam_id", "panel_id", "joint_id", "PLAN_LAYERS"]
+__all__ = ["write_plan_drawings", "node_id", "beam_id", "panel_id", "joint_id"]
 
-#: DXF layers of the plan: name -> ACI colour
-PLAN_LAYERS = {"BEAMS": 7, "LABELS_NODES": 3, "LABELS_BEAMS": 4, "LABELS_PANELS": 6, "LABELS_LEADERS": 8,
-               "SUPPORTS": 1, "DIMENSIONS": 2, "TITLE": 7}
 _A3_MM = (420, 297)
 _A3_LANDSCAPE_IN = (_A3_MM[0] / 25.4, _A3_MM[1] / 25.4)
 #: The scales a plan is drawn at (1:n), as an architect's or engineer's drawing states them.
@@ -96,14 +94,7 @@ def drawing_date() -> str:
 
 def _write_dxf(target: Path, plan: np.ndarray, beams: np.ndarray, centres: np.ndarray, supports: np.ndarray,
                height: float, title: list[str]) -> Path:
-    import ezdxf
-
-    doc = ezdxf.new("R2010", setup=True)
-    doc.header["$INSUNITS"] = 4
-    doc.header["$MEASUREMENT"] = 1
-    doc.header["$DIMLFAC"] = 1.0
-    for name, colour in PLAN_LAYERS.items():
-        doc.layers.add(name, color=colour)
+    doc = new_document(PLAN_LAYERS, setup=True)
     msp = doc.modelspace()
     for a, b in beams:
         msp.add_line(tuple(plan[a]), tuple(plan[b]), dxfattribs={"layer": "BEAMS"})

@@ -40,7 +40,8 @@ from shapely.geometry import MultiPoint, box
 
 from engine.errors import InputError
 from engine.parts import sheet_id
-from fabrication.files import atomic_path, save_dxf
+from fabrication.dxf import cutting_layers, new_document, save_dxf
+from fabrication.files import atomic_path
 from fabrication.settings import SheetSettings
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -427,7 +428,7 @@ def write_sheet_dxfs(nesting: SheetNesting, panels: list["Panel"], folder: str |
     """Write ``folder/SHEET01.dxf``... : sheet outline on NOTES, parts on CUT, panel ids on
     ENGRAVE, drill holes on DRILL (mm, $INSUNITS 4). ``settings``: PanelSettings for the
     hole diameter (default: PanelSettings()); ``first_number``: the first sheet's number."""
-    from fabrication.panels import PanelSettings, add_panel, new_dxf
+    from fabrication.panels import PanelSettings, add_panel
 
     settings = settings or PanelSettings()
     folder = Path(folder)
@@ -435,7 +436,7 @@ def write_sheet_dxfs(nesting: SheetNesting, panels: list["Panel"], folder: str |
     sheet = nesting.settings
     paths = []
     for k, members in enumerate(nesting.sheets):
-        doc = new_dxf(drill=settings.hole_diameter_mm > 0)
+        doc = new_document(cutting_layers(drill=settings.hole_diameter_mm > 0))
         msp = doc.modelspace()
         msp.add_lwpolyline([(0, 0), (sheet.width_mm, 0), (sheet.width_mm, sheet.height_mm), (0, sheet.height_mm)],
                            close=True, dxfattribs={"layer": "NOTES"})

@@ -31,20 +31,16 @@ from shapely.geometry import Polygon
 from engine.errors import InputError
 from engine.mesh import PolyMesh
 from engine.parts import panel_id, sheet_id
-from fabrication.files import save_dxf, write_text_atomic
+from fabrication.dxf import ENGRAVE_STYLE, cutting_layers, new_document, save_dxf
+from fabrication.files import write_text_atomic
 from fabrication.settings import PanelSettings
 
 if TYPE_CHECKING:  # pragma: no cover
     from fabrication.nesting_sheets import SheetNesting
 
 __all__ = ["PanelSettings", "Panel", "flatten_panels", "write_panel_dxfs", "write_panels_csv",
-           "new_dxf", "add_panel", "panel_label", "LAYERS",
+           "add_panel", "panel_label",
            "SheetSettings", "SheetNesting", "nest_sheets", "write_sheet_dxfs", "write_sheets_picture"]
-
-#: DXF layers used by every fabrication drawing: name -> ACI colour.
-LAYERS = {"CUT": 1, "ENGRAVE": 5, "DRILL": 3, "NOTES": 8}
-#: Text style for engraving: a single-stroke SHX font, as laser and CNC software expect.
-ENGRAVE_STYLE = "SINGLESTROKE"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -229,24 +225,6 @@ def flatten_panels(polymesh: PolyMesh, settings: PanelSettings | None = None, *,
 
 # ---------------------------------------------------------------------------- DXF
 
-def new_dxf(drill: bool = True):
-    """A new ezdxf R2010 document in mm with the fabrication layers and engraving style; without
-    ``drill`` (panels without fixing holes) no DRILL layer, rather than an empty one."""
-    import ezdxf
-
-    doc = ezdxf.new("R2010", setup=False)
-    doc.header["$INSUNITS"] = 4  # mm
-    doc.header["$MEASUREMENT"] = 1  # metric
-    for name, colour in LAYERS.items():
-        if name == "DRILL" and not drill:
-            continue
-        if name not in doc.layers:
-            doc.layers.add(name, color=colour)
-    if ENGRAVE_STYLE not in doc.styles:
-        doc.styles.add(ENGRAVE_STYLE, font="romans.shx")
-    return doc
-
-
 def panel_label(outline_mm: np.ndarray) -> tuple[np.ndarray, float]:
     """Label anchor (2,) at the pole of inaccessibility and a text height (mm) that fits."""
     polygon = Polygon(outline_mm)
@@ -294,7 +272,7 @@ def write_panel_dxfs(panels: list[Panel], folder: str | os.PathLike,
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
     for panel in panels:
-        doc = new_dxf(drill=settings.hole_diameter_mm > 0)
+        doc = new_document(cutting_layers(drill=settings.hole_diameter_mm > 0))
         add_panel(doc.modelspace(), panel, settings=settings, note=True)
         target = folder / f"{panel.id}.dxf"
         save_dxf(doc, target)

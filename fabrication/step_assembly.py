@@ -63,7 +63,7 @@ def step_part(text: str, first_id: int, *, context_id: int = 2) -> StepPart:
     (see the module docstring), renumbered from ``first_id`` on, with references to the file's
     application context pointing to ``context_id`` (the assembly's).
 
-    Raises ValueError for a file of another structure (schema, number of parts)."""
+    Raises FabricationError for a file of another structure (schema, number of parts)."""
     header_end = text.index("ENDSEC;")
     schema = re.search(r"FILE_SCHEMA\s*\(.*?\)\s*;", text[:header_end], re.S)
     if schema is None or " ".join(schema.group(0).split()) != SCHEMA:

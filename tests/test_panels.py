@@ -179,6 +179,31 @@ def test_panels_without_fixings_have_no_drill_layer(tmp_path):
         assert {"CUT", "ENGRAVE", "NOTES"} <= layers and "DRILL" not in layers
 
 
+def test_every_dxf_writer_uses_the_layer_table(tmp_path):
+    """A panel's, a nesting sheet's and the plan's DXF read back in mm with the layers of
+    fabrication.dxf (each in its colour and linetype) and no others but ezdxf's 0 and Defpoints."""
+    from fabrication.drawings import write_plan_drawings
+    from fabrication.dxf import CUTTING_LAYERS, ENGRAVE_STYLE, LAYERS, PLAN_LAYERS
+    from fabrication.nesting_sheets import SheetSettings, nest_sheets, write_sheet_dxfs
+
+    mesh = hex_polymesh(2, 3)
+    settings = PanelSettings(clearance_mm=3, hole_diameter_mm=4, hole_inset_mm=10)
+    panels = flatten_panels(mesh, settings)
+    nesting = nest_sheets(panels, SheetSettings(width_mm=1200, height_mm=600))
+    written = [(write_panel_dxfs(panels, tmp_path / "panels", settings)[0], CUTTING_LAYERS),
+               (write_sheet_dxfs(nesting, panels, tmp_path / "sheets", settings)[0], CUTTING_LAYERS),
+               (write_plan_drawings(mesh, tmp_path / "plan", project_name="x")[0], PLAN_LAYERS)]
+    for path, expected in written:
+        doc = ezdxf.readfile(path)
+        assert doc.header["$INSUNITS"] == 4 and doc.header["$MEASUREMENT"] == 1
+        layers = {layer.dxf.name: layer for layer in doc.layers if layer.dxf.name not in ("0", "Defpoints")}
+        # LABELS_LEADERS is dropped when no id needed a leader line
+        assert set(expected) - {"LABELS_LEADERS"} <= set(layers) <= set(expected), path.name
+        for name, layer in layers.items():
+            assert (layer.color, layer.dxf.linetype) == (LAYERS[name].colour, LAYERS[name].linetype), name
+        assert (ENGRAVE_STYLE in doc.styles) == ("ENGRAVE" in layers)
+
+
 def test_panels_csv(tmp_path):
     mesh = hex_polymesh(2, 2)
     settings = PanelSettings(thickness_mm=4, density=1000, hole_diameter_mm=0)

@@ -634,8 +634,8 @@ def test_a_dxf_is_the_same_bytes_from_any_process(tmp_path):
 
     import ezdxf
 
-    script = ("import sys; from fabrication.panels import new_dxf; from fabrication.files import save_dxf; "
-              "d = new_dxf(); d.modelspace().add_lwpolyline([(0, 0), (100, 0), (100, 50)], "
+    script = ("import sys; from fabrication.dxf import CUTTING_LAYERS, new_document, save_dxf; "
+              "d = new_document(CUTTING_LAYERS); d.modelspace().add_lwpolyline([(0, 0), (100, 0), (100, 50)], "
               "dxfattribs={'layer': 'CUT'}); save_dxf(d, sys.argv[1])")
     root = Path(__file__).resolve().parents[1]
     digests = []
