@@ -10,6 +10,7 @@ Cases combine linearly, so a combination is resolved into one equivalent case.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 
@@ -24,6 +25,7 @@ __all__ = [
     "LoadCombination",
     "combine",
     "lump_area_load",
+    "pick_combination",
 ]
 
 GRAVITY = 9.81
@@ -90,7 +92,7 @@ class LoadCombination:
     factors: dict[str, float] = field(default_factory=dict)
 
 
-def combine(cases: dict[str, LoadCase], combination: LoadCombination) -> LoadCase:
+def combine(cases: Mapping[str, LoadCase], combination: LoadCombination) -> LoadCase:
     """The single load case equivalent to a combination (loads add linearly)."""
     missing = [c for c in combination.factors if c not in cases]
     if missing:
@@ -112,6 +114,23 @@ def combine(cases: dict[str, LoadCase], combination: LoadCombination) -> LoadCas
                     area_plan=area_plan,
                     point_nodes=np.concatenate(nodes) if nodes else np.zeros(0, dtype=np.int64),
                     point_forces=np.concatenate(forces) if forces else np.zeros((0, 6)))
+
+
+def pick_combination(combinations: Mapping[str, LoadCombination], load_cases: Mapping[str, LoadCase],
+                     limit_state: LimitState | str, name: str | None = None) -> LoadCombination:
+    """The combination that the checks of ``limit_state`` run under: the combination called ``name``,
+    or the load case of that name alone (factor 1); without a name, the first combination of that
+    limit state. Where none of these is found, every load case at factor 1, named after the limit
+    state."""
+    state = LimitState(limit_state)
+    if name is None:
+        named = [n for n, c in combinations.items() if c.limit_state == state]
+        name = named[0] if named else None
+    if name is not None and name in combinations:
+        return combinations[name]
+    if name is not None and name in load_cases:
+        return LoadCombination(name=name, limit_state=state, factors={name: 1.0})
+    return LoadCombination(name=state.value, limit_state=state, factors={n: 1.0 for n in load_cases})
 
 
 def lump_area_load(vertices: np.ndarray, triangles: np.ndarray, case: LoadCase) -> np.ndarray:

@@ -17,14 +17,15 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from engine.checks import member_checks
 from engine.en1993 import CHECKED, NOT_CHECKED
 from engine.errors import ConvergenceError, MechanismError
 from engine.findings import Finding
-from engine.frame import FrameModel, factor_stiffness, linear_buckling, linear_static, nonlinear_static
+from engine.frame import FrameModel, factor_stiffness, linear_buckling, linear_static
+from engine.load_test import load_test
 from engine.loads import LoadCombination, combine
+from engine.loads import pick_combination as choose_combination
 from engine.mesh import PolyMesh
 from engine.parts import beam_id, node_id
 from engine.protocol import run_protocol
@@ -33,6 +34,7 @@ from engine.sections import material as material_by_name
 from engine.sizing import size_sections
 from engine.structure import BeamProperties, beam_up_vectors, gridshell_loads, node_normals, support_restraints
 from engine.supports import Supports
+from engine.verdicts import VerdictFixes, design_verdicts, findings_of
 from fabrication.files import atomic_path, write_text_atomic
 from fabrication.workers import exit_with_parent
 
@@ -81,16 +83,10 @@ def beam_properties(project: Project) -> tuple[BeamProperties, Section, Material
 
 
 def pick_combination(project: Project, surface: SurfaceResult, limit_state: str) -> LoadCombination:
+    """The combination of ``limit_state`` (engine.loads.pick_combination) with the name that
+    ``[analysis] uls_combination`` or ``sls_combination`` asks for."""
     name = project.analysis.uls_combination if limit_state == "ULS" else project.analysis.sls_combination
-    combos = surface.combinations
-    if name is None:
-        named = [n for n, c in combos.items() if c.limit_state.value == limit_state]
-        name = named[0] if named else None
-    if name in combos:
-        return combos[name]
-    if name in surface.load_cases:
-        return LoadCombination(name=name, limit_state=limit_state, factors={name: 1.0})
-    return LoadCombination(name=limit_state, limit_state=limit_state, factors={n: 1.0 for n in surface.load_cases})
+    return choose_combination(surface.combinations, surface.load_cases, limit_state, name)
 
 
 def build_frame(polymesh: PolyMesh, surface: SurfaceResult, props: BeamProperties,
@@ -156,35 +152,11 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, project: Project, ctx: 
                                buckling_length_factor=config.buckling_length_factor)
     utilisation = np.asarray(checks.utilisation)
     vertical_sls = float(np.abs(result.sls_displacements[:, 2]).max())
-    stiffer = ("a larger [section] diameter or thickness, a stronger [material], or more supports ([[supports]])"
-               + ("" if project.design.size_sections or sections is None else
-                  "; or let the tubes be sized: [design] size_sections = true"))
-    verdicts = [
-        {"check": "member utilisation (ULS)", "kind": "utilisation", "value": float(utilisation.max()), "limit": 1.0,
-         "pass": bool(utilisation.max() <= 1.0), "part": beam_id(utilisation.argmax()),
-         "fix": f"{stiffer}"},
-        {"check": f"deflection (SLS) vs span/{config.deflection_limit_ratio:g}", "kind": "deflection",
-         "value": vertical_sls, "limit": deflection_limit, "pass": bool(vertical_sls <= deflection_limit), "unit": "m",
-         "part": node_id(np.abs(result.sls_displacements[:, 2]).argmax()),
-         "fix": f"{stiffer}; or [analysis] deflection_limit_ratio if the limit is not the project's"},
-    ]
-    if result.buckling_error is not None:
-        verdicts.append({"check": "linear buckling load factor (not solved)", "kind": "buckling_not_solved",
-                         "value": None, "limit": config.required_load_factor, "part": "mode 1",
-                         "pass": False, "error": result.buckling_error,
-                         "fix": "check the supports ([[supports]]) for a near-mechanism, or fewer [analysis] n_modes; "
-                                "the non-linear paths ran without mode-shaped imperfections"})
-    if result.lambda_LB is not None:
-        verdicts.append({"check": "linear buckling load factor", "kind": "buckling", "value": result.lambda_LB,
-                         "limit": config.required_load_factor, "part": "mode 1",
-                         "pass": bool(result.lambda_LB >= config.required_load_factor), "fix": stiffer})
-    if worst is not None:
-        value = worst.capacity
-        label = ("limit load factor" if worst.limit_load_factor is not None
-                 else "load factor carried (no limit point found)")
-        verdicts.append({"check": f"worst non-linear {label} ({worst.name})", "kind": "nonlinear_buckling",
-                         "value": float(value), "limit": config.required_load_factor, "part": worst.name,
-                         "pass": bool(value >= config.required_load_factor), "fix": stiffer})
+    verdicts = design_verdicts(utilisation=utilisation, sls_displacements=result.sls_displacements,
+                               deflection_limit=deflection_limit, deflection_ratio=config.deflection_limit_ratio,
+                               required_load_factor=config.required_load_factor, lambda_LB=result.lambda_LB,
+                               buckling_error=result.buckling_error, worst=worst,
+                               fixes=_fixes(project, sections))
     axial = np.asarray(checks.axial_force)
     figures = {
         "nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
@@ -203,14 +175,9 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, project: Project, ctx: 
         "equilibrium_error": result.equilibrium_error,
         "imperfections": [{"shape": c.name, "lambda_NL": c.capacity, "limit_point": c.limit_load_factor is not None,
                            "path_complete": c.converged} for c in result.imperfect],
-        "verdicts": verdicts,
+        "verdicts": [v.to_dict() for v in verdicts],
         "checks": _checks_note(method, checks),
-        "findings": [Finding(kind=v["kind"], parts=[v["part"]],
-                             measure=v["value"], limit=v["limit"],
-                             unit=v.get("unit", ""), stage="analysis", fix=v["fix"],
-                             message=v["error"] if "error" in v else
-                             f"{v['check']}: {v['value']:.3g} against {v['limit']:.3g}").to_dict()
-                     for v in verdicts if not v["pass"]],
+        "findings": [f.to_dict() for f in findings_of(verdicts, stage="analysis")],
     }
     if design is not None:
         figures["design"] = sizer.summary(design, sections, checks, lengths, mass_before, rounds)
@@ -255,44 +222,41 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, project: Project, ctx: 
     return load(ctx.folder, project)
 
 
+def _fixes(project: Project, sections: BeamSections | None) -> VerdictFixes:
+    """What to change when a verdict fails, naming the project file's keys."""
+    stiffer = ("a larger [section] diameter or thickness, a stronger [material], or more supports ([[supports]])"
+               + ("" if project.design.size_sections or sections is None else
+                  "; or let the tubes be sized: [design] size_sections = true"))
+    return VerdictFixes(stiffer=stiffer,
+                        deflection=f"{stiffer}; or [analysis] deflection_limit_ratio if the limit is not the project's",
+                        buckling_not_solved="check the supports ([[supports]]) for a near-mechanism, or fewer "
+                                            "[analysis] n_modes; the non-linear paths ran without mode-shaped "
+                                            "imperfections")
+
+
 def _load_test(ctx, project: Project, surface, polymesh, model, supports, props, combination) -> dict:
-    """The mock-up's incremental load test (METHOD.md 7): the permanent cases of the SLS
-    combination (those with self-weight) held, the others scaled by the load factor; the vertical
-    deflection of each named control point's nearest node against the load factor."""
+    """The mock-up's incremental load test (METHOD.md 7, engine.load_test) under the SLS
+    combination: loadtest.csv (the vertical deflection of each named control point's nearest node
+    against the load factor), its picture and the record for analysis.json."""
     import pandas as pd
 
-    permanent = {n: f for n, f in combination.factors.items() if surface.load_cases[n].self_weight}
-    variable = {n: f for n, f in combination.factors.items() if n not in permanent}
-    if not variable:
+    test = load_test(model, supports, surface.load_cases, combination, project.analysis.control_points,
+                     lambda case: gridshell_loads(polymesh, case, mass_per_length=props.mass_per_length,
+                                                  surface_vertices=surface.mesh.vertices),
+                     max_load_factor=project.analysis.max_load_factor)
+    if test is None:
         return {"skipped": "the SLS combination has no variable load case to increase"}
-
-    def loads_of(factors: dict) -> np.ndarray:
-        if not factors:
-            return np.zeros((polymesh.n_nodes, 6))
-        case = combine(surface.load_cases, LoadCombination(name="part", limit_state="SLS", factors=factors))
-        return gridshell_loads(polymesh, case, mass_per_length=props.mass_per_length,
-                               surface_vertices=surface.mesh.vertices)
-
-    names = list(project.analysis.control_points)
-    points = np.array([project.analysis.control_points[n] for n in names], dtype=float)
-    _, nodes = cKDTree(polymesh.nodes).query(points)
-    run = nonlinear_static(model, supports, loads_of(variable), control=(int(nodes[0]), 2),
-                           initial_loads=loads_of(permanent), max_load_factor=project.analysis.max_load_factor,
-                           max_steps=60, monitor=[(int(n), 2) for n in nodes])
-    table = pd.DataFrame({"load_factor": run.path[:, 0]})
-    for name, column in zip(names, run.monitored.T):
+    table = pd.DataFrame({"load_factor": test.load_factors})
+    for name, column in zip(test.control_nodes, test.monitored.T):
         table[f"{name}_uz_mm"] = 1000 * column
     with atomic_path(ctx.folder / "loadtest.csv") as tmp:
         table.to_csv(tmp, index=False, float_format="%.6g")
-    curves = {f"{name} ({node_id(n)})": np.c_[run.path[:, 0], column]
-              for name, n, column in zip(names, nodes, run.monitored.T)}
+    curves = {f"{name} ({node_id(n)})": np.c_[test.load_factors, column]
+              for (name, n), column in zip(test.control_nodes.items(), test.monitored.T)}
     plot_response(curves, ctx.folder / "loadtest.png", required=project.analysis.required_load_factor,
-                  title=f"{project.project.name}: load test, {', '.join(permanent) or 'no'} load held, "
-                        f"{', '.join(variable)} increased")
-    return {"permanent_cases": list(permanent), "variable_cases": list(variable),
-            "control_nodes": {name: node_id(n) for name, n in zip(names, nodes)},
-            "limit_load_factor": run.limit_load_factor, "largest_load_factor": float(run.path[:, 0].max()),
-            "path_complete": bool(run.converged)}
+                  title=f"{project.project.name}: load test, {', '.join(test.permanent) or 'no'} load held, "
+                        f"{', '.join(test.variable)} increased")
+    return test.to_dict()
 
 
 def _draw(ctx, polymesh, result, utilisation, axial, project: Project) -> None:
