@@ -338,6 +338,7 @@ class _Problem:
     sliding: np.ndarray
     interior: np.ndarray
     movable: np.ndarray
+    local: bool  # only a region of the grid moves: the rest is held, and only its cells and nodes are worked on
     start: np.ndarray  # (n, 3) the first iterate: the nodes, sliding ones on the boundary
     x0: np.ndarray  # a copy of it: what fairness and the target areas refer to
     groups: dict[int, np.ndarray]
@@ -392,11 +393,26 @@ def _global_step_system(settings: OptimizeSettings, groups: dict[int, np.ndarray
                        A3=A3, B=B, solve=solve)
 
 
+def _active_cells(groups: dict[int, np.ndarray], areas: dict[int, np.ndarray | None],
+                  fixed: np.ndarray) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray | None]]:
+    """``groups`` and their target ``areas`` less the cells whose nodes are all fixed (nothing moves them)."""
+    kept_groups, kept_areas = {}, {}
+    for k, faces in groups.items():
+        keep = ~fixed[faces].all(axis=1)
+        if keep.any():
+            kept_groups[k] = faces[keep]
+            area = areas[k]
+            kept_areas[k] = None if area is None else area[keep]
+    return kept_groups, kept_areas
+
+
 def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, settings: OptimizeSettings,
             surface: ClosestSurfacePoints, before: dict,
-            beam_length_limits: Callable[[PolyMesh], np.ndarray] | None) -> _Problem:
-    """The problem: boundary cells split (planar panels), corners and supports fixed, boundary nodes
-    sliding, the rest interior; the mirror partners, the target areas and the global step."""
+            beam_length_limits: Callable[[PolyMesh], np.ndarray] | None,
+            held: np.ndarray | None = None) -> _Problem:
+    """The problem: boundary cells split (planar panels), corners, supports and the ``held`` nodes
+    fixed, boundary nodes sliding, the rest interior; the mirror partners, the target areas and the
+    global step (over the cells that have a node to move only, where nodes are held)."""
     planar_panels = settings.planar and settings.planarity_weight > 0 and settings.iterations > 0
     given = polymesh
     new_beams = np.zeros((0, 2), dtype=np.int64)
@@ -409,6 +425,9 @@ def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, setti
         corner_splits, edge_splits = splits.corner_splits, splits.edge_splits
     n = polymesh.n_nodes
     fixed = polymesh.corners | polymesh.supports
+    local = held is not None
+    if held is not None:
+        fixed = fixed | np.r_[np.asarray(held, dtype=bool), np.zeros(n - len(held), dtype=bool)]
     boundary = ClosestBoundaryPoints(mesh)
     sliding = polymesh.boundary & ~fixed
     if sliding.any() and not len(boundary.segments):
@@ -425,11 +444,14 @@ def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, setti
     partners = mirror_partners(x, planes, PARTNER_REACH * float(polymesh.beam_lengths.mean())) if planes else None
     nearest_vertex = cKDTree(mesh.vertices) if field is not None and settings.follow_field else None
     areas, grading = _target_areas(groups, polymesh, x0, settings, field, nearest_vertex)
+    if local:
+        groups, areas = _active_cells(groups, areas, fixed)
     return _Problem(settings=settings, given=given, polymesh=polymesh, new_beams=new_beams,
                     corner_splits=corner_splits, edge_splits=edge_splits,
                     with_end_game=planar_panels and settings.planarity_iterations > 0,
                     surface=surface, boundary=boundary, fixed=fixed, sliding=sliding, interior=interior,
-                    movable=interior | sliding, start=x, x0=x0, groups=groups, planes=planes, partners=partners,
+                    movable=interior | sliding, local=local, start=x, x0=x0, groups=groups, planes=planes,
+                    partners=partners,
                     field=field, nearest_vertex=nearest_vertex, areas=areas, grading=grading,
                     corners=face_corners(polymesh.faces), min_corner=float(np.radians(settings.min_corner_angle_deg)),
                     beam_length_limits=beam_length_limits,
@@ -475,7 +497,11 @@ def _local_step(p: _Problem, x: np.ndarray, t: float, f: float) -> tuple[np.ndar
                 k: regular_targets(cells, settings.max_cell_stretch, p.areas[k]) for k, cells in points.items()})
         if t > 0.0:
             target += t * stacked_targets(p.groups, {k: planar_targets(cells) for k, cells in points.items()})
-    node_target = into_band(x, *p.surface.closest(x), p.band)
+    if p.local:  # the held nodes' targets do not count: their DOFs are not solved for
+        node_target = x.copy()
+        node_target[p.movable] = into_band(x[p.movable], *p.surface.closest(x[p.movable]), p.band)
+    else:
+        node_target = into_band(x, *p.surface.closest(x), p.band)
     if f > 0:
         # keep_grading: a smooth displacement, so that sizes keep their grading; else the grid
         smooth = p.x0 + s.neighbours @ (x - p.x0) if settings.keep_grading else s.neighbours @ x
@@ -628,7 +654,13 @@ def _end_game(p: _Problem, x: np.ndarray, progress: Callable[[str, float | None]
                                          iterations=settings.planarity_iterations,
                                          min_beam_length=settings.min_beam_length,
                                          min_angle_deg=settings.min_corner_angle_deg)
-        areas = _target_areas(groups, polymesh, p.x0, settings, p.field, p.nearest_vertex)[0]
+        if attempt == 0:  # the set-up's: the same call on the same grid
+            areas = p.areas
+        else:
+            areas = _target_areas(groups, polymesh, p.x0, settings, p.field, p.nearest_vertex)[0]
+            if p.local:
+                groups, areas = _active_cells(groups, areas, p.fixed)
+                C = centering_rows(groups, polymesh.n_nodes)
         regular = partial(_regular_rows, groups=groups, areas=areas, max_stretch=settings.max_cell_stretch)
         said = partial(_said_step, progress, int(end["steps"]))
         planarised, report = planarise(x, groups, interior=p.interior, sliding=p.sliding,
@@ -700,7 +732,8 @@ def _quality_record(p: _Problem, mesh: TriMesh, field: GuidingField | None, befo
 
 def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, settings: OptimizeSettings, *,
              progress: Callable[[str, float | None], None] | None = None,
-             beam_length_limits: Callable[[PolyMesh], np.ndarray] | None = None) -> OptimizeResult:
+             beam_length_limits: Callable[[PolyMesh], np.ndarray] | None = None,
+             held: np.ndarray | None = None) -> OptimizeResult:
     """Regularise and (with ``settings.planar``) planarise the cells of ``polymesh`` on the
     reference surface ``mesh``; corners and supports stay put, boundary nodes on the boundary.
 
@@ -710,6 +743,9 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
     ``beam_length_limits(grid)`` gives each beam's shortest length (m) on the grid as it stands
     (the joints' set-backs grow as their angles close); the iterations hold every beam to the larger
     of it and ``settings.min_beam_length``.
+    ``held`` (n_nodes,) bool: nodes held where they are, as supports are (None: none); only the
+    cells with a node free to move are worked on, so optimising a grid again round a few local
+    changes costs in proportion to the region let free.
     With ``settings.iterations == 0`` the grid passes unchanged.
 
     quality: "before" (the grid as given) and "after" figures (see :func:`optimize_quality`),
@@ -729,7 +765,7 @@ def optimize(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, sett
     _check(polymesh, mesh)
     surface = ClosestSurfacePoints(mesh)
     before = optimize_quality(polymesh, surface=surface)
-    problem = _set_up(polymesh, mesh, field, settings, surface, before, beam_length_limits)
+    problem = _set_up(polymesh, mesh, field, settings, surface, before, beam_length_limits, held)
     iterated = _iterate(problem, progress)
     end = _end_game(problem, iterated.x, progress)
     x, stopped_in_band = end.x, False

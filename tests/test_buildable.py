@@ -370,3 +370,28 @@ def test_findings_are_grouped_by_kind_with_the_worst_first():
     assert [r["kind"] for r in rows] == ["cut_length", "sheet_size"]
     assert rows[0]["count"] == 3 and rows[0]["worst"] == 10.0 and rows[0]["worst_parts"] == ["B0001"]
     json.dumps(findings)  # JSON-ready
+
+
+@pytest.mark.parametrize("rings", [1, 3])
+def test_the_region_optimised_again_is_within_its_rings_of_a_collapse(rings):
+    """After a collapse the grid is optimised again only near it: the nodes within ``rings`` beams
+    (graph distance, scipy's shortest paths) of the nodes it changed, the merged node (moved) and
+    its neighbours (joined to it), so within ``rings + 1`` of the merged node."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import shortest_path
+
+    from workflow.stages.optimize import changed_region
+
+    grid = _honeycomb(8, 8)
+    interior = np.flatnonzero(~grid.boundary[grid.edges].any(axis=1))
+    beam = int(interior[len(interior) // 2])
+    after, done = collapse_beams(grid, np.array([beam]))
+    assert done == 1
+    merged = int(np.argmin(np.linalg.norm(after.nodes - grid.nodes[grid.edges[beam]].mean(axis=0), axis=1)))
+    edges = after.edges
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(after.n_nodes,) * 2)
+    hops = shortest_path(graph, directed=False, unweighted=True, indices=merged)
+    region = changed_region(grid, after, rings=rings)
+    assert np.array_equal(region, hops <= rings + 1)
+    assert 0 < region.sum() < after.n_nodes / 2
+    assert not changed_region(grid, grid, rings=rings).any(), "nothing changed, nothing optimised again"

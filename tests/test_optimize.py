@@ -565,3 +565,30 @@ def test_a_grading_compressed_for_the_joints_is_a_finding():
     finding = compressed_finding(quality)
     assert finding["kind"] == "grading_compressed" and finding["stage"] == "optimize"
     assert "0.44" in finding["message"] and "0.76" in finding["message"] and "n_cells" in finding["fix"]
+
+
+def test_held_nodes_stay_exactly_and_the_region_left_free_is_optimised(dome):
+    """Optimising again round a local change: the held nodes do not move at all, the free region
+    gains regularity as a whole optimisation would, and only the cells with a free node are worked
+    on (the global system is the free region's)."""
+    surface, grid = dome
+    settings = OptimizeSettings(iterations=30, planar=False)
+    centre = np.argmin(np.linalg.norm(grid.nodes[:, :2] - [3.0, 2.0], axis=1))
+    free = np.linalg.norm(grid.nodes[:, :2] - grid.nodes[centre, :2], axis=1) < 4.0
+    held = ~free
+    local = optimize(grid, surface, None, settings, held=held)
+    whole = optimize(grid, surface, None, settings)
+    out = local.polymesh.nodes
+    assert np.array_equal(out[held], grid.nodes[held])
+    moving = free & ~(grid.supports | grid.corners)
+    assert np.abs(out[moving] - grid.nodes[moving]).max() > 1e-3
+    # the free region's cells: about as regular as the whole optimisation makes them
+    inside = np.array([free[f].all() for f in grid.faces])
+
+    def irregularity(nodes: np.ndarray) -> float:
+        lengths = [np.linalg.norm(nodes[f] - nodes[np.roll(f, -1)], axis=1) for f, i in zip(grid.faces, inside) if i]
+        return float(np.mean([side.std() / side.mean() for side in lengths]))
+
+    assert irregularity(out) < 0.5 * irregularity(grid.nodes)
+    assert irregularity(out) < 1.15 * irregularity(whole.polymesh.nodes)
+    assert _distance_to_surface(out[moving], surface).max() < 0.005 * surface.diagonal

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from engine.collapse import collapse_beams, dissolve_kinks, open_narrow_joints, remove_short_beams
@@ -60,6 +61,9 @@ COMPRESSED_SLOPE = 0.05
 BUILDABLE_ROUNDS = 2
 #: Rounds of (remove the beams still short, collapse those the removals freed) at the end.
 LAST_RESORT_ROUNDS = 5
+#: After collapses and flips the grid is optimised again within this many beams of the nodes they
+#: changed; the rest, optimised already, is held where it is.
+REOPTIMISED_RINGS = 3
 
 __all__ = ["OptimizedGrid", "run", "load", "optimize_settings", "panel_pieces_of", "write_panels_obj",
            "read_panels_obj"]
@@ -100,15 +104,44 @@ def _unsettled(result: OptimizeResult) -> bool:
 
 
 def _optimised(grid: PolyMesh, surface: SurfaceResult, field: GuidingField, settings: OptimizeSettings,
-               limits, ctx: StageContext) -> tuple[OptimizeResult, OptimizeSettings]:
-    """(result, settings used): ``grid`` optimised, and again without the symmetry planes where the
-    symmetric optimisation did not settle (optimize.json's symmetry record measures what is left)."""
-    result = optimize(grid, surface.mesh, field, settings, progress=ctx.step, beam_length_limits=limits)
+               limits, ctx: StageContext, held: np.ndarray | None = None) -> tuple[OptimizeResult, OptimizeSettings]:
+    """(result, settings used): ``grid`` optimised (``held`` nodes held where they are), and again
+    without the symmetry planes where the symmetric optimisation did not settle (optimize.json's
+    symmetry record measures what is left)."""
+    result = optimize(grid, surface.mesh, field, settings, progress=ctx.step, beam_length_limits=limits, held=held)
     if settings.symmetry_planes and _unsettled(result):
         ctx.step("the symmetric optimisation did not settle: optimising without the symmetry planes")
         settings = dataclasses.replace(settings, symmetry_planes=())
-        result = optimize(grid, surface.mesh, field, settings, progress=ctx.step, beam_length_limits=limits)
+        result = optimize(grid, surface.mesh, field, settings, progress=ctx.step, beam_length_limits=limits,
+                          held=held)
     return result, settings
+
+
+def changed_region(before: PolyMesh, after: PolyMesh, rings: int = REOPTIMISED_RINGS) -> np.ndarray:
+    """(after.n_nodes,) bool: the nodes of ``after`` within ``rings`` beams of a node that the
+    collapses and flips from ``before`` moved, made or reconnected (a node is the same node where it
+    lies at the same point with the same neighbours)."""
+    distance, match = cKDTree(before.nodes).query(after.nodes)
+    same = distance <= 1e-9 * max(float(before.beam_lengths.mean()), 1e-300)
+    old_id = np.where(same, match, -1)
+
+    def neighbours(grid: PolyMesh) -> list[list[int]]:
+        out: list[list[int]] = [[] for _ in range(grid.n_nodes)]
+        for a, b in grid.edges.tolist():
+            out[a].append(b)
+            out[b].append(a)
+        return out
+
+    old, new = neighbours(before), neighbours(after)
+    changed = ~same
+    for i in np.flatnonzero(same):
+        changed[i] = sorted(old_id[new[i]].tolist()) != sorted(old[old_id[i]])
+    adjacency = sp.coo_matrix((np.ones(2 * len(after.edges)), (after.edges.ravel(), after.edges[:, ::-1].ravel())),
+                              shape=(after.n_nodes, after.n_nodes)).tocsr()
+    region = changed
+    for _ in range(rings):
+        region = region | (adjacency @ region.astype(float) > 0)
+    return region
 
 
 def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: Project,
@@ -156,7 +189,10 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
         """``result`` with ``grid`` (after ``record``'s collapses and flips) optimised again."""
         ctx.step(f"{record['collapsed_beams']} short beams collapsed, {record['flipped_beams']} flipped: "
                  f"optimising {when}")
-        again, _ = _optimised(grid, surface, field, dataclasses.replace(settings, split_cells=False), limits, ctx)
+        # round the changes only (with symmetry planes all of it: the mirror pairs move together)
+        held = None if settings.symmetry_planes else ~changed_region(result.polymesh, grid)
+        again, _ = _optimised(grid, surface, field, dataclasses.replace(settings, split_cells=False), limits, ctx,
+                              held=held)
         return dataclasses.replace(result, polymesh=again.polymesh, quality={
             **again.quality, "before": result.quality["before"], "grading": result.quality.get("grading")})
 
