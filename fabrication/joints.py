@@ -5,9 +5,11 @@ node id engraved on its top face, one sleeve per beam (bore = beam size + 2 clea
 around it, a pin hole across it along the node axis); the bore starts at the set-back where neighbouring bores keep
 the least wall. Steel joint (full size): a hub tube along the node axis with one fin plate per
 beam, in the plane of the beam and the axis, with a bolt hole. Files: joints/J0001.step (the
-exact solid named J0001, without the engraved id, points to 1e-8 mm), joints/J0001.stl (the part
-to print: engraved, watertight, 0.05 mm chord), joints/joints.step (all, named; on request and
-under 30 MB). Joints that are the same part but for the id are named by ``same_joints``.
+exact solid named J0001, without the engraved id, points to 1e-8 mm), joints/J0001.stl (sockets
+only, the part to print: engraved, watertight, 0.05 mm chord; a steel node is cut and welded from
+its STEP and drawing, so it has none and its report holds its box, ``box_mm``, for the clash
+check instead), joints/joints.step (all, named; on request and under 30 MB). Joints that are the
+same part but for the id are named by ``same_joints``.
 
 Speed (issue 6): a socket joint is one fuse (hub and sleeves) and one cut (bores and pin holes)
 in OCP, one joint per core; the id is written between the sleeves and engraved by building the
@@ -659,12 +661,18 @@ def _build_and_write_checked(job: tuple) -> dict:
         report["_part"] = str(write_step_part(part, Path(parts_folder) / f"{report['id']}.part")) \
             if part.last_id <= last_id else None
     written = time.perf_counter()
-    report["watertight"] = _watertight_stl(placed, folder / f"{report['id']}.stl", report)
+    printed = settings.kind == "socket"
+    if printed:
+        report["watertight"] = _watertight_stl(placed, folder / f"{report['id']}.stl", report)
+        report["stl_volume_ok"] = abs(report["stl_volume_error"]) <= STL_VOLUME_TOLERANCE
+    else:  # no STL: the clash check's broad phase takes the solid's own box
+        box = placed.bounding_box()
+        report["box_mm"] = [float(v) for v in (box.min.X, box.min.Y, box.min.Z, box.max.X, box.max.Y, box.max.Z)]
     error = report["max_axis_error_deg"]
     report["wall_ok"] = report["min_wall_mm"] >= settings.min_wall_mm - 1e-9
-    report["stl_volume_ok"] = abs(report["stl_volume_error"]) <= STL_VOLUME_TOLERANCE
-    report["ok"] = bool(report["valid"] and report["single_solid"] and report["watertight"] and report["wall_ok"]
-                        and report["stl_volume_ok"] and not report["clashes"] and (np.isnan(error) or error <= 0.1))
+    report["ok"] = bool(report["valid"] and report["single_solid"] and report["wall_ok"]
+                        and (not printed or (report["watertight"] and report["stl_volume_ok"]))
+                        and not report["clashes"] and (np.isnan(error) or error <= 0.1))
     finished = time.perf_counter()
     report["seconds"] = {"build": round(built - started, 4), "check_and_step": round(written - built, 4),
                          "stl": round(finished - written, 4)}

@@ -683,3 +683,35 @@ def test_step_points_written_to_8_places_read_back_the_same_solid(tmp_path):
     assert _volume_and_box(short) == pytest.approx(_volume_and_box(full), abs=1e-6)
     assert (tmp_path / "short.step").stat().st_size < 0.88 * (tmp_path / "full.step").stat().st_size
     assert "CARTESIAN_POINT('',(0.,0.,0.));" in (tmp_path / "short.step").read_text()
+
+
+def test_a_steel_node_has_no_stl_and_the_clash_check_takes_its_box_from_the_solid(tmp_path):
+    """A steel node is cut and welded, not printed: no STL is written, and its report carries the
+    solid's box, which holds the STEP file's solid as OCCT reads it back (its tessellation's
+    vertices) and is tight on it; the clash check's broad phase from those boxes finds the same
+    clashes as testing every pair of STEP solids."""
+    import trimesh
+
+    from fabrication import joints
+    from fabrication.clearance import joint_clashes_from_step
+
+    settings = joints.JointSettings(kind="steel")
+    reports = []
+    for node, x in ((6, 0.0), (7, 60.0), (8, 2000.0)):  # the first two close enough to clash
+        geometry = joints.JointGeometry(node=node, position_mm=np.array([x, 0.0, 0.0]),
+                                        directions=_joint_geometry(node=node).directions,
+                                        axis=np.array([0.0, 0.0, 1.0]), beam_size_mm=48.3)
+        reports.append(joints._build_and_write((geometry, settings, str(tmp_path), None, *joints._id_ranges(1)[0])))
+    assert all(r["ok"] and "watertight" not in r and "box_mm" in r for r in reports)
+    assert not list(tmp_path.glob("*.stl")) and len(list(tmp_path.glob("J*.step"))) == 3
+    for r in reports:
+        vertices, _ = joints._tessellate(_read_step(tmp_path / f"{r['id']}.step"), 0.05, 0.5, relative=False)
+        low, high = np.array(r["box_mm"][:3]), np.array(r["box_mm"][3:])
+        assert np.all(vertices >= low - 1e-6) and np.all(vertices <= high + 1e-6)
+        assert np.allclose(vertices.min(axis=0), low, atol=0.5) and np.allclose(vertices.max(axis=0), high, atol=0.5)
+        assert trimesh.Trimesh(*joints._tessellate(_read_step(tmp_path / f"{r['id']}.step"), 0.05, 0.5,
+                                                   relative=False)).volume > 0
+    boxes = {r["id"]: r["box_mm"] for r in reports}
+    broad = joint_clashes_from_step(tmp_path, stl_boxes=True, boxes=boxes)
+    every = joint_clashes_from_step(tmp_path)
+    assert [c["parts"] for c in broad] == [c["parts"] for c in every] == [["J0007", "J0008"]]

@@ -1,8 +1,8 @@
 """Stage ``fabrication``: everything a workshop needs to build the checked grid-shell.
 
-Artifacts (07-fabrication/): joints/ (J0001.step, J0001.stl ..., joints.step on request under 30 MB), beams/
-(cutlist.csv, cutlist.xlsx, bars.csv, beams.step), panels/ (P0001.dxf ..., sheets/SHEET01.dxf
-..., panels.csv), assembly/ (sequence.csv, steps/*.png), drawings/ (plan.dxf, plan.pdf),
+Artifacts (07-fabrication/): joints/ (J0001.step, J0001.stl for printed sockets ..., joints.step on
+request under 30 MB), beams/ (cutlist.csv, cutlist.xlsx, bars.csv, beams.step), panels/ (P0001.dxf
+..., sheets/SHEET01.dxf ..., panels.csv), assembly/ (sequence.csv, steps/*.png), drawings/ (plan.dxf, plan.pdf),
 gridshell.step, gridshell.3dm and fabrication.json (counts and checks; the seconds each step took
 go into the manifest, ``step_seconds``). Lengths in mm.
 """
@@ -128,7 +128,8 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     findings += _joint_findings(joint_reports, limits)
     clock.start("joints: clearance between neighbours")
     summary["joint_clashes"] = _joint_clashes(folder / "joints", [r["id"] for r in joint_reports
-                                                                  if r.get("built", True)], config.workers)
+                                                                  if r.get("built", True)], config.workers,
+                                              {r["id"]: r["box_mm"] for r in joint_reports if "box_mm" in r})
     findings += [Finding(kind="joint_clash", parts=list(c["parts"]), measure=c.get("volume_mm3"), limit=CLASH_MM3,
                          unit="mm3", stage="fabrication",
                          message=(f"joints {c['parts'][0]} and {c['parts'][1]} overlap by "
@@ -199,12 +200,15 @@ def output_files(folder: Path) -> dict:
 CLASH_MM3 = 1.0
 
 
-def _joint_clashes(folder: Path, names: list[str], workers: int | None = None) -> list[dict]:
+def _joint_clashes(folder: Path, names: list[str], workers: int | None = None,
+                   boxes: dict[str, np.ndarray] | None = None) -> list[dict]:
     """Pairs of joint solids (as written) that intersect by more than CLASH_MM3, the booleans on
-    every core (the joints' workers have ended by then)."""
-    # boxes from the STL each worker wrote beside the STEP (same solid): only touching joints are read
+    every core (the joints' workers have ended by then). ``boxes``: the boxes of the joints that
+    have no STL (steel nodes), from their reports."""
+    # boxes from the STL each worker wrote beside the STEP (same solid), or from the solid where it
+    # wrote none: only touching joints are read
     return joint_clashes_parallel(folder, names, workers=workers or os.cpu_count() or 1, min_volume_mm3=CLASH_MM3,
-                                  stl_boxes=True)
+                                  stl_boxes=True, boxes=boxes)
 
 
 def _joint_findings(reports: list[dict], limits: BuildLimits) -> list[Finding]:
