@@ -2,7 +2,7 @@
 supports and loads -> shell analysis -> guiding field -> remesh), with the engine functions the
 workflow stages call, Voro(D, A) with the project's defaults (D = 2, A = 2, templates/mockup.toml).
 
-    .venv/bin/python benchmarks/remesh_quality.py [--cells N] [--surfaces DIR] [--seeds N]
+    .venv/bin/python benchmarks/remesh_quality.py [--cells N[,N...]] [--surfaces DIR] [--seeds N] [--generated N]
 
 Per surface: cells, hexagon share of interior cells, valence-3 share of interior nodes, achieved
 size ratio and aspect (as ``polymesh_quality`` defines them) against the bounds the field spans
@@ -14,7 +14,10 @@ GRIDSHELL_SURFACES); the script skips them cleanly when the folder is absent.
 Targets (issue 4): >= 70 % hexagons, 100 % valence 3, size ratio and aspect within 25 % of D' and A'.
 With --seeds N each surface is remeshed with seeds 0 .. N-1 (the lattice offsets and the starts
 follow the seed; the field is computed once per surface) and the spread over the seeds is printed
-with every run that misses a target.
+with every run that misses a target. With --generated N the generated free-form roofs of seeds 0 .. N-1
+(tests/generated_surfaces.py, flagged supports) are remeshed too; --cells takes several sizes
+(e.g. 60,120,300,1500), each surface remeshed at each. The size correlation is printed both ways:
+``corr`` (Pearson) and ``rank`` (Spearman, issue 13's figure).
 """
 
 from __future__ import annotations
@@ -110,10 +113,13 @@ def spread(projects, seeds: list[int]) -> int:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cells", type=int, default=None, help="cell count (default: each project's own)")
+    parser.add_argument("--cells", default=None,
+                        help="cell counts, comma-separated (default: each project's own)")
     parser.add_argument("--surfaces", type=Path, default=SURFACES)
     parser.add_argument("--seeds", type=int, default=None, metavar="N",
                         help="remesh each surface with seeds 0 .. N-1 (field computed once) and print the spread")
+    parser.add_argument("--generated", type=int, default=0, metavar="N",
+                        help="also the generated free-form roofs of seeds 0 .. N-1 (flagged supports)")
     args = parser.parse_args()
     projects = [("mock-up", load_project(resources.files("templates") / "mockup.toml"))]
     files = sorted(args.surfaces.glob("*.ply")) if args.surfaces.is_dir() else []
@@ -123,14 +129,26 @@ def main() -> int:
         _, _, flagged = read_surface(path)
         supports = "flagged" if flagged is not None and np.any(flagged) else "boundary"
         projects.append((f"{path.stem} ({supports})", project_from_surface(str(path), supports)))
+    if args.generated:
+        import tempfile
+
+        from tests.generated_surfaces import generate_surface, write_ply
+
+        folder = Path(tempfile.mkdtemp(prefix="remesh_quality_"))
+        for seed in range(args.generated):
+            surface = generate_surface(seed)
+            path = write_ply(surface, folder / f"gen{seed:02d}-{surface.kind}.ply")
+            projects.append((f"{path.stem} (flagged)", project_from_surface(str(path), "flagged")))
     if args.cells is not None:
-        projects = [(name, project.model_copy(update={"remesh": project.remesh.model_copy(
-            update={"n_cells": args.cells, "mean_beam_length": None, "total_length": None})}))
-            for name, project in projects]
+        sizes = [int(c) for c in str(args.cells).split(",")]
+        projects = [(name if len(sizes) == 1 else f"{name} c{cells}",
+                     project.model_copy(update={"remesh": project.remesh.model_copy(
+                         update={"n_cells": cells, "mean_beam_length": None, "total_length": None})}))
+                    for name, project in projects for cells in sizes]
     if args.seeds is not None:
         return spread(projects, list(range(args.seeds)))
     header = (f"{'surface':24s} {'verts':>6s} {'cells':>5s} {'hex %':>6s} {'val3 %':>6s} {'Dfield':>6s} "
-              f"{'size/D':>6s} {'Afield':>6s} {'asp/A':>6s} {'corr':>6s} {'short m':>8s} {'short/l':>7s} "
+              f"{'size/D':>6s} {'Afield':>6s} {'asp/A':>6s} {'corr':>6s} {'rank':>6s} {'short m':>8s} {'short/l':>7s} "
               f"{'angle':>6s} {'time s':>6s}")
     print(f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     print(header)
@@ -139,17 +157,19 @@ def main() -> int:
         q, seconds, n_vertices = run_pipeline(project)
         D, A = q["field_size_ratio"], q["field_max_aspect"]
         size, aspect = q["achieved_size_ratio"] / D, q["achieved_max_aspect"] / A
-        correlation = q.get("size_correlation")
+        correlation, rank = q.get("size_correlation"), q.get("size_rank_correlation")
         print(f"{name:24s} {n_vertices:6d} {q['n_faces']:5d} {100 * q['hexagon_share_interior']:6.1f} "
               f"{100 * q['valence3_share_interior']:6.1f} {D:6.2f} {size:6.3f} {A:6.2f} {aspect:6.3f} "
-              f"{correlation if correlation is not None else float('nan'):6.3f} {q['shortest_beam_m']:8.4f} "
+              f"{correlation if correlation is not None else float('nan'):6.3f} "
+              f"{rank if rank is not None else float('nan'):6.3f} {q['shortest_beam_m']:8.4f} "
               f"{q['shortest_beam_m'] / q['mean_beam_length_m']:7.3f} {q['smallest_angle_deg']:6.1f} {seconds:6.2f}")
         missed = _missed(q)
         if missed:
             failures.append(f"{name}: {', '.join(missed)}")
     print("columns: Dfield, Afield = the field's size ratio and largest aspect (D', A', at most D = 2, A = 2); "
-          "size/D, asp/A = achieved size ratio / D', achieved largest aspect / A'; corr = correlation of achieved and "
-          "prescribed cell size; short/l = shortest beam / mean beam; angle = smallest polygon angle (deg)")
+          "size/D, asp/A = achieved size ratio / D', achieved largest aspect / A'; corr, rank = Pearson and Spearman "
+          "correlation of achieved and prescribed cell size; short/l = shortest beam / mean beam; "
+          "angle = smallest polygon angle (deg)")
     print("targets missed: " + ("; ".join(failures) if failures else "none"))
     return 0
 
