@@ -5,8 +5,9 @@ On a doubly curved surface a hexagon whose nodes follow the surface is not plana
 anticlastic regions a planar hexagon cannot be convex. The beam grid keeps the statics-aware cells;
 the glazing is a property of the panels. A cell within the planarity tolerance and convex in its
 best-fit plane is one panel; otherwise the diagonal whose two parts are flattest (largest node
-distance from their best-fit planes, then the most even split) cuts it, recursively. A triangle is
-always planar and convex, so the split always ends.
+distance from their best-fit planes, then the most even split) cuts it, recursively; a diagonal
+that would cut off a sliver (a triangle of three nearly aligned nodes, no panel to glaze) is taken
+only where no other will do. A triangle is always planar and convex, so the split always ends.
 """
 
 from __future__ import annotations
@@ -19,6 +20,9 @@ from shapely.geometry import LineString, Polygon
 from .mesh import PolyMesh, best_fit_plane
 
 __all__ = ["PanelPiece", "planar_pieces", "panel_pieces", "piece_flatness"]
+
+#: A triangle whose height over its longest side is under this is a sliver, not a panel.
+SLIVER = 0.05
 
 
 @dataclass(frozen=True)
@@ -67,6 +71,15 @@ def _flatness(points: np.ndarray) -> tuple[float, bool, np.ndarray]:
     return distance, convex, local
 
 
+def _sliver(points: np.ndarray) -> bool:
+    """Whether a node loop is a triangle whose height over its longest side is under SLIVER."""
+    if len(points) != 3:
+        return False
+    sides = np.roll(points, -1, axis=0) - points
+    longest = float(np.max(np.einsum("ij,ij->i", sides, sides)))
+    return bool(np.linalg.norm(np.cross(sides[0], sides[1])) < SLIVER * max(longest, 1e-300))
+
+
 def planar_pieces(nodes: np.ndarray, loop: np.ndarray, tolerance: float) -> list[np.ndarray]:
     """Node loops (sub-loops of ``loop``) that are each planar within ``tolerance`` (m) and convex,
     the fewest the recursive diagonal split finds; ``[loop]`` when the cell already is."""
@@ -92,7 +105,8 @@ def planar_pieces(nodes: np.ndarray, loop: np.ndarray, tolerance: float) -> list
             figures = [piece_flatness(nodes[p]) for p in parts]
             bad = sum(1 for d, c in figures if not (d <= tolerance and c))
             worst = max(d if c else np.inf for d, c in figures)
-            key = (bad, worst, abs(len(parts[0]) - len(parts[1])))
+            slivers = sum(_sliver(nodes[p]) for p in parts)
+            key = (slivers, bad, worst, abs(len(parts[0]) - len(parts[1])))
             if best is None or key < best[0]:
                 best = (key, parts)
     if best is None:  # no diagonal inside (a degenerate cell): a fan of triangles from its first node

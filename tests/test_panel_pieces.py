@@ -63,3 +63,22 @@ def test_panel_pieces_name_their_cells():
     pieces = panel_pieces(grid, 1e-6)
     assert [(p.cell, p.piece) for p in pieces][0] == (0, 0)
     assert {p.cell for p in pieces[1:]} == {1} and [p.piece for p in pieces[1:]] == list(range(1, len(pieces)))
+
+
+def test_no_sliver_is_cut_off_where_another_diagonal_will_do():
+    """A pentagon with one node nearly on the line of its neighbours (as at a straight run of a
+    boundary), raised off the plane of the other four: the flattest split alone cut off the nearly
+    aligned triangle (leaving a planar quad), a panel of no area that the cutting clearance removes
+    (the courtyard template at 1500 cells asked); the split now leaves none."""
+    nodes = np.array([[0.0, 0.0, 0.0], [1.0, -0.01, 0.05], [2.0, 0.0, 0.0], [2.0, 1.5, 0.0], [0.0, 1.5, 0.0]])
+    pieces = planar_pieces(nodes, np.arange(5), 1e-6)
+    assert all(piece_flatness(nodes[p])[0] <= 1e-6 and piece_flatness(nodes[p])[1] for p in pieces)
+    for p in pieces:
+        if len(p) == 3:
+            q = nodes[p]
+            sides = np.linalg.norm(q - np.roll(q, -1, axis=0), axis=1)
+            height = 2 * _area(q) / sides.max()
+            assert height > 0.05 * sides.max(), p
+    plan = nodes.copy()
+    plan[:, 2] = 0
+    assert sum(_area(plan[p]) for p in pieces) == pytest.approx(_area(plan))
