@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .condensed import CondensedFactor
+from .condensed import CondensedFactor, FillOrdering
 from .errors import InputError, MechanismError
 from .linalg import assemble_blocks, block_diagonal, count_free_rigid_modes, node_dofs
 from .supports import Supports
@@ -275,12 +275,13 @@ def short_beam_hint(beam_lengths: np.ndarray | None) -> str | None:
 
 
 def factor_free_stiffness(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray,
-            beam_lengths: np.ndarray | None = None) -> CondensedFactor:
+                          beam_lengths: np.ndarray | None = None, *,
+                          ordering: FillOrdering | None = None) -> CondensedFactor:
     """Factor of the stiffness on the free DOFs from the element matrices (m,12,12) in global
     axes, the beams' internal nodes condensed out (``engine.condensed``); a singular matrix is a
-    mechanism, named with its count."""
+    mechanism, named with its count. ``ordering``: kept between factorisations of one pattern."""
     try:
-        lu = condensed_factor(K_elements, el, free)
+        lu = condensed_factor(K_elements, el, free, ordering)
     except RuntimeError as exc:
         raise MechanismError("the frame is a mechanism: its stiffness matrix is singular", n_modes=1,
                              hint="check for loose beams or nodes held by pinned ends only") from exc
@@ -295,20 +296,26 @@ def factor_free_stiffness(K_elements: np.ndarray, el: ElementMesh, free: np.ndar
     return lu
 
 
-def condensed_factor(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray) -> CondensedFactor:
+def condensed_factor(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray,
+                     ordering: FillOrdering | None = None) -> CondensedFactor:
+    """The condensed factor (``engine.condensed``) of element matrices on ``el``'s free DOFs."""
     return CondensedFactor(K_elements, el.connectivity, len(el.nodes), el.n_original, free,
-                           len(el.connectivity) // len(el.first))
+                           len(el.connectivity) // len(el.first), ordering=ordering)
 
 
-def factor_or_none(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray) -> CondensedFactor | None:
+def factor_or_none(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray,
+                   ordering: FillOrdering | None = None) -> CondensedFactor | None:
+    """The condensed factor, or None where the matrix is exactly singular."""
     try:
-        return condensed_factor(K_elements, el, free)
+        return condensed_factor(K_elements, el, free, ordering)
     except RuntimeError:
         return None
 
 
-def factor_with_inertia(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray) -> tuple[CondensedFactor, int]:
-    lu = condensed_factor(K_elements, el, free)
+def factor_with_inertia(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray,
+                        ordering: FillOrdering | None = None) -> tuple[CondensedFactor, int]:
+    """The condensed factor and its count of negative pivots."""
+    lu = condensed_factor(K_elements, el, free, ordering)
     return lu, lu.negative_pivots
 
 

@@ -27,7 +27,7 @@ import scipy.sparse.linalg as spla
 
 from .linalg import assemble_blocks
 
-__all__ = ["CondensedFactor", "sparse_lu"]
+__all__ = ["CondensedFactor", "FillOrdering", "sparse_lu"]
 
 
 def sparse_lu(matrix: sp.spmatrix):
@@ -35,6 +35,46 @@ def sparse_lu(matrix: sp.spmatrix):
     pivots (the inertia of a symmetric matrix is read from the signs of U's diagonal)."""
     return spla.splu(sp.csc_matrix(matrix), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                      options={"SymmetricMode": True})
+
+
+class _PermutedLU:
+    """A SuperLU of P A P^T solving A x = b (the U of the permuted matrix, whose diagonal holds
+    the same pivots in the permuted order)."""
+
+    def __init__(self, lu, order: np.ndarray) -> None:
+        self._lu, self._order = lu, order
+
+    @property
+    def U(self):
+        return self._lu.U
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        out = np.empty_like(rhs, dtype=float)
+        out[self._order] = self._lu.solve(rhs[self._order])
+        return out
+
+
+class FillOrdering:
+    """A fill-reducing symmetric ordering found at the first factorisation (SuperLU's minimum
+    degree on A^T + A) and given to the next ones of the same size: the tangents along one
+    non-linear path share their pattern, and finding the ordering again was some 15 % of each
+    factorisation (Hall at 1500 cells, docs/benchmarks.md). The factors are those of the same
+    elimination order, so the solutions and the pivots' signs are those of ``sparse_lu``."""
+
+    def __init__(self) -> None:
+        self._order: np.ndarray | None = None
+
+    def factor(self, matrix: sp.spmatrix):
+        """SuperLU of ``matrix`` (as ``sparse_lu``) in the kept order, found now if there is none."""
+        matrix = sp.csc_matrix(matrix)
+        if self._order is None or len(self._order) != matrix.shape[0]:
+            lu = sparse_lu(matrix)
+            self._order = np.argsort(lu.perm_c)
+            return lu
+        order = self._order
+        lu = spla.splu(matrix[order][:, order].tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.0,
+                       options={"SymmetricMode": True})
+        return _PermutedLU(lu, order)
 
 
 def _block_pivots(blocks: np.ndarray) -> np.ndarray:
@@ -62,17 +102,19 @@ class CondensedFactor:
     (n_free, r). ``pivots``: the pivots of the elimination (internal blocks, then the diagonal of
     S's U), whose signs give the inertia of a symmetric K. Raises RuntimeError when K is exactly
     singular (an internal block or S), as SuperLU does. With k = 1 it is a plain SuperLU of the
-    assembled matrix.
+    assembled matrix. ``ordering``: S's elimination order, kept from one factorisation of a
+    pattern to the next.
     """
 
     def __init__(self, element_matrices: np.ndarray, connectivity: np.ndarray, n_nodes: int, n_original: int,
-                 free: np.ndarray, elements_per_beam: int) -> None:
+                 free: np.ndarray, elements_per_beam: int, *, ordering: FillOrdering | None = None) -> None:
         k = int(elements_per_beam)
+        lu_of = sparse_lu if ordering is None else ordering.factor
         self.free = free
         self.n_dofs = 6 * n_nodes
         if k == 1:
             K = assemble_blocks(element_matrices, connectivity, n_nodes)
-            self._lu = sparse_lu(K[free][:, free])
+            self._lu = lu_of(K[free][:, free])
             self._beams = None
             self._block_pivots: np.ndarray | None = np.zeros(0)
             self._K_ii: np.ndarray | None = None
@@ -113,7 +155,7 @@ class CondensedFactor:
         self._boundary = free[free < 6 * n_original]
         if len(free) - len(self._boundary) != m * g:
             raise ValueError("every internal DOF of the beams must be free")
-        self._lu = sparse_lu(S[self._boundary][:, self._boundary])
+        self._lu = lu_of(S[self._boundary][:, self._boundary])
         self._end_dofs = (6 * beam_ends[:, :, None] + np.arange(6)).reshape(m, 12)
         # scatter of the (m, 12) end contributions onto the end-node DOFs
         self._scatter = sp.csr_matrix((np.ones(12 * m), (self._end_dofs.ravel(), np.arange(12 * m))),

@@ -29,6 +29,7 @@ from .beam_elements import (
     local_stiffness,
     restrained_dofs,
 )
+from .condensed import FillOrdering
 from .errors import ConvergenceError, InputError
 from .linalg import single_threaded_blas
 from .supports import Supports
@@ -36,6 +37,10 @@ from .supports import Supports
 __all__ = ["PathSettings", "NonlinearResult", "nonlinear_static"]
 
 log = logging.getLogger(__name__)
+
+#: The local end deformations of a co-rotational element: rotations at a (3-5), elongation (6),
+#: rotations at b (9-11); its other local DOFs are zero by the element frame's definition.
+LOCAL_DEFORMATIONS = (3, 4, 5, 6, 9, 10, 11)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -109,7 +114,15 @@ class _Corotational:
         self.free = np.flatnonzero(~self.restrained)
         self.R0_rows = np.ascontiguousarray(np.transpose(self.R0, (1, 2, 0)))        # R0[i, j] as (3, 3, m)
         self.K_local = condense(local_stiffness(self.L0, self.el), self.el.released)
-        self.K_rows = np.ascontiguousarray(np.transpose(self.K_local, (1, 2, 0)))    # (12, 12, m)
+        K_rows = np.transpose(self.K_local, (1, 2, 0))                                # (12, 12, m)
+        # the local deformations are the end rotations and the elongation only (node a at the
+        # origin, node b on the axis), and a beam's stiffness couples few of them: per row of
+        # the end forces, the columns of those it uses (22 of 144 products for prismatic beams)
+        self.local_rows = []
+        for i in range(12):
+            columns = [j for j in LOCAL_DEFORMATIONS if np.any(K_rows[i, j])]
+            self.local_rows.append((columns, np.ascontiguousarray(K_rows[i, columns])))
+        self.ordering = FillOrdering()
         self.scatter = self.dofs.T.ravel()                                           # f (12, m) onto the DOFs
         self.step = 1e-8
         self.spins = [_rotation_matrices(self.step * np.eye(3)[k:k + 1])[0] for k in range(3)]
@@ -143,7 +156,13 @@ class _Corotational:
             d[offset] = (M[2][1] - M[1][2]) * factor
             d[offset + 1] = (M[0][2] - M[2][0]) * factor
             d[offset + 2] = (M[1][0] - M[0][1]) * factor
-        f_local = np.einsum("ijm,jm->im", self.K_rows, d)
+        f_local = np.zeros_like(d)
+        for i, (columns, K_i) in enumerate(self.local_rows):
+            if columns:
+                row = K_i[0] * d[columns[0]]
+                for K_ij, j in zip(K_i[1:], columns[1:]):
+                    row += K_ij * d[j]
+                f_local[i] = row
         f_global = np.empty_like(f_local)
         for block in range(0, 12, 3):
             f = f_local[block:block + 3]
@@ -171,13 +190,14 @@ class _Corotational:
     def tangent(self, state) -> np.ndarray:
         """Element tangent stiffnesses (m,12,12) in global axes: the derivative of the element
         end forces with respect to the end translations and spins (applied as in ``_update``), by
-        forward differences over all elements at once (12 evaluations of the element kernel,
-        relative accuracy ~1e-8)."""
+        forward differences over all elements at once (9 evaluations of the element kernel,
+        relative accuracy ~1e-8). The forces depend on the end positions through the chord
+        only, so those of end a are minus those of end b."""
         xa, xb, Ra, Rb = state
         base = self._end_forces(xa, xb, Ra, Rb)
         K = np.empty((12, 12, xa.shape[1]))
         h_translation = self.step * self.L0
-        for column in range(12):
+        for column in range(3, 12):
             end, component = divmod(column, 6)
             x_pair, r_pair = [xa, xb], [Ra, Rb]
             if component < 3:
@@ -190,6 +210,7 @@ class _Corotational:
                 r_pair[end] = np.stack([S[i, 0] * Rn[0] + S[i, 1] * Rn[1] + S[i, 2] * Rn[2] for i in range(3)])
                 h = self.step
             K[:, column] = (self._end_forces(x_pair[0], x_pair[1], r_pair[0], r_pair[1]) - base) / h
+        K[:, :3] = -K[:, 6:9]
         return np.ascontiguousarray(np.transpose(K, (2, 0, 1)))
 
 
@@ -265,7 +286,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
         """The factored tangent at an element state, or None where it is singular."""
         nonlocal factored
         factored += 1
-        return factor_or_none(cr.tangent(cache), cr.el, free)
+        return factor_or_none(cr.tangent(cache), cr.el, free, cr.ordering)
     F_ref = np.zeros(6 * cr.n_all)
     F_ref[:6 * n] = loads.ravel()
     F_dead = np.zeros(6 * cr.n_all)
@@ -307,7 +328,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             x, triads = state
     # first step size from a linear prediction reaching about max_load_factor / 20
     _, cache = residual(x, triads, 0.0)
-    lu = factor_free_stiffness(cr.tangent(cache), cr.el, free)
+    lu = factor_free_stiffness(cr.tangent(cache), cr.el, free, ordering=cr.ordering)
     factored += 1
     u_ref = np.zeros(6 * cr.n_all)
     u_ref[free] = lu.solve(F_ref[free])
@@ -341,7 +362,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
         else:
             _, cache = residual(x, triads, lam)
             try:
-                lu, negatives = factor_with_inertia(cr.tangent(cache), cr.el, free)
+                lu, negatives = factor_with_inertia(cr.tangent(cache), cr.el, free, cr.ordering)
             except RuntimeError:
                 converged_all = False
                 break
@@ -478,7 +499,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             break
     if len(path) > 1:                                        # pivots of the final state
         try:
-            pivots[-1] = factor_with_inertia(cr.tangent(residual(x, triads, lam)[1]), cr.el, free)[1]
+            pivots[-1] = factor_with_inertia(cr.tangent(residual(x, triads, lam)[1]), cr.el, free, cr.ordering)[1]
             factored += 1
         except RuntimeError:
             pass

@@ -418,6 +418,71 @@ def test_condensed_factor_solves_as_a_plain_lu_and_keeps_the_inertia():
             assert factor.negative_pivots == (0 if sigma == 0 else 2)
 
 
+def test_a_kept_fill_ordering_gives_the_factor_of_a_fresh_one():
+    """The ordering found at a path's first factorisation and given to the next ones (of other
+    values on the same pattern): the same solutions and the same negative pivots as a factor
+    that orders its matrix afresh, on a positive definite and an indefinite K + sigma K_G."""
+    from dataclasses import replace
+
+    from engine import beam_elements, frame
+    from engine.condensed import CondensedFactor, FillOrdering
+    from engine.linalg import congruent
+
+    model, supports, loads = _space_frame()
+    fine = replace(model, elements_per_beam=3)
+    state = frame._solve_linear(fine, supports, loads)
+    el, free = state.el, state.free
+    K_G = congruent(state.T, beam_elements.geometric_stiffness(state.L, state.local_forces[:, 6], el))
+    first = linear_buckling(fine, supports, loads, n_modes=3).factors
+    rhs = np.random.default_rng(3).normal(size=(len(free), 3))
+    kept = FillOrdering()
+    for sigma in (0.0, 0.5 * (first[1] + first[2]), 0.5 * first[0]):
+        elements = state.K_elements + sigma * K_G
+        args = (elements, el.connectivity, len(el.nodes), el.n_original, free, 3)
+        fresh, reordered = CondensedFactor(*args), CondensedFactor(*args, ordering=kept)
+        expected = fresh.solve(rhs)
+        assert np.abs(reordered.solve(rhs) - expected).max() < 1e-10 * np.abs(expected).max()
+        assert np.abs(reordered.solve(rhs[:, 1]) - expected[:, 1]).max() < 1e-10 * np.abs(expected).max()
+        assert reordered.negative_pivots == fresh.negative_pivots == {0.0: 0, 0.5 * first[0]: 0}.get(sigma, 2)
+
+
+def test_the_corotational_tangent_is_the_derivative_of_the_end_forces():
+    """The element tangent (forward differences, end a's translation columns taken as minus end
+    b's) against central differences of the end forces in every direction, at a deformed state
+    of a frame with a released beam end."""
+    from dataclasses import replace
+
+    from engine.corotational import _Corotational, _rotation_matrices
+
+    model, supports, _ = _space_frame()
+    releases = np.zeros((len(model.beams), 2, 6), bool)
+    releases[3, 1, 4:] = True
+    model = replace(model, releases=releases)
+    cr = _Corotational(model, supports)
+    rng = np.random.default_rng(5)
+    x = cr.X + 0.02 * rng.normal(size=cr.X.shape)
+    triads = _rotation_matrices(0.2 * rng.normal(size=(cr.n_all, 3)))
+    _, state = cr.internal_forces(x, triads)
+    K = cr.tangent(state)
+    xa, xb, Ra, Rb = state
+    h = 1e-6
+    for column in range(12):
+        end, component = divmod(column, 6)
+        pair = {+1: None, -1: None}
+        for sign in pair:
+            x_pair, r_pair = [xa.copy(), xb.copy()], [Ra, Rb]
+            if component < 3:
+                x_pair[end][component] += sign * h * cr.L0
+            else:
+                spin = _rotation_matrices(sign * h * np.eye(3)[component - 3:component - 2])[0]
+                r_pair[end] = np.einsum("ij,jkm->ikm", spin, r_pair[end])
+            pair[sign] = cr._end_forces(x_pair[0], x_pair[1], r_pair[0], r_pair[1])
+        step = h * cr.L0 if component < 3 else h
+        central = (pair[1] - pair[-1]) / (2 * step)
+        scale = np.abs(K).max(axis=(1, 2))
+        assert np.all(np.abs(K[:, :, column].T - central).max(axis=0) < 1e-5 * scale), column
+
+
 def test_buckling_factors_match_a_dense_eigensolver():
     """All requested factors of the shifted sparse Lanczos against scipy's dense symmetric solver
     on the same K and K_G (mixed tension and compression, 3 elements per beam)."""
