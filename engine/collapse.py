@@ -36,7 +36,7 @@ from typing import Callable
 
 import numpy as np
 
-from .mesh import PolyMesh
+from .mesh import PolyMesh, neighbour_lists
 
 __all__ = ["CollapseReport", "collapse_beams", "flip_beams", "collapse_short_beams", "remove_beams",
            "remove_short_beams", "open_narrow_joints", "dissolve_kinks", "MAX_VALENCE"]
@@ -96,10 +96,7 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray, *, merge_corners: bool
     edges = polymesh.edges
     n = polymesh.n_nodes
     faces, node_faces = _cells_at_nodes(polymesh)
-    neighbours: list[set[int]] = [set() for _ in range(n)]
-    for a, b in edges:
-        neighbours[a].add(int(b))
-        neighbours[b].add(int(a))
+    neighbours = [set(around) for around in neighbour_lists(edges, n)]
     # boundary beams: used by one cell
     uses: dict[tuple[int, int], int] = {}
     for f in faces:
@@ -420,10 +417,7 @@ def dissolve_kinks(polymesh: PolyMesh) -> tuple[PolyMesh, int]:
         return polymesh, 0
     faces, node_faces = _cells_at_nodes(polymesh)
     joined = {tuple(e) for e in np.sort(edges, axis=1).tolist()}
-    neighbours: dict[int, list[int]] = {}
-    for a, b in edges:
-        neighbours.setdefault(int(a), []).append(int(b))
-        neighbours.setdefault(int(b), []).append(int(a))
+    neighbours = neighbour_lists(edges, polymesh.n_nodes)
     busy = np.zeros(polymesh.n_nodes, dtype=bool)
     dropped = np.zeros(polymesh.n_nodes, dtype=bool)
     for v in map(int, kinks):

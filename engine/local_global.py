@@ -14,7 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .mesh import TriMesh
+from .mesh import TriMesh, node_adjacency
 from .proximity import closest_point_on_triangles
 
 __all__ = ["HEXAGON_SIDE", "cells_by_degree", "cell_ids_by_degree", "cell_adjacency", "graded_areas", "cell_areas",
@@ -281,8 +281,7 @@ def stacked_targets(groups: dict[int, np.ndarray], targets: dict[int, np.ndarray
 
 def neighbour_mean(edges: np.ndarray, n: int) -> sp.csr_matrix:
     """(n, n) operator: mean of each node's neighbours (a node without neighbours: itself)."""
-    adjacency = sp.csr_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
-                                                          np.r_[edges[:, 1], edges[:, 0]])), shape=(n, n))
+    adjacency = node_adjacency(edges, n)
     degree = np.asarray(adjacency.sum(axis=1)).ravel()
     lonely = degree == 0
     return (sp.diags(1.0 / np.maximum(degree, 1.0)) @ adjacency + sp.diags(lonely.astype(float))).tocsr()

@@ -15,7 +15,8 @@ from functools import cached_property
 
 import numpy as np
 
-__all__ = ["TriMesh", "PolyMesh", "unique_edges", "boundary_loops", "chain_loops", "best_fit_plane"]
+__all__ = ["TriMesh", "PolyMesh", "unique_edges", "boundary_loops", "chain_loops", "best_fit_plane", "node_adjacency",
+           "neighbour_lists"]
 
 
 def _readonly(array: np.ndarray) -> np.ndarray:
@@ -40,6 +41,25 @@ def unique_edges(faces: list[np.ndarray] | np.ndarray) -> np.ndarray:
             directed = np.zeros((0, 2), dtype=np.int64)
     edges = np.sort(directed.astype(np.int64), axis=1)
     return np.unique(edges, axis=0) if len(edges) else edges
+
+
+def node_adjacency(edges: np.ndarray, n: int):
+    """(n, n) symmetric node adjacency (scipy CSR, 1 per edge) of the undirected ``edges`` (e, 2),
+    each listed once."""
+    import scipy.sparse as sp
+
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    return sp.csr_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
+                         shape=(n, n))
+
+
+def neighbour_lists(edges: np.ndarray, n: int) -> list[list[int]]:
+    """Each of the n nodes' neighbours along the undirected ``edges`` (e, 2), in the edges' order."""
+    out: list[list[int]] = [[] for _ in range(n)]
+    for a, b in np.asarray(edges, dtype=np.int64).reshape(-1, 2).tolist():
+        out[a].append(b)
+        out[b].append(a)
+    return out
 
 
 def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:

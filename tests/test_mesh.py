@@ -34,3 +34,31 @@ def test_moved_nodes_keep_the_topology_and_measure_their_own_lengths():
     assert np.array_equal(moved.beam_lengths, np.linalg.norm(chords, axis=1))
     np.testing.assert_allclose(moved.beam_lengths, 2.0 * grid.beam_lengths)
     assert np.array_equal(moved.face_boundary, grid.face_boundary)
+
+
+def test_node_adjacency_and_neighbour_lists_name_each_beams_two_ends():
+    """The one node adjacency that the optimiser, the collapses and the re-optimised region share:
+    symmetric, a row per node as long as its valence, each beam seen from both ends."""
+    from scipy.sparse.csgraph import breadth_first_order
+
+    from engine.mesh import neighbour_lists, node_adjacency
+
+    for seed in range(3):
+        loops = _loops(seed)
+        grid = PolyMesh(nodes=np.random.default_rng(seed).normal(size=(40, 3)), faces=tuple(loops))
+        adjacency = node_adjacency(grid.edges, grid.n_nodes)
+        lists = neighbour_lists(grid.edges, grid.n_nodes)
+        assert (adjacency != adjacency.T).nnz == 0
+        assert np.array_equal(np.asarray(adjacency.sum(axis=1)).ravel(), grid.valence)
+        assert [len(around) for around in lists] == grid.valence.tolist()
+        beams = {tuple(e) for e in grid.edges.tolist()}
+        assert {(min(a, b), max(a, b)) for a, around in enumerate(lists) for b in around} == beams
+        start = int(grid.edges[0, 0])
+        reached = breadth_first_order(adjacency, start, directed=False, return_predecessors=False)
+        linked = {start}
+        while True:
+            grown = linked | {b for a in linked for b in lists[a]}
+            if grown == linked:
+                break
+            linked = grown
+        assert set(reached.tolist()) == linked

@@ -14,14 +14,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from engine.collapse import collapse_beams, dissolve_kinks, open_narrow_joints, remove_short_beams
 from engine.field import GuidingField
 from engine.findings import Finding
 from engine.grids import LATTICES, GridKind, isotropic_field
-from engine.mesh import PolyMesh
+from engine.mesh import PolyMesh, neighbour_lists, node_adjacency
 from engine.optimize import OptimizeResult, OptimizeSettings, grid_quality, optimize
 from engine.parts import joint_id, panel_id
 from engine.symmetry import symmetrised_grid, symmetry_record
@@ -125,19 +124,11 @@ def changed_region(before: PolyMesh, after: PolyMesh, rings: int = REOPTIMISED_R
     same = distance <= 1e-9 * max(float(before.beam_lengths.mean()), 1e-300)
     old_id = np.where(same, match, -1)
 
-    def neighbours(grid: PolyMesh) -> list[list[int]]:
-        out: list[list[int]] = [[] for _ in range(grid.n_nodes)]
-        for a, b in grid.edges.tolist():
-            out[a].append(b)
-            out[b].append(a)
-        return out
-
-    old, new = neighbours(before), neighbours(after)
+    old, new = neighbour_lists(before.edges, before.n_nodes), neighbour_lists(after.edges, after.n_nodes)
     changed = ~same
     for i in np.flatnonzero(same):
         changed[i] = sorted(old_id[new[i]].tolist()) != sorted(old[old_id[i]])
-    adjacency = sp.coo_matrix((np.ones(2 * len(after.edges)), (after.edges.ravel(), after.edges[:, ::-1].ravel())),
-                              shape=(after.n_nodes, after.n_nodes)).tocsr()
+    adjacency = node_adjacency(after.edges, after.n_nodes)
     region = changed
     for _ in range(rings):
         region = region | (adjacency @ region.astype(float) > 0)
