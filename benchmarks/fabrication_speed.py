@@ -2,11 +2,16 @@
 panel DXFs with sheet nesting (benchmarks/_bench_panels.py).
 
     .venv/bin/python benchmarks/fabrication_speed.py [--nodes 500] [--workers 2] [--peers 12] [--skip-panels]
+    .venv/bin/python benchmarks/fabrication_speed.py --beams 4500   # beams.step only
 
 Targets (issue 6): under 1 s per joint on average on 2 cores; 1000 panels with nesting under 30 s.
 Peers, measured in the same run on the first ``--peers`` joints, one process, CPU seconds: the id
 engraved by a boolean cut (as before the face-built pockets), and joints.step written by OCCT
 from all the solids held in one process (as before the part files streamed by the parent).
+
+``--beams N``: beams.step of a grid of about N beams (CHS 60.3 x 3.2), and in the same run the
+same file with every tube extruded from one shared profile face, as it was before 2026-12-03
+(its build and export grew as the square of the tubes).
 """
 
 from __future__ import annotations
@@ -119,13 +124,44 @@ def bench_peers(nodes: int, count: int) -> None:
           f"{prepared:.3f} s per joint on checks, STEP and its part file")
 
 
+def bench_beams_step(beams: int) -> None:
+    """Seconds of beams.step for a grid of about ``beams`` beams, the tubes' profile copied per tube
+    (the product) and shared by all (the scheme before), with the files' sizes."""
+    import copy as copy_module
+    import types
+
+    import pandas as pd
+
+    from fabrication import beams as beams_module
+
+    grid, _ = _grid(max(8, (2 * beams) // 3))
+    lengths = 1000 * grid.beam_lengths
+    table = pd.DataFrame({"id": [f"B{k + 1:04d}" for k in range(len(lengths))], "cut_length_mm": 0.7 * lengths,
+                          "setback_start_mm": 0.15 * lengths})
+    print(f"beams.step, {len(lengths)} tubes CHS 60.3 x 3.2:")
+    with tempfile.TemporaryDirectory() as folder:
+        for name, module in (("profile copied per tube", copy_module),
+                             ("one shared profile", types.SimpleNamespace(deepcopy=lambda shape: shape))):
+            beams_module.copy = module  # type: ignore[assignment]
+            start = time.perf_counter()
+            path = beams_module.write_beams_step(grid, table, Path(folder) / "beams.step", outer_size_mm=60.3,
+                                                 wall_mm=3.2)
+            print(f"  {name:24s} {time.perf_counter() - start:7.1f} s  {path.stat().st_size / 1e6:6.1f} MB",
+                  flush=True)
+        beams_module.copy = copy_module
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--nodes", type=int, default=500)
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--peers", type=int, default=12, help="joints for the peer figures (0: none)")
     parser.add_argument("--skip-panels", action="store_true")
+    parser.add_argument("--beams", type=int, default=0, help="only beams.step of a grid of about this many beams")
     args = parser.parse_args()
+    if args.beams:
+        bench_beams_step(args.beams)
+        return 0
     bench_joints(args.nodes, args.workers)
     if args.peers:
         bench_peers(args.nodes, args.peers)
