@@ -38,7 +38,7 @@ import numpy as np
 
 from .mesh import PolyMesh, neighbour_lists
 
-__all__ = ["CollapseReport", "collapse_beams", "flip_beams", "collapse_short_beams", "remove_beams",
+__all__ = ["CollapseReport", "collapse_beams", "flip_beams", "flip_defects", "collapse_short_beams", "remove_beams",
            "remove_short_beams", "open_narrow_joints", "dissolve_kinks", "MAX_VALENCE"]
 
 #: Most beams a merged node may have (a joint with more is crowded, its angles small).
@@ -254,6 +254,42 @@ def flip_beams(polymesh: PolyMesh, beams: np.ndarray, lengths: np.ndarray) -> tu
                       boundary=polymesh.boundary, supports=polymesh.supports, corners=polymesh.corners)
     index = {tuple(e): k for k, e in enumerate(np.sort(result.edges, axis=1).tolist())}
     return result, len(flipped), np.array([index[e] for e in flipped], dtype=np.int64)
+
+
+def flip_defects(polymesh: PolyMesh) -> tuple[PolyMesh, int]:
+    """Flip (T1, :func:`flip_beams`, each beam kept at its length) the interior beams whose flip
+    brings the sides of their four interior cells closer to six: the beam's two cells lose a side
+    and the cells at its ends gain one, so a beam between two heptagons with a pentagon at each end
+    makes four hexagons. A flip is made where it takes at least 2 off the sum of |sides - 6| over
+    those cells, the largest gains first. The cells keep their count. Returns the grid and the
+    number flipped."""
+    edges = polymesh.edges
+    if not len(edges):
+        return polymesh, 0
+    _, node_faces = _cells_at_nodes(polymesh)
+    sides = polymesh.face_degrees
+    inner = ~polymesh.face_boundary
+    gains, beams = [], []
+    for k, (p, q) in enumerate(edges.tolist()):
+        if len(node_faces[p]) != 3 or len(node_faces[q]) != 3:
+            continue
+        shared = [i for i in node_faces[p] if i in node_faces[q]]
+        if len(shared) != 2:
+            continue
+        ends = [next(i for i in node_faces[p] if i not in shared), next(i for i in node_faces[q] if i not in shared)]
+        cells = shared + ends
+        if not inner[cells].all():
+            continue
+        before = np.abs(sides[cells] - 6).sum()
+        after = np.abs(sides[cells] + np.array([-1, -1, 1, 1]) - 6).sum()
+        if before - after >= 2:
+            gains.append(before - after)
+            beams.append(k)
+    if not beams:
+        return polymesh, 0
+    order = np.argsort(-np.array(gains), kind="stable")
+    flipped, count, _ = flip_beams(polymesh, np.array(beams)[order], polymesh.beam_lengths)
+    return flipped, count
 
 
 def collapse_short_beams(polymesh: PolyMesh, required: Callable[[PolyMesh], np.ndarray], *,

@@ -395,3 +395,24 @@ def test_the_region_optimised_again_is_within_its_rings_of_a_collapse(rings):
     assert np.array_equal(region, hops <= rings + 1)
     assert 0 < region.sum() < after.n_nodes / 2
     assert not changed_region(grid, grid, rings=rings).any(), "nothing changed, nothing optimised again"
+
+
+def test_a_defect_made_by_a_flip_is_flipped_back_to_hexagons():
+    """Issue 13: a T1 flip of a honeycomb's central beam leaves its two cells pentagons and the cells
+    at its ends heptagons; flip_defects finds that beam (two heptagons, a pentagon at each end),
+    flips it back and gives every cell its six sides and the honeycomb's own nodes again."""
+    from engine.collapse import flip_beams, flip_defects
+    from tests.test_panels import hex_polymesh
+
+    honeycomb = hex_polymesh(rows=6, cols=6)
+    centre = honeycomb.nodes[:, :2].mean(axis=0)
+    middle = np.linalg.norm(honeycomb.nodes[honeycomb.edges].mean(axis=1)[:, :2] - centre, axis=1)
+    beam = int(np.argmin(middle))
+    defect, count, _ = flip_beams(honeycomb, np.array([beam]), honeycomb.beam_lengths)
+    assert count == 1
+    assert sorted(defect.face_degrees.tolist()).count(6) == sorted(honeycomb.face_degrees.tolist()).count(6) - 4
+    healed, flipped = flip_defects(defect)
+    assert flipped == 1
+    assert np.array_equal(healed.face_degrees, honeycomb.face_degrees)
+    assert [sorted(f.tolist()) for f in healed.faces] == [sorted(f.tolist()) for f in honeycomb.faces]
+    assert flip_defects(honeycomb)[1] == 0

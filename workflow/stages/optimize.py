@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
-from engine.collapse import collapse_beams, dissolve_kinks, open_narrow_joints, remove_short_beams
+from engine.collapse import collapse_beams, dissolve_kinks, flip_defects, open_narrow_joints, remove_short_beams
 from engine.field import GuidingField
 from engine.findings import Finding
 from engine.grids import LATTICES, GridKind, isotropic_field
@@ -145,8 +145,11 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
     polymesh = remesh
     rounds_field = field_of_grid(ctx.out_dir, project)  # statics rounds: the field the grid was made under
     field = field if rounds_field is None else rounds_field
-    ctx.step("local/global iterations and the planarity end game")
     settings = optimize_settings(project)
+    defects = 0
+    if not settings.symmetry_planes:  # (a flip on one side of a plane would break the mirror)
+        polymesh, defects = flip_defects(polymesh)
+    ctx.step("local/global iterations and the planarity end game")
     limits = beam_length_limits(project)
     result, settings = _optimised(polymesh, surface, field, settings, limits, ctx)
     grading_kept, share_kept = True, short_share(result.polymesh, project)
@@ -238,6 +241,7 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
                          "planarity_tolerance_m": _piece_tolerance(result.polymesh, project)}
     quality["shortest_beam_m"] = buildable["shortest_beam_m"]
     quality["smallest_beam_angle_deg"] = buildable["smallest_beam_angle_deg"]
+    quality["defects_flipped"] = defects
     quality["weights"] = project.optimize.model_dump(mode="json")
     if planes:  # of the grid as written
         quality["symmetry"] = symmetry_record(result.polymesh.nodes, planes,
