@@ -52,6 +52,10 @@ FLIP_MARGIN = 1.1
 #: cells at its ends at most FLIP_SIDES[1] (they gain one): hexagons become pentagons and
 #: heptagons, never quads or octagons, and flips do not cascade.
 FLIP_SIDES = (6, 6)
+#: A flipped beam's length as shares of the one asked, tried in turn until its four cells fold
+#: nowhere they did not before (small cells round a short beam leave no room for a long one); a
+#: flip that folds them at every share is not made.
+FLIP_SHARES = (1.0, 0.75, 0.5, 0.3)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -177,6 +181,20 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray, *, merge_corners: bool
     return result, collapsed
 
 
+def _vector_area(x: np.ndarray, loop: list[int]) -> np.ndarray:
+    """(3,) twice the vector area of the cell ``loop`` at x (Newell), m2."""
+    points = x[loop]
+    return np.cross(points, np.roll(points, -1, axis=0)).sum(axis=0)
+
+
+def _folded_parts(x: np.ndarray, loop: list[int], up: np.ndarray) -> int:
+    """How many of the triangles from the cell's centroid to its beams face against ``up`` at x."""
+    points = x[loop]
+    centre = points.mean(axis=0)
+    u, v = points - centre, np.roll(points, -1, axis=0) - centre
+    return int(np.count_nonzero(np.cross(u, v) @ up <= 0))
+
+
 def _other(loop: list[int], node: int, not_this: int) -> int:
     """The neighbour of ``node`` in the cell ``loop`` that is not ``not_this``."""
     k = len(loop)
@@ -228,19 +246,32 @@ def flip_beams(polymesh: PolyMesh, beams: np.ndarray, lengths: np.ndarray) -> tu
         p2, q2 = _other(faces[right], p, q), _other(faces[right], q, p)
         if len({p1, q1, p2, q2}) != 4:
             continue
+        around = (left, right, below, above)
         # cells: left loses q, right loses p; below gets q between p and p2, above p between q and q1
-        faces[left].remove(q)
-        faces[right].remove(p)
-        _insert_between(faces[below], p, p2, q)
-        _insert_between(faces[above], q, q1, p)
+        loops = [list(faces[i]) for i in around]
+        loops[0].remove(q)
+        loops[1].remove(p)
+        _insert_between(loops[2], p, p2, q)
+        _insert_between(loops[3], q, q1, p)
         centre = 0.5 * (x[p] + x[q])
-        across = x[faces[right]].mean(axis=0) - x[faces[left]].mean(axis=0)
+        across = x[loops[1]].mean(axis=0) - x[loops[0]].mean(axis=0)
         axis = x[q] - x[p]
         axis /= max(np.linalg.norm(axis), 1e-300)
         across -= (across @ axis) * axis  # in the plane of the two cells, normal to the old beam
         across /= max(np.linalg.norm(across), 1e-300)
-        half = 0.5 * float(lengths[beam])
-        x[p], x[q] = centre - half * across, centre + half * across
+        up = np.sum([_vector_area(x, faces[i]) for i in around], axis=0)
+        folded_before = sum(_folded_parts(x, faces[i], up) for i in around)
+        trial = x.copy()
+        for share in FLIP_SHARES:  # as long as the four cells allow without folding
+            half = 0.5 * share * float(lengths[beam])
+            trial[p], trial[q] = centre - half * across, centre + half * across
+            if sum(_folded_parts(trial, loop, up) for loop in loops) <= folded_before:
+                break
+        else:
+            continue
+        x[p], x[q] = trial[p], trial[q]
+        for i, loop in zip(around, loops):
+            faces[i] = loop
         for v in (p, q):
             node_faces[v] = [i for i in node_faces[v] if i not in ((right,) if v == p else (left,))]
         node_faces[q].append(below)

@@ -90,7 +90,7 @@ from .local_global import (
 )
 from .mesh import PolyMesh, TriMesh
 from .planarise import PlanariseSettings, planarise
-from .projections import face_corners, lengthen_short_beams, open_narrow_corners
+from .projections import CellFans, face_corners, lengthen_short_beams, open_narrow_corners, unfolded
 from .symmetry import PARTNER_REACH, mirror_partners, symmetrise_points
 
 log = logging.getLogger(__name__)
@@ -349,6 +349,7 @@ class _Problem:
     areas: dict[int, np.ndarray | None]
     grading: dict
     corners: np.ndarray
+    fans: CellFans  # the cells' parts, whose folds the limits' projections may not make
     min_corner: float  # rad
     beam_length_limits: Callable[[PolyMesh], np.ndarray] | None
     system: _GlobalStep
@@ -453,7 +454,8 @@ def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, setti
                     movable=interior | sliding, local=local, start=x, x0=x0, groups=groups, planes=planes,
                     partners=partners,
                     field=field, nearest_vertex=nearest_vertex, areas=areas, grading=grading,
-                    corners=face_corners(polymesh.faces), min_corner=float(np.radians(settings.min_corner_angle_deg)),
+                    corners=face_corners(polymesh.faces), fans=CellFans(polymesh.faces),
+                    min_corner=float(np.radians(settings.min_corner_angle_deg)),
                     beam_length_limits=beam_length_limits,
                     system=_global_step_system(settings, groups, polymesh.edges, n, interior, sliding, tangents),
                     mean_length=max(before["mean_beam_length_m"], 1e-300), band=CLOSENESS_BAND * surface.diagonal)
@@ -483,6 +485,13 @@ def _hold_limits(p: _Problem, x: np.ndarray, sweeps: int = 3) -> np.ndarray:
     if p.sliding.any():
         x[p.sliding] = p.boundary.closest(x[p.sliding])[0]
     return x
+
+
+def _unfolded(p: _Problem, x: np.ndarray, new: np.ndarray) -> np.ndarray:
+    """The step from x to ``new`` but for the nodes of the cells it would fold, which stay at x
+    (crowded limits and the targets of the cells that collapses and flips left can turn a cell over
+    on the surface: engine.projections.unfolded)."""
+    return unfolded(x, new, p.fans, p.surface.closest_normals(p.fans.centroids(x))[1])
 
 
 def _local_step(p: _Problem, x: np.ndarray, t: float, f: float) -> tuple[np.ndarray, float]:
@@ -582,7 +591,9 @@ def _iterate(p: _Problem, progress: Callable[[str, float | None], None] | None) 
                 new, accepted = extrapolated, accepted + 1
             previous_energy, previous_plain = energy, plain
         new = _symmetric(p, _hold_limits(p, new))
-        if not np.all(np.isfinite(new)):
+        if np.all(np.isfinite(new)):
+            new = _unfolded(p, x, new)
+        else:
             # a step that left the reals (a guard: the one CI failure that led to it was the plot of
             # workflow/plots/remesh.py, reading matplotlib's uninitialised padding): the
             # iterations end at the last finite grid, and the quality says so
@@ -596,14 +607,14 @@ def _iterate(p: _Problem, progress: Callable[[str, float | None], None] | None) 
         if progress is not None:
             progress(f"optimize: iteration {done}/{len(plan)}", done / len(plan))
     if previous_plain is not None and _local_step(p, x, *plan[-1])[1] > previous_energy:
-        x = previous_plain  # never end on an accelerated point that raised the energy
+        x = _unfolded(p, x, previous_plain)  # never end on an accelerated point that raised the energy
     if done:
         for _ in range(FINAL_HOLD_ROUNDS):  # the limits once more, to convergence of the sweeps
             held = _symmetric(p, _hold_limits(p, x, sweeps=10))
             if not np.all(np.isfinite(held)):
                 stopped_non_finite = True
                 break
-            x = held
+            x = _unfolded(p, x, held)
     return _Iterated(x=x, done=done, step=step, accepted=accepted, rejected=rejected,
                      stopped_non_finite=stopped_non_finite)
 

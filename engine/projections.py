@@ -8,7 +8,8 @@ over the beams or corners; a node that may not move (a support, a corner) leaves
 others. A sweep that would not lower the sum of squared deficits (coupled limits can do that:
 opening one corner closes its neighbours at the same node), or for corners would narrow the
 narrowest, is halved until it does not, so the projections never leave the grid worse than they
-found it. Lengths in m, angles in radians.
+found it. Crowded limits can still push a node across its neighbours: :func:`unfolded` puts back
+the nodes of every cell that a move folds. Lengths in m, angles in radians.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 #: A sweep is halved at most this many times before the projection stops.
 MAX_HALVINGS = 5
 
-__all__ = ["lengthen_short_beams", "open_narrow_corners", "face_corners", "corner_angles"]
+__all__ = ["lengthen_short_beams", "open_narrow_corners", "face_corners", "corner_angles", "CellFans", "unfolded"]
 
 
 def face_corners(faces) -> np.ndarray:
@@ -38,6 +39,72 @@ def corner_angles(x: np.ndarray, corners: np.ndarray) -> np.ndarray:
 def _angles(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """(c,) angles between the rows of u and v (c,3), rad."""
     return np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.einsum("ij,ij->i", u, v))
+
+
+class CellFans:
+    """The corners of every cell ((c,) cell, (c,3) previous node, node, next node in the cell's
+    order): how each cell lies on a surface (its vector area, its turns about the surface's normal),
+    vectorised over the cells."""
+
+    def __init__(self, faces) -> None:
+        loops = [np.asarray(f, dtype=np.int64) for f in faces]
+        self.n_cells = len(loops)
+        self.cell = np.repeat(np.arange(self.n_cells), [len(f) for f in loops])
+        self.corners = face_corners(loops)
+        self.sides = np.bincount(self.cell, minlength=self.n_cells)
+
+    def normals(self, x: np.ndarray) -> np.ndarray:
+        """(cells, 3) Newell normals (twice the vector area, m2) of the cells at x."""
+        out = np.zeros((self.n_cells, 3))
+        np.add.at(out, self.cell, np.cross(x[self.corners[:, 1]], x[self.corners[:, 2]]))
+        return out
+
+    def centroids(self, x: np.ndarray) -> np.ndarray:
+        """(cells, 3) the mean of each cell's nodes at x."""
+        centre = np.zeros((self.n_cells, 3))
+        np.add.at(centre, self.cell, x[self.corners[:, 1]])
+        return centre / np.maximum(self.sides, 1)[:, None]
+
+    def windings(self, x: np.ndarray, up: np.ndarray) -> np.ndarray:
+        """(cells,) how many times each cell's loop at x turns about its ``up`` ((cells, 3) unit),
+        seen from above: 1 for a simple cell facing up (convex or not), -1 for one turned over, 0
+        for a bow-tie."""
+        normal = up[self.cell]
+        a, o, b = (x[self.corners[:, k]] for k in range(3))
+        into, out = o - a, b - o
+        into = into - np.einsum("ij,ij->i", into, normal)[:, None] * normal
+        out = out - np.einsum("ij,ij->i", out, normal)[:, None] * normal
+        turn = np.arctan2(np.einsum("ij,ij->i", np.cross(into, out), normal), np.einsum("ij,ij->i", into, out))
+        return np.rint(np.bincount(self.cell, weights=turn, minlength=self.n_cells) / (2 * np.pi)).astype(int)
+
+
+def unfolded(before: np.ndarray, after: np.ndarray, fans: CellFans, up: np.ndarray) -> np.ndarray:
+    """``after`` with the nodes of every cell that the move from ``before`` folds put back where they
+    were, repeated until the move folds no cell. Seen along ``up`` ((cells, 3), e.g. the surface's
+    normal at each cell, oriented consistently; the grid's side is the one most cells face), a cell
+    is folded where its loop no longer turns once (it crosses itself, or it is turned over), or
+    where its vector area turns against ``up``. A cell folded already before the move (such as a
+    jittered cell, or one turned over across the boundary) is free to unfold."""
+    if not fans.n_cells:
+        return after
+    up = up / np.maximum(np.linalg.norm(up, axis=1), 1e-300)[:, None]
+    facing = np.einsum("ij,ij->i", up, fans.normals(before))
+    if np.count_nonzero(facing < 0) > np.count_nonzero(facing > 0):  # the grid's side of the surface
+        up = -up
+    was_simple = fans.windings(before, up) == 1
+    was_facing = np.einsum("ij,ij->i", fans.normals(before), up) > 0
+    x = np.array(after, dtype=float)
+    for _ in range(fans.n_cells + 1):  # each round puts back at least one node
+        folded = np.flatnonzero((was_simple & (fans.windings(x, up) != 1))
+                                | (was_facing & (np.einsum("ij,ij->i", fans.normals(x), up) <= 0)))
+        if not len(folded):
+            break
+        nodes = np.unique(fans.corners[np.isin(fans.cell, folded), 1])
+        nodes = nodes[np.any(x[nodes] != before[nodes], axis=1)]
+        if not len(nodes):
+            break
+        x[nodes] = before[nodes]
+    return x
 
 
 def _guarded(x: np.ndarray, sweeps: int, deficits: Callable[[np.ndarray], np.ndarray],

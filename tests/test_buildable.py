@@ -416,3 +416,23 @@ def test_a_defect_made_by_a_flip_is_flipped_back_to_hexagons():
     assert np.array_equal(healed.face_degrees, honeycomb.face_degrees)
     assert [sorted(f.tolist()) for f in healed.faces] == [sorted(f.tolist()) for f in honeycomb.faces]
     assert flip_defects(honeycomb)[1] == 0
+
+
+def test_a_flip_is_shortened_or_not_made_where_its_length_would_fold_the_cells():
+    """A beam of a unit honeycomb flipped at 4 m would reach past the far sides of the cells it
+    enters: it is given a shorter share of that length, and no cell crosses itself or turns over
+    (their turns about +z, independently of the flip's own check); at 20 m no share fits and the
+    grid is left as it was."""
+    from engine.projections import CellFans
+
+    grid = _honeycomb()
+    interior = np.flatnonzero(~grid.boundary[grid.edges].any(axis=1))
+    beam = int(interior[len(interior) // 2])
+    result, done, new = flip_beams(grid, np.array([beam]), np.full(len(grid.edges), 4.0))
+    assert done == 1
+    length = float(result.beam_lengths[new[0]])
+    assert 0.3 * 4.0 - 1e-9 <= length < 4.0
+    fans = CellFans(result.faces)
+    assert np.all(fans.windings(result.nodes, np.tile([0.0, 0.0, 1.0], (result.n_faces, 1))) == 1)
+    same, done, _ = flip_beams(grid, np.array([beam]), np.full(len(grid.edges), 20.0))
+    assert done == 0 and same is grid

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from engine.optimize import OptimizeSettings, optimize, regular_targets
-from engine.projections import face_corners, lengthen_short_beams, open_narrow_corners
+from engine.projections import CellFans, face_corners, lengthen_short_beams, open_narrow_corners, unfolded
 from tests.test_optimize import _flat_square, _grid_on
 
 
@@ -113,3 +113,58 @@ def test_the_optimiser_keeps_the_grading_of_a_graded_grid():
     assert spread(before) > 1.6
     assert spread(after) == pytest.approx(spread(before), rel=0.03)
     assert spearmanr(before, after).statistic > 0.98
+
+
+def _folded_cells(grid) -> np.ndarray:
+    """Cells of a grid on the plane z = 0 that, seen from +z, are turned over or cross themselves."""
+    fans = CellFans(grid.faces)
+    return np.flatnonzero(fans.windings(grid.nodes, np.tile([0.0, 0.0, 1.0], (fans.n_cells, 1))) != 1)
+
+
+def test_a_move_that_folds_a_cell_is_put_back_and_one_that_does_not_is_kept():
+    """Four unit squares round a centre node: moving it inside its cells is kept; moving it past
+    its right neighbour makes bow-ties of the two cells on that side, whose moved nodes are put back;
+    the other moves are kept, and a cell folded before the move is free to move on."""
+    x = np.array([[i, j, 0.0] for j in range(3) for i in range(3)])
+    faces = [np.array([0, 1, 4, 3]), np.array([1, 2, 5, 4]), np.array([3, 4, 7, 6]), np.array([4, 5, 8, 7])]
+    fans = CellFans(faces)
+    up = np.tile([0.0, 0.0, -1.0], (4, 1))  # the sign of up does not matter: the side most cells face counts
+    inside = x.copy()
+    inside[4] += [0.4, -0.3, 0.05]
+    assert np.array_equal(unfolded(x, inside, fans, up), inside)
+    across = x.copy()
+    across[4] = [2.5, 1.0, 0.0]  # beyond node 5
+    across[0] += [0.1, 0.1, 0.0]
+    across[8] += [0.2, 0.1, 0.0]
+    assert list(fans.windings(across, -up)) == [1, 0, 1, 0], "the right-hand cells cross themselves"
+    kept = unfolded(x, across, fans, up)
+    assert list(fans.windings(kept, -up)) == [1, 1, 1, 1]
+    back = np.flatnonzero(np.any(kept != across, axis=1))
+    assert list(back) == [4, 8] and np.array_equal(kept[back], x[back])
+    on = across + [0.01, 0.0, 0.0]  # from the folded grid: nothing is held
+    assert np.array_equal(unfolded(across, on, fans, up), on)
+
+
+def test_the_optimiser_folds_no_cell_where_the_limits_ask_more_than_the_cells_can_give():
+    """A graded honeycomb on a plane (cells five times as wide on one side), every beam asked to be
+    1.5 times the median: the small cells cannot give it, and pushing their nodes apart turned 56
+    cells over before the steps were guarded. Now no cell has a part turned over, the cells' areas,
+    unsigned, add up to the square's (no two overlap), and the beams are still lengthened where they
+    can be (the summed shortfall at least halves)."""
+    from engine.optimize import cell_areas
+
+    surface = _flat_square()
+    grid = _grid_on(surface, 0.2, jitter=0.05, seed=3)
+    x = grid.nodes.copy()
+    u = (x[:, 0] + 1) / 2
+    x[:, 0] = -1 + 2 * (u + 2 * u**2) / 3
+    graded = grid.replace_nodes(x)
+    assert len(_folded_cells(graded)) == 0
+    wanted = 1.5 * float(np.median(graded.beam_lengths))
+    out = optimize(graded, surface, None, OptimizeSettings(iterations=30, planar=False),
+                   beam_length_limits=lambda g: np.full(len(g.edges), wanted)).polymesh
+    assert len(_folded_cells(out)) == 0
+    areas = [cell_areas(out.nodes[np.asarray(f)][None])[0] for f in out.faces]
+    assert sum(areas) == pytest.approx(4.0, rel=1e-6)
+    short = np.maximum(wanted - out.beam_lengths, 0).sum()
+    assert short < 0.5 * np.maximum(wanted - graded.beam_lengths, 0).sum(), "the limits still lengthen what they can"
