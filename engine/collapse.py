@@ -181,6 +181,19 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray, *, merge_corners: bool
     return result, collapsed
 
 
+def _cells_around(node_faces: list[list[int]], p: int, q: int) -> tuple[int, int, int, int] | None:
+    """(left, right, below, above): the two cells of the beam p-q and the third cell at p and at q,
+    where both ends have three cells and the beam two; else None."""
+    if len(node_faces[p]) != 3 or len(node_faces[q]) != 3:
+        return None
+    shared = [i for i in node_faces[p] if i in node_faces[q]]
+    if len(shared) != 2:
+        return None
+    below = next(i for i in node_faces[p] if i not in shared)
+    above = next(i for i in node_faces[q] if i not in shared)
+    return shared[0], shared[1], below, above
+
+
 def _vector_area(x: np.ndarray, loop: list[int]) -> np.ndarray:
     """(3,) twice the vector area of the cell ``loop`` at x (Newell), m2."""
     points = x[loop]
@@ -228,16 +241,12 @@ def flip_beams(polymesh: PolyMesh, beams: np.ndarray, lengths: np.ndarray) -> tu
         p, q = map(int, edges[beam])
         if not (free[p] and free[q]) or busy[p] or busy[q]:
             continue
-        if len(node_faces[p]) != 3 or len(node_faces[q]) != 3:
+        around = _cells_around(node_faces, p, q)
+        if around is None:
             continue
-        shared = [i for i in node_faces[p] if i in node_faces[q]]
-        if len(shared) != 2:
-            continue
-        left, right = shared
+        left, right, below, above = around
         if min(len(faces[left]), len(faces[right])) < FLIP_SIDES[0]:
             continue
-        below = next(i for i in node_faces[p] if i not in shared)
-        above = next(i for i in node_faces[q] if i not in shared)
         if below == above or set(faces[below]) & set(faces[above]):
             continue
         if max(len(faces[below]), len(faces[above])) > FLIP_SIDES[1]:
@@ -246,7 +255,6 @@ def flip_beams(polymesh: PolyMesh, beams: np.ndarray, lengths: np.ndarray) -> tu
         p2, q2 = _other(faces[right], p, q), _other(faces[right], q, p)
         if len({p1, q1, p2, q2}) != 4:
             continue
-        around = (left, right, below, above)
         # cells: left loses q, right loses p; below gets q between p and p2, above p between q and q1
         loops = [list(faces[i]) for i in around]
         loops[0].remove(q)
@@ -302,13 +310,10 @@ def flip_defects(polymesh: PolyMesh) -> tuple[PolyMesh, int]:
     inner = ~polymesh.face_boundary
     gains, beams = [], []
     for k, (p, q) in enumerate(edges.tolist()):
-        if len(node_faces[p]) != 3 or len(node_faces[q]) != 3:
+        around = _cells_around(node_faces, p, q)
+        if around is None:
             continue
-        shared = [i for i in node_faces[p] if i in node_faces[q]]
-        if len(shared) != 2:
-            continue
-        ends = [next(i for i in node_faces[p] if i not in shared), next(i for i in node_faces[q] if i not in shared)]
-        cells = shared + ends
+        cells = list(around)
         if not inner[cells].all():
             continue
         before = np.abs(sides[cells] - 6).sum()

@@ -90,7 +90,7 @@ from .local_global import (
 )
 from .mesh import PolyMesh, TriMesh
 from .planarise import PlanariseSettings, planarise
-from .projections import CellFans, face_corners, lengthen_short_beams, open_narrow_corners, unfolded
+from .projections import CellFans, face_corners, folded_cells, lengthen_short_beams, open_narrow_corners, unfolded
 from .symmetry import PARTNER_REACH, mirror_partners, symmetrise_points
 
 log = logging.getLogger(__name__)
@@ -206,7 +206,9 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *,
     regularity (mean over cells of std/mean of edge lengths after un-stretching the cell's own
     anisotropy), closeness_max_rel, closeness_mean_rel (node distance to the surface / bounding-box
     diagonal, with a mesh), shortest_beam_m, mean_beam_length_m, smallest_angle_deg,
-    nonconvex_faces (cells with a reflex corner in their best-fit plane)."""
+    nonconvex_faces (cells with a reflex corner in their best-fit plane); with a surface also
+    folded_cells (cells that, seen along the surface's normal, cross themselves or are turned over,
+    so that they overlap a neighbour: engine.projections.folded_cells)."""
     x = np.asarray(polymesh.nodes, dtype=float)
     lengths = polymesh.beam_lengths
     mean_length = float(lengths.mean()) if len(lengths) else 0.0
@@ -253,6 +255,8 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *,
         distance = surface.closest(x)[1]
         out["closeness_max_rel"] = float(distance.max() / surface.diagonal)
         out["closeness_mean_rel"] = float(distance.mean() / surface.diagonal)
+        fans = CellFans(polymesh.faces)
+        out["folded_cells"] = int(len(folded_cells(x, fans, surface.closest_normals(fans.centroids(x))[1])))
     return out
 
 

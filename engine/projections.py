@@ -21,7 +21,8 @@ import numpy as np
 #: A sweep is halved at most this many times before the projection stops.
 MAX_HALVINGS = 5
 
-__all__ = ["lengthen_short_beams", "open_narrow_corners", "face_corners", "corner_angles", "CellFans", "unfolded"]
+__all__ = ["lengthen_short_beams", "open_narrow_corners", "face_corners", "corner_angles", "CellFans", "folded_cells",
+           "unfolded"]
 
 
 def face_corners(faces) -> np.ndarray:
@@ -78,6 +79,23 @@ class CellFans:
         return np.rint(np.bincount(self.cell, weights=turn, minlength=self.n_cells) / (2 * np.pi)).astype(int)
 
 
+def _grid_side(x: np.ndarray, fans: CellFans, up: np.ndarray) -> np.ndarray:
+    """``up`` ((cells, 3)) as unit vectors turned to the side of the surface that most cells face at x."""
+    up = up / np.maximum(np.linalg.norm(up, axis=1), 1e-300)[:, None]
+    facing = np.einsum("ij,ij->i", up, fans.normals(x))
+    return -up if np.count_nonzero(facing < 0) > np.count_nonzero(facing > 0) else up
+
+
+def folded_cells(x: np.ndarray, fans: CellFans, up: np.ndarray) -> np.ndarray:
+    """Ids of the cells that, seen along ``up`` ((cells, 3), e.g. the surface's normal at each
+    cell; the grid's side is the one most cells face), cross themselves or are turned over at x:
+    where two cells overlap on the surface."""
+    if not fans.n_cells:
+        return np.zeros(0, dtype=np.int64)
+    up = _grid_side(x, fans, up)
+    return np.flatnonzero((fans.windings(x, up) != 1) | (np.einsum("ij,ij->i", fans.normals(x), up) <= 0))
+
+
 def unfolded(before: np.ndarray, after: np.ndarray, fans: CellFans, up: np.ndarray) -> np.ndarray:
     """``after`` with the nodes of every cell that the move from ``before`` folds put back where they
     were, repeated until the move folds no cell. Seen along ``up`` ((cells, 3), e.g. the surface's
@@ -87,10 +105,7 @@ def unfolded(before: np.ndarray, after: np.ndarray, fans: CellFans, up: np.ndarr
     jittered cell, or one turned over across the boundary) is free to unfold."""
     if not fans.n_cells:
         return after
-    up = up / np.maximum(np.linalg.norm(up, axis=1), 1e-300)[:, None]
-    facing = np.einsum("ij,ij->i", up, fans.normals(before))
-    if np.count_nonzero(facing < 0) > np.count_nonzero(facing > 0):  # the grid's side of the surface
-        up = -up
+    up = _grid_side(before, fans, up)
     was_simple = fans.windings(before, up) == 1
     was_facing = np.einsum("ij,ij->i", fans.normals(before), up) > 0
     x = np.array(after, dtype=float)

@@ -168,3 +168,21 @@ def test_the_optimiser_folds_no_cell_where_the_limits_ask_more_than_the_cells_ca
     assert sum(areas) == pytest.approx(4.0, rel=1e-6)
     short = np.maximum(wanted - out.beam_lengths, 0).sum()
     assert short < 0.5 * np.maximum(wanted - graded.beam_lengths, 0).sum(), "the limits still lengthen what they can"
+
+
+def test_the_grids_figures_count_the_cells_that_overlap_a_neighbour():
+    """optimize_quality's folded_cells on the plane: 0 for four squares, 2 when the centre node is
+    pushed past its right neighbour (the two cells on that side cross themselves), and 1 when three
+    of the four are turned over: the grid's side is the one most cells face, so the odd one is."""
+    from engine.mesh import PolyMesh
+    from engine.optimize import optimize_quality
+
+    x = np.array([[i - 1.0, j - 1.0, 0.0] for j in range(3) for i in range(3)])
+    faces = (np.array([0, 1, 4, 3]), np.array([1, 2, 5, 4]), np.array([3, 4, 7, 6]), np.array([4, 5, 8, 7]))
+    surface = _flat_square()
+    assert optimize_quality(PolyMesh(nodes=x, faces=faces), surface)["folded_cells"] == 0
+    pushed = x.copy()
+    pushed[4] = [1.5, 0.0, 0.0]
+    assert optimize_quality(PolyMesh(nodes=pushed, faces=faces), surface)["folded_cells"] == 2
+    turned = (faces[0][::-1].copy(), faces[1][::-1].copy(), faces[2][::-1].copy(), faces[3])
+    assert optimize_quality(PolyMesh(nodes=x, faces=turned), surface)["folded_cells"] == 1

@@ -20,9 +20,11 @@ from engine.collapse import collapse_beams, dissolve_kinks, flip_defects, open_n
 from engine.field import GuidingField
 from engine.findings import Finding
 from engine.grids import LATTICES, GridKind, isotropic_field
+from engine.local_global import ClosestSurfacePoints
 from engine.mesh import PolyMesh, neighbour_lists, node_adjacency
 from engine.optimize import OptimizeResult, OptimizeSettings, grid_quality, optimize
 from engine.parts import joint_id, panel_id
+from engine.projections import CellFans, folded_cells
 from engine.symmetry import symmetrised_grid, symmetry_record
 from fabrication.files import write_text_atomic
 from fabrication.limits import required_beam_lengths_m
@@ -223,6 +225,9 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
     elif compressed_grading(result.quality):
         ctx.report_findings([compressed_finding(result.quality)])
     planes = settings.symmetry_planes
+    folded = folded_cells_on(result.polymesh, surface)
+    if len(folded):
+        ctx.report_findings([folded_finding([int(c) for c in folded])])
     if planes:  # the collapses and removals keep mirror orbits only nearly: nodes symmetrised again
         symmetric = symmetrised_grid(result.polymesh, planes)
         if np.all(np.isfinite(symmetric.nodes)):  # else kept as optimised; the record measures it
@@ -327,6 +332,23 @@ def removed_finding(removed: int, grid: PolyMesh) -> dict:
                             f"collapsed: the grid has {grid.n_faces} cells"),
                    fix="smaller joints ([fabrication.joints] kind, hub_radius, sleeve_length, min_angle) or fewer "
                        "cells ([remesh] n_cells) keep every beam").to_dict()
+
+
+def folded_cells_on(grid: PolyMesh, surface: SurfaceResult) -> np.ndarray:
+    """Ids of the cells of ``grid`` that cross themselves or are turned over on the surface."""
+    fans = CellFans(grid.faces)
+    normals = ClosestSurfacePoints(surface.mesh).closest_normals(fans.centroids(grid.nodes))[1]
+    return folded_cells(grid.nodes, fans, normals)
+
+
+def folded_finding(cells: list[int]) -> dict:
+    """The finding that cells of the optimised grid overlap their neighbours (JSON-ready)."""
+    return Finding(kind="grid_folded", parts=[f"cell {c + 1}" for c in cells], measure=len(cells), limit=0,
+                   unit="cells", stage="optimize",
+                   message=(f"{len(cells)} cells of the optimised grid cross themselves or are turned over on the "
+                            "surface: they overlap their neighbours, and so do their panels and joints"),
+                   fix="fewer cells ([remesh] n_cells), less grading ([field] max_size_ratio), or smaller joints "
+                       "([fabrication.joints]); or send the surface with the report").to_dict()
 
 
 def grading_finding(share: float, quality: dict) -> dict:
