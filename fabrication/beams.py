@@ -95,10 +95,13 @@ def write_cut_list(table: pd.DataFrame, folder: Path) -> tuple[Path, Path]:
 
 
 def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, outer_size_mm: float | np.ndarray,
-                     wall_mm: float | np.ndarray | None = None) -> Path:
+                     wall_mm: float | np.ndarray | None = None, profile_per_tube: bool = True) -> Path:
     """Every beam as a named solid of its cut length, placed between its joints (mm): a tube of
     outer size and ``wall_mm`` (an annulus extruded, no boolean), or a rod where no wall is given;
-    a beam of zero cut length (shorter than its joints take, reported by the caller) has no solid."""
+    a beam of zero cut length (shorter than its joints take, reported by the caller) has no solid.
+    ``profile_per_tube`` False extrudes every tube from one shared profile face (the scheme before,
+    kept for benchmarks/fabrication_speed.py: the same file, built in time growing as the square
+    of the tubes)."""
     from build123d import Align, Circle, Compound, Cylinder, Location, Plane, Solid, Vector, export_step
 
     e = polymesh.edges
@@ -120,7 +123,8 @@ def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, out
                 annuli[key] = (Circle(0.5 * size) - Circle(0.5 * size - walls[k])).faces()[0]
             # a copy of the profile per tube: prisms of one shared face made the build and the
             # STEP export grow as the square of the tubes (4500 tubes: 75 s, with copies 12 s)
-            solid = Solid.extrude(copy.deepcopy(annuli[key]), Vector(0, 0, float(row.cut_length_mm)))
+            profile = copy.deepcopy(annuli[key]) if profile_per_tube else annuli[key]
+            solid = Solid.extrude(profile, Vector(0, 0, float(row.cut_length_mm)))
         solid = solid.moved(Location(Plane(origin=tuple(map(float, origin)), z_dir=tuple(map(float, direction)))))
         solid.label = row.id
         solids.append(solid)

@@ -165,12 +165,14 @@ class _Sheet:
             return None
         return shapely.bounds(shapely.get_parts(self.free))
 
-    def add(self, hull: np.ndarray, settings: SheetSettings) -> None:
-        """Put the part of convex outline ``hull`` (mm, sheet frame) on the sheet."""
+    def add(self, hull: np.ndarray, settings: SheetSettings, *, envelope: bool = False) -> None:
+        """Put the part of convex outline ``hull`` (mm, sheet frame) on the sheet; with ``envelope``
+        (the tight rule reads it) the parts' convex envelope grows with it."""
         self.hulls.append(hull)
-        together = shapely.convex_hull(shapely.multipoints(np.concatenate([self.envelope, hull])))
-        self.envelope = shapely.get_coordinates(together)[:-1] if together.geom_type == "Polygon" \
-            else np.concatenate([self.envelope, hull])
+        if envelope:
+            together = shapely.convex_hull(shapely.multipoints(np.concatenate([self.envelope, hull])))
+            self.envelope = shapely.get_coordinates(together)[:-1] if together.geom_type == "Polygon" \
+                else np.concatenate([self.envelope, hull])
         self.bounds.append(np.concatenate([hull.min(axis=0), hull.max(axis=0)]))
         if self.free is not None:
             grown = shapely.buffer(shapely.Polygon(hull), settings.spacing_mm + self.free_radius, quad_segs=_QUAD_SEGS)
@@ -325,7 +327,7 @@ def _place(sheet: _Sheet, k: int, i: int, options: list[_Orientation], settings:
     if best is None:
         return False
     _, o, (x, y) = best
-    sheet.add(o.hull + (x, y), settings)
+    sheet.add(o.hull + (x, y), settings, envelope=tight)
     dx, dy = o.shift + (x, y)
     placements[i] = Placement(panel=int(i), sheet=k, angle_deg=float(o.angle), dx=float(dx), dy=float(dy))
     return True
