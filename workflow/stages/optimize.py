@@ -267,7 +267,8 @@ def without_unbuildable_beams(result: OptimizeResult, project: Project, surface:
     end nodes, and one beam of each pair closer than the joint's smallest angle removed
     (engine.collapse: remove_short_beams, collapse_beams, open_narrow_joints), a corner of the outline
     with no inner beam merged into the next corner where the two lie closer than that, in rounds while that
-    changes the grid; its "after" figures are measured again. ``removed`` counts the beams removed
+    changes the grid (LAST_RESORT_ROUNDS at most, then the short beams removed once more); its "after"
+    figures are measured again. ``removed`` counts the beams removed
     and collapsed. No node moves but those of the collapses, so nothing is optimised again."""
     limits = build_limits_of(project)
     grid, removed, corners = result.polymesh, 0, 0
@@ -287,6 +288,11 @@ def without_unbuildable_beams(result: OptimizeResult, project: Project, surface:
         removed += gone + merged + straightened + more + opened
         if not (merged or opened or straightened or more):
             break
+    else:
+        # a straightened kink can leave a beam short at its ends' narrower angles: removals (which
+        # only widen angles) have the last word
+        grid, gone, _ = remove_short_beams(grid, lambda g: required_beam_lengths_m(g, limits))
+        removed += gone
     if not removed:
         return result, 0
     after = grid_quality(grid, surface.mesh, field)
