@@ -17,6 +17,7 @@ linear buckling analysis, so no peer prints buckling factors.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import resource
 import sys
 import time
@@ -307,6 +308,9 @@ def main() -> int:
     parser.add_argument("--no-peers", action="store_true")
     parser.add_argument("--full-newton", action="store_true",
                         help="also follow the path with a factor at every corrector iteration, for comparison")
+    parser.add_argument("--limit-tolerances", metavar="T,...",
+                        help="also follow the path with these limit tolerances (0: the first maximum always "
+                             "refined), for comparison with the default")
     args = parser.parse_args()
     frame, supports, loads = model(args.nodes, args.elements_per_beam)
     n_all = len(frame.nodes) + len(frame.beams) * (args.elements_per_beam - 1)
@@ -328,13 +332,17 @@ def main() -> int:
     control = int(np.argmax(np.abs(linear.displacements[:, 2])))
     # the path with the corrector reusing its factor (the default), then with a factor at every
     # iteration (full Newton, the scheme before 2026-12-03) as the reference in the same run
-    schemes = [("non-linear path", True)] + ([("  full Newton", False)] if args.full_newton else [])
-    for label, reuse in schemes if args.steps > 0 else []:
+    default = PathSettings(max_load_factor=1e9, max_steps=args.steps)
+    schemes = [("non-linear path", default)]
+    if args.full_newton:
+        schemes.append(("  full Newton", dataclasses.replace(default, reuse_factor=False)))
+    for tolerance in (float(t) for t in (args.limit_tolerances or "").split(",") if t):
+        schemes.append((f"  limit tol. {tolerance:g}", dataclasses.replace(default, limit_tolerance=tolerance)))
+    for label, settings in schemes if args.steps > 0 else []:
         start = time.perf_counter()
-        run = frame_module.nonlinear_static(frame, supports, loads, control=(control, 2), settings=PathSettings(
-            max_load_factor=1e9, max_steps=args.steps, reuse_factor=reuse))
+        run = frame_module.nonlinear_static(frame, supports, loads, control=(control, 2), settings=settings)
         t_nonlinear = time.perf_counter() - start
-        limit = None if run.limit_load_factor is None else round(run.limit_load_factor, 4)
+        limit = None if run.limit_load_factor is None else round(run.limit_load_factor, 6)
         negative = np.flatnonzero(run.negative_pivots > 0)
         pivots = (f"first negative pivot at load factor {run.path[negative[0], 0]:.3f}" if len(negative)
                   else "no negative pivot")

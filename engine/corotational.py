@@ -227,13 +227,37 @@ class PathSettings:
     iterates on the last factored tangent while each iteration at least halves the residual
     (modified Newton, refactored where it does not), instead of factoring at every iteration (full
     Newton, False); both converge to the same equilibria, the first with a fraction of the
-    factorisations."""
+    factorisations. ``limit_tolerance``: a step over the first maximum is not redone shorter where
+    the parabola through the last points puts the peak within this share of the largest load
+    factor found (0: always redone, up to 3 times)."""
 
     max_load_factor: float = 10.0
     max_steps: int = 80
     tolerance: float = 1e-5
     steps_past_limit: int = 3
     reuse_factor: bool = True
+    limit_tolerance: float = 2e-4
+
+
+def _peak_excess(before: float, at: float, *, back: float, after: float | None = None, ahead: float = 0.0,
+                 slope: float | None = None) -> float:
+    """How far the load factor's peak rises above ``at`` (the largest found), by the parabola in the
+    arc length through ``before`` (``back`` behind) and ``at``, and either ``after`` (``ahead``
+    beyond) or the ``slope`` at ``at``; inf where the points do not bracket a maximum."""
+    if back <= 0:
+        return np.inf
+    if after is not None:
+        if ahead <= 0:
+            return np.inf
+        curvature = (back * (after - at) + ahead * (before - at)) / (back * ahead * (back + ahead))
+        slope = (after - at - curvature * ahead**2) / ahead
+    elif slope is not None:
+        curvature = (before - at + slope * back) / back**2
+    else:
+        return np.inf
+    if curvature >= 0:
+        return np.inf
+    return float(-slope**2 / (4 * curvature))
 
 
 def nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *, control: tuple[int, int],
@@ -345,6 +369,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     pivots = [0]
     factors = [0.0]
     iterations = [0]
+    arcs = [0.0]                      # the arc of the step to each point of the path
     refinements, arc_cap = 0, np.inf      # steps redone shorter near a critical point (at most 3)
     previous: np.ndarray | None = None
     limit = None
@@ -376,7 +401,9 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             direction = -1.0 if np.dot(previous[free], du_f[free]) < 0 else 1.0
         else:
             direction = -1.0 if negatives > 0 else 1.0
-        if saved is not None and limit is None and direction < 0 < lam and lam > saved[2] and refinements < 3:
+        ahead_slope = -1 / max(float(np.linalg.norm(du_f[free])), 1e-300)  # d(load factor)/d(arc) past the top
+        if saved is not None and limit is None and direction < 0 < lam and lam > saved[2] and refinements < 3 \
+                and _peak_excess(saved[2], lam, back=arcs[-1], slope=ahead_slope) > settings.limit_tolerance * lam:
             # the last step went over a maximum of the load factor: redo it shorter, to land
             # closer to the peak (each time 0.3 of the arc, held until the limit)
             refinements += 1
@@ -384,7 +411,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             arc *= 0.3
             arc_cap = arc
             saved = None
-            for history in (path, monitored, pivots, factors, iterations):
+            for history in (path, monitored, pivots, factors, iterations, arcs):
                 history.pop()
             continue
         accepted = False
@@ -466,8 +493,11 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             if state is not None:
                 x_try, t_try = state
                 lam_try, landed = max_load_factor, True
-        if limit is None and lam_try < lam and lam > 0 and direction > 0 and refinements < 3:
-            # the step went over a maximum of the load factor: redo it shorter, to land closer
+        if limit is None and lam_try < lam and lam > 0 and direction > 0 and refinements < 3 \
+                and (_peak_excess(factors[-2], lam, back=arcs[-1], after=lam_try, ahead=arc)
+                     > settings.limit_tolerance * lam):
+            # the step went over a maximum of the load factor, and the peak may lie above the
+            # largest load factor found by more than the tolerance: redo it shorter, to land closer
             # to the peak (each time 0.3 of the arc; the arc is then held until the limit)
             refinements += 1
             arc *= 0.3
@@ -487,6 +517,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
         pivots.append(negatives)                             # provisional: set at the next step
         factors.append(lam)
         iterations.append(_iteration)
+        arcs.append(arc)
         # automatic step size: aim at about 5 corrector iterations per step, counted from the
         # corrector's restart where it had one (more on a reused factor, which converges linearly,
         # would let the arcs grow until full Newton fails from the prediction near a critical point)
