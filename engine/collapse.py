@@ -296,12 +296,13 @@ def flip_beams(polymesh: PolyMesh, beams: np.ndarray, lengths: np.ndarray) -> tu
 
 
 def flip_defects(polymesh: PolyMesh) -> tuple[PolyMesh, int]:
-    """Flip (T1, :func:`flip_beams`, each beam kept at its length) the interior beams whose flip
-    brings the sides of their four interior cells closer to six: the beam's two cells lose a side
-    and the cells at its ends gain one, so a beam between two heptagons with a pentagon at each end
-    makes four hexagons. A flip is made where it takes at least 2 off the sum of |sides - 6| over
-    those cells, the largest gains first. The cells keep their count. Returns the grid and the
-    number flipped."""
+    """Flip (T1, :func:`flip_beams`, each beam kept at its length) the beams between interior nodes
+    whose flip brings the sides of the interior cells among their four closer to six: the beam's
+    two cells lose a side and the cells at its ends gain one, so a beam between two heptagons with a
+    pentagon at each end makes four hexagons, and a heptagon next to the boundary passes its extra
+    side to a boundary cell. A flip is made where it takes at least 2 off the sum of |sides - 6|
+    over those interior cells, the largest gains first. The cells keep their count. Returns the grid
+    and the number flipped."""
     edges = polymesh.edges
     if not len(edges):
         return polymesh, 0
@@ -314,10 +315,9 @@ def flip_defects(polymesh: PolyMesh) -> tuple[PolyMesh, int]:
         if around is None:
             continue
         cells = list(around)
-        if not inner[cells].all():
-            continue
-        before = np.abs(sides[cells] - 6).sum()
-        after = np.abs(sides[cells] + np.array([-1, -1, 1, 1]) - 6).sum()
+        counted = inner[cells]  # a boundary cell is cut by the outline: its sides do not count
+        before = np.abs(sides[cells] - 6)[counted].sum()
+        after = np.abs(sides[cells] + np.array([-1, -1, 1, 1]) - 6)[counted].sum()
         if before - after >= 2:
             gains.append(before - after)
             beams.append(k)

@@ -436,3 +436,26 @@ def test_a_flip_is_shortened_or_not_made_where_its_length_would_fold_the_cells()
     assert np.all(fans.windings(result.nodes, np.tile([0.0, 0.0, 1.0], (result.n_faces, 1))) == 1)
     same, done, _ = flip_beams(grid, np.array([beam]), np.full(len(grid.edges), 20.0))
     assert done == 0 and same is grid
+
+
+def test_a_defect_beside_the_boundary_is_flipped_back_counting_interior_cells_only():
+    """Issue 13: the same 5-7 defect made at a beam one of whose four cells is a boundary cell:
+    only the interior cells' sides count, and they gain 3, so flip_defects flips it back to the
+    honeycomb's cells (it had looked for four interior cells, and left it)."""
+    from engine.collapse import _cells_around, _cells_at_nodes, flip_beams, flip_defects
+    from tests.test_panels import hex_polymesh
+
+    honeycomb = hex_polymesh(rows=6, cols=6)
+    _, node_faces = _cells_at_nodes(honeycomb)
+    boundary_cell = honeycomb.face_boundary
+    candidates = []
+    for k, (p, q) in enumerate(honeycomb.edges.tolist()):
+        around = _cells_around(node_faces, p, q)
+        if around is not None and not honeycomb.boundary[[p, q]].any() and boundary_cell[list(around)].sum() == 1:
+            candidates.append(k)
+    assert candidates, "the patch has a beam between interior nodes with one boundary cell round it"
+    defect, count, _ = flip_beams(honeycomb, np.array(candidates[:1]), honeycomb.beam_lengths)
+    assert count == 1
+    healed, flipped = flip_defects(defect)
+    assert flipped == 1
+    assert [sorted(f.tolist()) for f in healed.faces] == [sorted(f.tolist()) for f in honeycomb.faces]
