@@ -431,7 +431,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="generated roofs with settings drawn from their seed (material, section, joints, D, A, "
                              "loads, panels, sheets, supports) instead of the quick-start ones")
     parser.add_argument("--only-templates", action="store_true", help="the templates only")
-    parser.add_argument("--match", help="only roofs whose name contains one of these comma-separated strings")
+    parser.add_argument("--match", help="only roofs whose name contains one of these comma-separated strings "
+                                           "(=NAME: that name exactly)")
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "any_roof",
                         help="output folder (default out/any_roof)")
     parser.add_argument("--jobs", type=int, default=1, help="runs at a time (default 1)")
@@ -454,7 +455,7 @@ def main(argv: list[str] | None = None) -> int:
         cases += _generated_cases(args.surfaces, out, args.first_seed, args.vary_settings)
     if args.match:
         wanted = [w for w in args.match.split(",") if w]
-        cases = [c for c in cases if any(w in c.name for w in wanted)]
+        cases = [c for c in cases if any(c.name == w[1:] if w.startswith("=") else w in c.name for w in wanted)]
     order = {c.name: i for i, c in enumerate(cases)}
     # the cheap sweep first: every roof at the smallest size, then the next size
     plan = [(case, cells) for cells in sorted(args.cells) for case in cases]
