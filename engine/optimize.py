@@ -353,7 +353,7 @@ class _Problem:
     areas: dict[int, np.ndarray | None]
     grading: dict
     corners: np.ndarray
-    fans: CellFans  # the cells' parts, whose folds the limits' projections may not make
+    fans: CellFans  # the cells, which no step of the iterations may fold
     min_corner: float  # rad
     beam_length_limits: Callable[[PolyMesh], np.ndarray] | None
     system: _GlobalStep
