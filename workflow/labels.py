@@ -57,6 +57,7 @@ LABELS: dict[str, tuple[str, str, float]] = {
     "closeness_mean_rel": ("mean distance to the surface / diagonal", "%", 100.0),
     "regularity": ("irregularity (spread of the sides, un-stretched)", "%", 100.0),
     "nonconvex_faces": ("non-convex cells", "", 1.0),
+    "folded_cells": ("cells folded over (overlapping a neighbour)", "", 1.0),
     # analysis
     "uls_combination": ("ULS combination", "", 1.0),
     "sls_combination": ("SLS combination", "", 1.0),
