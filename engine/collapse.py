@@ -14,7 +14,8 @@ buildable length). A collapse is made only where the result stays a valid polygo
   beams (MAX_BOUNDARY_VALENCE on the boundary).
 
 The merged node keeps the place of its more constrained end (corner, then support, then boundary),
-else takes the midpoint; it keeps the flags of both ends. Collapses of one pass touch disjoint
+else takes the midpoint, or where that would fold a cell round it the place of either end; a
+collapse that folds a cell at each is not made. It keeps the flags of both ends. Collapses of one pass touch disjoint
 neighbourhoods; passes repeat until no short beam can be collapsed.
 
 A collapse makes a node of four or five beams, and such a joint has narrower angles (and longer
@@ -150,8 +151,16 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray, *, merge_corners: bool
         keep, drop = (a, b) if rank[a] >= rank[b] else (b, a)
         if corner_pair:  # the corner with inner beams stays; the bare one goes
             keep, drop = (b, a) if len(neighbours[a]) == 2 else (a, b)
-        elif rank[a] == rank[b]:
-            x[keep] = 0.5 * (x[a] + x[b])
+            places = [x[keep]]
+        elif rank[a] == rank[b]:  # the midpoint, else where either end is, whichever folds no cell
+            places = [0.5 * (x[a] + x[b]), x[keep], x[drop]]
+        else:
+            places = [x[keep]]
+        place = _unfolding_place(x, [faces[i] for i in set(node_faces[a]) | set(node_faces[b]) if i not in triangles],
+                                 target, keep, drop, places)
+        if place is None:
+            continue
+        x[keep] = place
         target[drop] = keep
         removed_faces.update(triangles)
         for i in node_faces[drop]:
@@ -179,6 +188,26 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray, *, merge_corners: bool
     result = PolyMesh(nodes=x[used], faces=tuple(np.asarray(number[f], dtype=np.int64) for f in new_faces),
                       **{name: mask[used] for name, mask in flags.items()})
     return result, collapsed
+
+
+def _unfolding_place(x: np.ndarray, cells: list[list[int]], target: np.ndarray, keep: int, drop: int,
+                     places: list[np.ndarray]) -> np.ndarray | None:
+    """The first of ``places`` for the node that ``keep`` and ``drop`` merge into where the ``cells``
+    round them (node loops, earlier merges by ``target``) fold nowhere they did not before (judged
+    along their summed vector area; engine.collapse has no surface), or None."""
+    loops = [[int(target[v]) for v in loop] for loop in cells]
+    up = np.sum([_vector_area(x, loop) for loop in loops], axis=0)
+    folded_before = sum(_folded_parts(x, loop, up) for loop in loops)
+    merged = []
+    for loop in loops:
+        loop = [keep if v == drop else v for v in loop]
+        merged.append([v for j, v in enumerate(loop) if v != loop[j - 1]])
+    trial = x.copy()
+    for place in places:
+        trial[keep] = place
+        if sum(_folded_parts(trial, loop, up) for loop in merged if len(loop) >= 3) <= folded_before:
+            return np.array(place, dtype=float)
+    return None
 
 
 def _cells_around(node_faces: list[list[int]], p: int, q: int) -> tuple[int, int, int, int] | None:

@@ -459,3 +459,33 @@ def test_a_defect_beside_the_boundary_is_flipped_back_counting_interior_cells_on
     healed, flipped = flip_defects(defect)
     assert flipped == 1
     assert [sorted(f.tolist()) for f in healed.faces] == [sorted(f.tolist()) for f in honeycomb.faces]
+
+
+def test_a_collapse_moves_its_node_where_no_cell_folds():
+    """Two boundary nodes on an arc collapse; a thin triangle beside them has its inner node just
+    under the chord to the next boundary node. At the midpoint of the collapsed beam (inside the
+    arc) that triangle turns over, and so it does at the first end's place; at the second end's
+    place it does not, so the merged node goes there. Judged independently by each cell's turns
+    about +z."""
+    from engine.projections import CellFans
+
+    arc = [np.radians(100), np.radians(90), np.radians(60)]
+    nodes = np.array([[np.cos(t), np.sin(t), 0.0] for t in arc] + [[0.25, 0.925, 0.0], [0.0, 0.5, 0.0]])
+    faces = (np.array([0, 4, 3, 1]), np.array([3, 2, 1]), np.array([4, 2, 3]))
+    boundary = np.array([True, True, True, False, True])
+    grid = PolyMesh(nodes=nodes, faces=faces, boundary=boundary)
+
+    def turns(g: PolyMesh) -> list[int]:
+        fans = CellFans(g.faces)
+        return fans.windings(g.nodes, np.tile([0.0, 0.0, 1.0], (g.n_faces, 1))).tolist()
+
+    assert turns(grid) == [1, 1, 1]
+    beam = int(np.flatnonzero((np.sort(grid.edges, axis=1) == [0, 1]).all(axis=1))[0])
+    merged, count = collapse_beams(grid, np.array([beam]))
+    assert count == 1 and merged.n_faces == 3
+    assert turns(merged) == [1, 1, 1]
+    assert np.any(np.all(np.isclose(merged.nodes, nodes[1]), axis=1)), "the merged node is where the second end was"
+    at_midpoint = nodes.copy()
+    at_midpoint[0] = 0.5 * (nodes[0] + nodes[1])  # node 0 standing for the merged node, node 1 unused
+    assert -1 in turns(PolyMesh(nodes=at_midpoint, faces=(np.array([0, 4, 3]), np.array([3, 2, 0]),
+                                                          np.array([4, 2, 3])))), "the midpoint folds"
