@@ -351,8 +351,8 @@ def folded_finding(cells: list[int]) -> dict:
     """The finding that cells of the optimised grid overlap their neighbours (JSON-ready)."""
     return Finding(kind="grid_folded", parts=[f"cell {c + 1}" for c in cells], measure=len(cells), limit=0,
                    unit="cells", stage="optimize",
-                   message=(f"{len(cells)} cells of the optimised grid cross themselves or are turned over on the "
-                            "surface: they overlap their neighbours, and so do their panels and joints"),
+                   message=(f"folded cells in the optimised grid: {len(cells)} (crossing themselves or turned over on "
+                            "the surface); they overlap their neighbours, and so do their panels and joints"),
                    fix="fewer cells ([remesh] n_cells), less grading ([field] max_size_ratio), or smaller joints "
                        "([fabrication.joints]); or send the surface with the report").to_dict()
 
