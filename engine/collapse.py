@@ -38,6 +38,7 @@ from typing import Callable
 import numpy as np
 
 from .mesh import PolyMesh, neighbour_lists
+from .projections import CellFans
 
 __all__ = ["CollapseReport", "collapse_beams", "flip_beams", "flip_defects", "collapse_short_beams", "remove_beams",
            "remove_short_beams", "open_narrow_joints", "dissolve_kinks", "MAX_VALENCE"]
@@ -156,11 +157,16 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray, *, merge_corners: bool
             places = [0.5 * (x[a] + x[b]), x[keep], x[drop]]
         else:
             places = [x[keep]]
-        place = _unfolding_place(x, [faces[i] for i in set(node_faces[a]) | set(node_faces[b]) if i not in triangles],
-                                 target, keep, drop, places)
-        if place is None:
+        around = [faces[i] for i in set(node_faces[a]) | set(node_faces[b]) if i not in triangles]
+        before = [[int(target[v]) for v in loop] for loop in around]
+        after = []
+        for loop in before:
+            loop = [keep if v == drop else v for v in loop]
+            after.append([v for j, v in enumerate(loop) if v != loop[j - 1]])
+        chosen = _first_unfolding(x, before, after, [{keep: np.array(p, dtype=float)} for p in places])
+        if chosen is None:
             continue
-        x[keep] = place
+        x[keep] = chosen[keep]
         target[drop] = keep
         removed_faces.update(triangles)
         for i in node_faces[drop]:
@@ -190,23 +196,30 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray, *, merge_corners: bool
     return result, collapsed
 
 
-def _unfolding_place(x: np.ndarray, cells: list[list[int]], target: np.ndarray, keep: int, drop: int,
-                     places: list[np.ndarray]) -> np.ndarray | None:
-    """The first of ``places`` for the node that ``keep`` and ``drop`` merge into where the ``cells``
-    round them (node loops, earlier merges by ``target``) fold nowhere they did not before (judged
-    along their summed vector area; engine.collapse has no surface), or None."""
-    loops = [[int(target[v]) for v in loop] for loop in cells]
-    up = np.sum([_vector_area(x, loop) for loop in loops], axis=0)
-    folded_before = sum(_folded_parts(x, loop, up) for loop in loops)
-    merged = []
-    for loop in loops:
-        loop = [keep if v == drop else v for v in loop]
-        merged.append([v for j, v in enumerate(loop) if v != loop[j - 1]])
+def _folded_count(x: np.ndarray, loops: list[list[int]], up: np.ndarray) -> int:
+    """How many of the cells ``loops`` (node loops of 3 nodes or more) are folded at x seen along
+    ``up`` ((3,) unit): they do not turn once about it, or their vector area turns against it
+    (engine.projections.CellFans, the optimiser's own test)."""
+    fans = CellFans(loops)
+    along = np.broadcast_to(up, (fans.n_cells, 3))
+    return int(np.count_nonzero((fans.windings(x, along) != 1) | (fans.normals(x) @ up <= 0)))
+
+
+def _first_unfolding(x: np.ndarray, before: list[list[int]], after: list[list[int]],
+                     candidates: list[dict[int, np.ndarray]]) -> dict[int, np.ndarray] | None:
+    """The first of ``candidates`` (new places of some nodes) at which the cells ``after`` (node
+    loops) fold no more than the cells ``before`` did at x, or None. The cells are seen along their
+    summed vector area at x (engine.collapse knows no surface)."""
+    before, after = ([loop for loop in loops if len(loop) >= 3] for loops in (before, after))
+    up = CellFans(before).normals(x).sum(axis=0)
+    up /= max(float(np.linalg.norm(up)), 1e-300)
+    folded_before = _folded_count(x, before, up)
     trial = x.copy()
-    for place in places:
-        trial[keep] = place
-        if sum(_folded_parts(trial, loop, up) for loop in merged if len(loop) >= 3) <= folded_before:
-            return np.array(place, dtype=float)
+    for places in candidates:
+        for node, place in places.items():
+            trial[node] = place
+        if _folded_count(trial, after, up) <= folded_before:
+            return places
     return None
 
 
@@ -221,20 +234,6 @@ def _cells_around(node_faces: list[list[int]], p: int, q: int) -> tuple[int, int
     below = next(i for i in node_faces[p] if i not in shared)
     above = next(i for i in node_faces[q] if i not in shared)
     return shared[0], shared[1], below, above
-
-
-def _vector_area(x: np.ndarray, loop: list[int]) -> np.ndarray:
-    """(3,) twice the vector area of the cell ``loop`` at x (Newell), m2."""
-    points = x[loop]
-    return np.cross(points, np.roll(points, -1, axis=0)).sum(axis=0)
-
-
-def _folded_parts(x: np.ndarray, loop: list[int], up: np.ndarray) -> int:
-    """How many of the triangles from the cell's centroid to its beams face against ``up`` at x."""
-    points = x[loop]
-    centre = points.mean(axis=0)
-    u, v = points - centre, np.roll(points, -1, axis=0) - centre
-    return int(np.count_nonzero(np.cross(u, v) @ up <= 0))
 
 
 def _other(loop: list[int], node: int, not_this: int) -> int:
@@ -296,17 +295,12 @@ def flip_beams(polymesh: PolyMesh, beams: np.ndarray, lengths: np.ndarray) -> tu
         axis /= max(np.linalg.norm(axis), 1e-300)
         across -= (across @ axis) * axis  # in the plane of the two cells, normal to the old beam
         across /= max(np.linalg.norm(across), 1e-300)
-        up = np.sum([_vector_area(x, faces[i]) for i in around], axis=0)
-        folded_before = sum(_folded_parts(x, faces[i], up) for i in around)
-        trial = x.copy()
-        for share in FLIP_SHARES:  # as long as the four cells allow without folding
-            half = 0.5 * share * float(lengths[beam])
-            trial[p], trial[q] = centre - half * across, centre + half * across
-            if sum(_folded_parts(trial, loop, up) for loop in loops) <= folded_before:
-                break
-        else:
+        halves = [0.5 * share * float(lengths[beam]) for share in FLIP_SHARES]
+        chosen = _first_unfolding(x, [faces[i] for i in around], loops,
+                                  [{p: centre - half * across, q: centre + half * across} for half in halves])
+        if chosen is None:  # every share folds the four cells
             continue
-        x[p], x[q] = trial[p], trial[q]
+        x[p], x[q] = chosen[p], chosen[q]
         for i, loop in zip(around, loops):
             faces[i] = loop
         for v in (p, q):
