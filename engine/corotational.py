@@ -401,9 +401,10 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             direction = -1.0 if np.dot(previous[free], du_f[free]) < 0 else 1.0
         else:
             direction = -1.0 if negatives > 0 else 1.0
-        ahead_slope = -1 / max(float(np.linalg.norm(du_f[free])), 1e-300)  # d(load factor)/d(arc) past the top
+        # (the slope: d(load factor)/d(arc) past the top, read only once a maximum is passed)
         if saved is not None and limit is None and direction < 0 < lam and lam > saved[2] and refinements < 3 \
-                and _peak_excess(saved[2], lam, back=arcs[-1], slope=ahead_slope) > settings.limit_tolerance * lam:
+                and _peak_excess(saved[2], lam, back=arcs[-1], slope=-1 / max(float(np.linalg.norm(du_f[free])), 1e-300)
+                                 ) > settings.limit_tolerance * lam:
             # the last step went over a maximum of the load factor: redo it shorter, to land
             # closer to the peak (each time 0.3 of the arc, held until the limit)
             refinements += 1
