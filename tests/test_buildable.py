@@ -489,3 +489,50 @@ def test_a_collapse_moves_its_node_where_no_cell_folds():
     at_midpoint[0] = 0.5 * (nodes[0] + nodes[1])  # node 0 standing for the merged node, node 1 unused
     assert -1 in turns(PolyMesh(nodes=at_midpoint, faces=(np.array([0, 4, 3]), np.array([3, 2, 0]),
                                                           np.array([4, 2, 3])))), "the midpoint folds"
+
+
+def test_when_the_last_resorts_rounds_run_out_the_short_beams_are_removed_once_more(monkeypatch):
+    """The last resort's rounds straighten kinks, which can leave a beam short at its ends' narrower
+    angles; when its rounds run out, the short beams are removed once more, so none that a removal
+    can take is left short of what its joints need (here: no rounds at all)."""
+    from importlib import resources
+    from types import SimpleNamespace
+
+    from engine.field import GuidingField
+    from engine.mesh import TriMesh
+    from engine.optimize import OptimizeResult
+    from engine.parametric import grid_triangles
+    from workflow.config import load_project
+    from workflow.stages import optimize as stage
+    from workflow.stages.build_limits import build_limits_of
+
+    project = load_project(resources.files("templates") / "mockup.toml")
+    limits = build_limits_of(project)
+    side = 2 * limits.shortest_beam_mm() / 1000
+    grid = _honeycomb(5, 5, side=side)
+    x = grid.nodes.copy()
+    interior = np.flatnonzero(~grid.boundary[grid.edges].any(axis=1))
+    moved: set[int] = set()
+    for beam in interior[::5]:
+        a, b = map(int, grid.edges[beam])
+        if {a, b} & moved:
+            continue
+        x[b] = x[a] + 0.2 * (x[b] - x[a])  # 0.4 of the shortest buildable beam
+        moved |= {a, b}
+    grid = grid.replace_nodes(x)
+    short_before = int(np.sum(grid.beam_lengths < required_beam_lengths_m(grid, limits)))
+    assert short_before >= 3
+    low, high = grid.nodes.min(axis=0) - side, grid.nodes.max(axis=0) + side
+    u, v = np.meshgrid(np.linspace(low[0], high[0], 11), np.linspace(low[1], high[1], 11), indexing="ij")
+    plane = TriMesh(vertices=np.c_[u.ravel(), v.ravel(), np.zeros(u.size)], faces=grid_triangles(10, 10))
+    n = plane.n_vertices
+    field = GuidingField(size=np.ones(n), anisotropy=np.ones(n), direction=np.tile([1.0, 0, 0], (n, 1)),
+                         normals=np.tile([0, 0, 1.0], (n, 1)))
+    monkeypatch.setattr(stage, "LAST_RESORT_ROUNDS", 0)
+    result, removed = stage.without_unbuildable_beams(OptimizeResult(polymesh=grid, quality={}), project,
+                                                      SimpleNamespace(mesh=plane), field)
+    after = result.polymesh
+    _check_valid(after)
+    assert removed >= short_before
+    assert np.all(after.beam_lengths >= required_beam_lengths_m(after, limits) - 1e-9)
+    assert np.allclose(_area(after), _area(grid)), "a removal merges two cells and moves no node"
