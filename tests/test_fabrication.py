@@ -330,6 +330,29 @@ def test_a_node_with_collinear_beams_is_built_and_its_chips_reported(tmp_path):
     assert report["max_axis_error_deg"] < 1e-6
 
 
+def test_flat_sleeves_fused_at_once_are_all_there():
+    """A node of an unseen roof (seed 72, 30 mm rods, sockets): three beams in the hub's mid-plane.
+    OCCT's one fuse of the three sleeves into the hub kept one of them; the joint was reported
+    with its bore axis 35 degrees off. Each sleeve now reaches its set-back plus its sleeve."""
+    from fabrication import joints
+
+    directions = np.array([[0.8387, -0.5431, 0.0410], [0.9157, 0.3909, 0.0936], [-0.9959, -0.0362, -0.0826]])
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    axis = np.array([-0.0813, -0.0492, 0.9955])
+    axis /= np.linalg.norm(axis)
+    settings = joints.JointSettings()
+    geometry = joints.JointGeometry(node=53, position_mm=np.zeros(3), directions=directions, axis=axis,
+                                    beam_size_mm=30.0)
+    solid, report = joints.build_joint(geometry, settings)
+    reach = report["setback_mm"] + joints.joint_sleeve_mm(settings, 30.0)
+    points = np.array([[v.X, v.Y, v.Z] for v in solid.vertices()])
+    for d in directions:  # the farthest point of the solid along each beam: the sleeve's end
+        assert (points @ d).max() == pytest.approx(reach, abs=0.5)
+    assert len(solid.solids()) == 1 and solid.is_valid
+    bore = 0.5 * 30.0 + settings.clearance_mm
+    assert joints._axis_errors_deg(solid, directions, bore) < 1e-6
+
+
 def test_tessellation_is_build123d_s():
     """The numpy read of the triangulation gives build123d's tessellate() vertices and triangles."""
     import copy
