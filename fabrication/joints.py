@@ -280,8 +280,8 @@ def _boolean(kind: str, arguments: list, tools: list):
 def _inside(shape, points: np.ndarray) -> np.ndarray:
     """(k,) whether each point (mm) lies inside the solid ``shape``."""
     from OCP.BRepClass3d import BRepClass3d_SolidClassifier
-    from OCP.TopAbs import TopAbs_IN
     from OCP.gp import gp_Pnt
+    from OCP.TopAbs import TopAbs_IN
 
     classifier = BRepClass3d_SolidClassifier(shape)
     states = []
