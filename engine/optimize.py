@@ -709,16 +709,25 @@ def _end_game(p: _Problem, x: np.ndarray, progress: Callable[[str, float | None]
 
 # ----------------------------------------------------------------------------- (d) closeness band, (e) record
 
+#: Rounds of "into the closeness limit, then symmetric" at most: the mirrored mean of two nodes
+#: brought to the limit on a surface meshed a little unsymmetrically can lie beyond it again.
+CLOSENESS_ROUNDS = 10
+
+
 def _within_closeness_limit(p: _Problem, x: np.ndarray) -> tuple[np.ndarray, bool]:
     """(x with the nodes beyond the hard closeness limit brought back to it: the band is a soft
-    constraint, whether that left the reals: then x as it was)."""
+    constraint, whether that left the reals: then x as it was). With symmetry planes the nodes are
+    made symmetric after, and the two are repeated (CLOSENESS_ROUNDS at most) until both hold."""
+    limit = CLOSENESS_LIMIT * p.surface.diagonal
     banded = x.copy()
-    banded[p.movable] = into_band(x[p.movable], *p.surface.closest(x[p.movable]),
-                                   CLOSENESS_LIMIT * p.surface.diagonal)
-    banded = _symmetric(p, banded)
-    if np.all(np.isfinite(banded)):
-        return banded, False
-    return x, True
+    for _ in range(CLOSENESS_ROUNDS if p.partners is not None else 1):
+        banded[p.movable] = into_band(banded[p.movable], *p.surface.closest(banded[p.movable]), limit)
+        banded = _symmetric(p, banded)
+        if not np.all(np.isfinite(banded)):
+            return x, True
+        if p.partners is None or p.surface.closest(banded[p.movable])[1].max(initial=0.0) <= limit * (1 + 1e-6):
+            break
+    return banded, False
 
 
 def _quality_record(p: _Problem, mesh: TriMesh, field: GuidingField | None, before: dict, result: PolyMesh,
