@@ -50,6 +50,8 @@ from .symmetry import symmetrised_grid, symmetry_record
 __all__ = ["RemeshSettings", "RemeshResult", "remesh", "polymesh_quality"]
 
 Progress = Callable[[str, "float | None"], None]
+#: The grid as a caller will make it buildable (collapses of the beams its joints cannot take).
+Buildable = Callable[[PolyMesh], PolyMesh]
 
 #: Vertex weight w = area * h^-DENSITY_POWER (measured: gives achieved size ~ h, see tests).
 DENSITY_POWER = 2.0
@@ -77,6 +79,10 @@ CANDIDATES_PER_START = 3
 #: Largest relative gap between a candidate grid's achieved size ratio (aspect) and the field's
 #: D' (A') that the choice among candidates accepts before looking at hexagons (issue 4's band).
 SHAPE_TOLERANCE = 0.25
+#: Shares of interior nodes with three beams and of interior hexagons that the choice among
+#: candidates asks first (issue 13's targets for the optimised grid).
+VALENCE3_TARGET = 0.95
+HEXAGON_TARGET = 0.70
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -403,13 +409,16 @@ class _Timing:
 
 
 def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: RemeshSettings,
-                support_vertices: np.ndarray | None, say, timing: _Timing | None = None) -> PolyMesh:
+                support_vertices: np.ndarray | None, say, timing: _Timing | None = None,
+                buildable: Buildable | None = None) -> PolyMesh:
     """The grid-shell of ``n_cells`` cells. Where the clustered mesh is small, several lattice
     offsets (seeds settings.seed, +1, ...; the lattice turned by LATTICE_TURNS_DEG in turn) are
     tried, up to START_BUDGET clustered vertices in all and MAX_STARTS starts, each giving its
     CANDIDATES_PER_START best clusterings (a single start gives one); the grid kept is the
-    candidate's with the best _grid_score (valence 3, size and aspect within the band, hexagons),
-    its nodes symmetrised where settings.symmetry_planes are given (engine.symmetry)."""
+    candidate's with the best _grid_score (valence 3, size and aspect within the band, hexagons)
+    of the grid as ``buildable`` will make it (the caller's collapses of beams its joints cannot
+    take cost hexagons and three-beam nodes; the candidate is returned as extracted), its nodes
+    symmetrised where settings.symmetry_planes are given (engine.symmetry)."""
     from time import perf_counter
 
     say("refining the surface", 0.0)
@@ -427,12 +436,16 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
     # polygons of the candidates, best clustering first, until none left could score higher (the
     # clusters' hexagon share is the grid's but where extraction collapses a short beam)
     candidates.sort(key=_candidate_order)
-    best, best_score = None, (-1.0, -1.0, -1.0)
+    best: PolyMesh | None = None
+    best_score: tuple[float, ...] = (-1.0,)
     for clusters in candidates:
-        if best_score >= (1.0, 1.0, clusters.hexagon_share):
+        # the best a candidate can score: its clusters' hexagons (extraction and collapses lower them)
+        share = clusters.hexagon_share
+        if best_score >= (1.0, 1.0, float(share >= HEXAGON_TARGET), 1.0, share):
             break
         polymesh = _polygons(mesh, fine, clusters.labels, clusters.centroids, support_vertices)
-        score = _grid_score(polymesh, mesh, field) if len(candidates) > 1 else best_score
+        scored = buildable(polymesh) if buildable is not None else polymesh
+        score = _grid_score(scored, mesh, field) if len(candidates) > 1 else best_score
         if best is None or score > best_score:
             best, best_score = polymesh, score
     if timing is not None:
@@ -443,11 +456,12 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
     return symmetrised_grid(best, tuple(settings.symmetry_planes)) if settings.symmetry_planes else best
 
 
-def _grid_score(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField) -> tuple[float, float, float]:
-    """What the choice among candidate grids maximises: the share of interior nodes of valence 3
-    (a short beam collapsed where four cells nearly meet leaves a valence-4 node), then 1 if the
-    achieved size ratio and aspect lie within SHAPE_TOLERANCE of the field's D' and A' (0 if not),
-    then the hexagon share of interior cells."""
+def _grid_score(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField) -> tuple[float, ...]:
+    """What the choice among candidate grids maximises, in turn: whether at least VALENCE3_TARGET of
+    the interior nodes have three beams (a short beam collapsed where four cells nearly meet leaves
+    a node of four), whether the achieved size ratio and aspect lie within SHAPE_TOLERANCE of the
+    field's D' and A', whether at least HEXAGON_TARGET of the interior cells are hexagons, then the
+    valence-3 share and the hexagon share (1.0 / 0.0 for the targets)."""
     interior_nodes = ~polymesh.boundary
     valence3 = float(np.mean(polymesh.valence[interior_nodes] == 3)) if interior_nodes.any() else 1.0
     size_ratio, aspect = size_and_aspect(polymesh, mesh, field)
@@ -455,7 +469,8 @@ def _grid_score(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField) -> tuple
     shaped = float(abs(size_ratio / bounds[0] - 1) <= SHAPE_TOLERANCE
                    and abs(aspect / bounds[1] - 1) <= SHAPE_TOLERANCE)
     interior = ~polymesh.face_boundary
-    return valence3, shaped, float(np.mean(polymesh.face_degrees[interior] == 6)) if interior.any() else 0.0
+    hexagons = float(np.mean(polymesh.face_degrees[interior] == 6)) if interior.any() else 0.0
+    return float(valence3 >= VALENCE3_TARGET), shaped, float(hexagons >= HEXAGON_TARGET), valence3, hexagons
 
 
 def _cells_for_length(mesh: TriMesh, field: GuidingField, mean_beam_length: float) -> int:
@@ -469,29 +484,35 @@ def _cells_for_length(mesh: TriMesh, field: GuidingField, mean_beam_length: floa
 
 
 def remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
-           support_vertices: np.ndarray | None = None, progress: Progress | None = None) -> RemeshResult:
+           support_vertices: np.ndarray | None = None, progress: Progress | None = None,
+           buildable: Buildable | None = None) -> RemeshResult:
     """The statics-aware Voronoi grid-shell of ``mesh`` under ``field`` (see the module docstring).
+    ``buildable``: the grid as the caller will make it buildable (collapses of the beams its joints
+    cannot take); where several candidate grids are made, they are compared as such.
     With symmetry planes, a grid that cannot be made symmetric (too few cells for the planes to
     keep seeds on every part, or nodes that do not settle) is remeshed without them, and the
     quality's ``symmetry`` says so (``symmetric`` false, ``reason``)."""
     if not settings.symmetry_planes:
-        return _remesh(mesh, field, settings, support_vertices=support_vertices, progress=progress)
+        return _remesh(mesh, field, settings, support_vertices=support_vertices, progress=progress,
+                       buildable=buildable)
     try:
-        result = _remesh(mesh, field, settings, support_vertices=support_vertices, progress=progress)
+        result = _remesh(mesh, field, settings, support_vertices=support_vertices, progress=progress,
+                         buildable=buildable)
         if np.all(np.isfinite(result.polymesh.nodes)):
             return result
         reason = "its nodes did not settle (non-finite positions)"
     except MeshError as error:
         reason = str(error).splitlines()[0]
     result = _remesh(mesh, field, replace(settings, symmetry_planes=()), support_vertices=support_vertices,
-                     progress=progress)
+                     progress=progress, buildable=buildable)
     result.quality["symmetry"] = {"symmetric": False, "reason": f"not made symmetric: {reason}",
                                   "planes": [list(map(list, plane)) for plane in settings.symmetry_planes]}
     return result
 
 
 def _remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
-            support_vertices: np.ndarray | None = None, progress: Progress | None = None) -> RemeshResult:
+            support_vertices: np.ndarray | None = None, progress: Progress | None = None,
+            buildable: Buildable | None = None) -> RemeshResult:
     """The grid of ``remesh`` with the settings as given.
 
     The quality dict also holds ``clustering_s`` and ``extraction_s`` (seconds spent in the
@@ -519,19 +540,19 @@ def _remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
         raise InputError(f"remesh: {n_cells} cells is more than this remesher handles ({max_cells})",
                          hint="ask for fewer cells or a longer mean beam length")
     timing = _Timing()
-    polymesh = _tessellate(mesh, field, n_cells, settings, support_vertices, say, timing)
+    polymesh = _tessellate(mesh, field, n_cells, settings, support_vertices, say, timing, buildable)
     if settings.mean_beam_length is not None:
         for _ in range(3):
             achieved = float(polymesh.beam_lengths.mean())
             if abs(achieved / settings.mean_beam_length - 1) < 0.01:
                 break
             n_cells = max(4, int(round(n_cells * (achieved / settings.mean_beam_length) ** 2)))
-            polymesh = _tessellate(mesh, field, n_cells, settings, support_vertices, say, timing)
+            polymesh = _tessellate(mesh, field, n_cells, settings, support_vertices, say, timing, buildable)
     if settings.n_cells is not None and settings.symmetry_planes:
-        polymesh = _symmetric_count(mesh, field, settings, support_vertices, say, polymesh, timing)
+        polymesh = _symmetric_count(mesh, field, settings, support_vertices, say, polymesh, timing, buildable)
     if settings.total_length is not None:
         polymesh, n_cells = _match_total_length(mesh, field, settings, support_vertices, say, polymesh, n_cells,
-                                                timing)
+                                                timing, buildable)
     quality = polymesh_quality(polymesh, mesh=mesh, field=field)
     quality.update({"n_cells_requested": int(n_cells), "field_size_ratio": ratio, "field_max_aspect": aspect,
                     "clustering_s": timing.clustering_s, "extraction_s": timing.extraction_s,
@@ -555,7 +576,7 @@ SYMMETRIC_COUNT_TOLERANCE = 0.03
 SYMMETRIC_COUNT_TRIES = 4
 
 
-def _symmetric_count(mesh, field, settings, support_vertices, say, polymesh, timing=None):
+def _symmetric_count(mesh, field, settings, support_vertices, say, polymesh, timing=None, buildable=None):
     """The symmetric grid with the cell count nearest ``settings.n_cells``: up to
     SYMMETRIC_COUNT_TRIES more tessellations with the seed count scaled by asked / built (a seed
     count tried before moved by one towards the count asked)."""
@@ -572,13 +593,14 @@ def _symmetric_count(mesh, field, settings, support_vertices, say, polymesh, tim
             trial = max(4, trial + step)
         tried.add(trial)
         say(f"symmetric grid: {polymesh.n_faces} cells for {asked} asked, seeding {trial}")
-        polymesh = _tessellate(mesh, field, trial, settings, support_vertices, say, timing)
+        polymesh = _tessellate(mesh, field, trial, settings, support_vertices, say, timing, buildable)
         if abs(polymesh.n_faces - asked) < abs(best.n_faces - asked):
             best = polymesh
     return best
 
 
-def _match_total_length(mesh, field, settings, support_vertices, say, polymesh, n_cells, timing=None):
+def _match_total_length(mesh, field, settings, support_vertices, say, polymesh, n_cells, timing=None,
+                        buildable=None):
     """Secant iteration on the cell count (L_tot ~ sqrt(cells)) to meet L_tot within 1 %."""
     target = settings.total_length
     best = (abs(polymesh.total_length / target - 1), polymesh, n_cells)
@@ -594,7 +616,7 @@ def _match_total_length(mesh, field, settings, support_vertices, say, polymesh, 
             break
         n_cells = proposal
         tried.add(n_cells)
-        polymesh = _tessellate(mesh, field, n_cells, settings, support_vertices, say, timing)
+        polymesh = _tessellate(mesh, field, n_cells, settings, support_vertices, say, timing, buildable)
         error = abs(polymesh.total_length / target - 1)
         if error < best[0]:
             best = (error, polymesh, n_cells)
@@ -603,7 +625,7 @@ def _match_total_length(mesh, field, settings, support_vertices, say, polymesh, 
         error, polymesh, n_cells = best
         for seed in range(1, 12):
             candidate = _tessellate(mesh, field, n_cells, replace(settings, seed=settings.seed + seed),
-                                    support_vertices, say, timing)
+                                    support_vertices, say, timing, buildable)
             candidate_error = abs(candidate.total_length / target - 1)
             if candidate_error < best[0]:
                 best = (candidate_error, candidate, n_cells)

@@ -368,3 +368,36 @@ def test_a_hole_smaller_than_the_cells_round_it_is_met_by_several_cells(seed, n_
     _check_valid(polymesh)
     V, E, F = polymesh.n_nodes, len(polymesh.edges), polymesh.n_faces
     assert V - E + F == 1 - surface.n_holes
+
+
+def test_candidates_are_compared_as_the_caller_will_build_them():
+    """Where several candidate grids are made, the remesher ranks them by what ``buildable`` makes
+    of each (collapses cost hexagons and three-beam nodes), and returns the winner as extracted."""
+    from engine.collapse import collapse_short_beams
+
+    mesh = _square(24)
+    field = _field(mesh, size=1.0 + mesh.vertices[:, 0] + 1.0)
+    settings = RemeshSettings(n_cells=40)
+    seen: list = []
+
+    def record(grid):
+        seen.append(grid)
+        return grid
+
+    plain = remesh(mesh, field, settings).polymesh
+    same = remesh(mesh, field, settings, buildable=record).polymesh
+    assert np.array_equal(same.nodes, plain.nodes), "a buildable that changes nothing changes no choice"
+    assert len(seen) >= 2, "the square at 40 cells makes several candidates"
+    favoured = len(seen) // 2 if len(seen) > 2 else 1  # not the one chosen without it, if it was first
+    calls: list = []
+
+    def spoil_all_but_one(grid):
+        # every other candidate as if half its beams were too short: collapsed into four-beam nodes
+        calls.append(grid)
+        if len(calls) - 1 == favoured:
+            return grid
+        long = np.quantile(grid.beam_lengths, 0.5)
+        return collapse_short_beams(grid, lambda g: np.full(len(g.edges), long))[0]
+
+    chosen = remesh(mesh, field, settings, buildable=spoil_all_but_one).polymesh
+    assert np.array_equal(chosen.nodes, calls[favoured].nodes), "the candidate that builds best is kept, as extracted"

@@ -52,7 +52,9 @@ def run(surface: SurfaceResult, field: GuidingField, project: Project, ctx: Stag
     support_vertices = np.zeros(surface.mesh.n_vertices, dtype=bool)
     support_vertices[surface.supports.nodes] = True
     settings = remesh_settings(project)
-    result = remesh(surface.mesh, field, settings, support_vertices=support_vertices, progress=ctx.step)
+    made_buildable = buildable_as_remeshed(project)
+    result = remesh(surface.mesh, field, settings, support_vertices=support_vertices, progress=ctx.step,
+                    buildable=made_buildable)
     rounds: list[dict] = []
     if grid == GridKind.VORONOI:  # the control stays uniform: its field is not the forces'
         result, field, rounds = remeshed_from_beam_forces(result, field, surface, project, ctx)
@@ -62,7 +64,7 @@ def run(surface: SurfaceResult, field: GuidingField, project: Project, ctx: Stag
             result, project,
             lambda n: remesh(surface.mesh, field, dataclasses.replace(settings, n_cells=n, mean_beam_length=None,
                                                                       total_length=None),
-                             support_vertices=support_vertices, progress=ctx.step),
+                             support_vertices=support_vertices, progress=ctx.step, buildable=made_buildable),
             progress=ctx.step)
     if remeshes:
         ctx.report_findings([coarsened_finding(asked, result)])
@@ -127,7 +129,8 @@ def remeshed_from_beam_forces(result: RemeshResult, field: GuidingField, surface
         forces = surface_membrane_forces(mesh, grid, axial, node_normals(grid, mesh))
         field = guiding_field(mesh, forces, field_settings)
         ctx.step(f"statics round {number} of {count}: remeshing under the field of the beam forces")
-        result = remesh(mesh, field, settings, support_vertices=support_vertices, progress=ctx.step)
+        result = remesh(mesh, field, settings, support_vertices=support_vertices, progress=ctx.step,
+                        buildable=buildable_as_remeshed(project))
         rounds.append(_round_figures(number, result))
         ctx.step(f"statics round {number} of {count}: {rounds[-1]['cells']} cells, "
                  f"{rounds[-1]['total_length_m']:.1f} m of beams")
@@ -201,6 +204,13 @@ def coarsened_finding(asked: int, result: RemeshResult) -> dict:
                    fix="smaller joints ([fabrication.joints] kind, hub_radius, sleeve_length) or a smaller tube "
                        "([section] diameter) for more cells; [remesh] coarsen_for_joints = false keeps the "
                        "cells asked for, with joints that clash").to_dict()
+
+
+def buildable_as_remeshed(project: Project) -> Callable[[PolyMesh], PolyMesh]:
+    """The grid as this stage makes it buildable (buildable_grid at REMESH_SHARE): the remesher
+    compares its candidate grids as such, so that one whose short beams would be collapsed (each
+    collapse costs two hexagons and a three-beam node) loses to one that needs none."""
+    return lambda grid: buildable_grid(grid, project, share=REMESH_SHARE)[0]
 
 
 def buildable_grid(polymesh: PolyMesh, project: Project, share: float = 1.0) -> tuple[PolyMesh, dict]:
