@@ -196,11 +196,9 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray, *, merge_corners: bool
     return result, collapsed
 
 
-def _folded_count(x: np.ndarray, loops: list[list[int]], up: np.ndarray) -> int:
-    """How many of the cells ``loops`` (node loops of 3 nodes or more) are folded at x seen along
-    ``up`` ((3,) unit): they do not turn once about it, or their vector area turns against it
-    (engine.projections.CellFans, the optimiser's own test)."""
-    fans = CellFans(loops)
+def _folded_count(x: np.ndarray, fans: CellFans, up: np.ndarray) -> int:
+    """How many of the cells of ``fans`` are folded at x seen along ``up`` ((3,) unit): they do not
+    turn once about it, or their vector area turns against it (the optimiser's own test)."""
     along = np.broadcast_to(up, (fans.n_cells, 3))
     return int(np.count_nonzero((fans.windings(x, along) != 1) | (fans.normals(x) @ up <= 0)))
 
@@ -211,14 +209,16 @@ def _first_unfolding(x: np.ndarray, before: list[list[int]], after: list[list[in
     loops) fold no more than the cells ``before`` did at x, or None. The cells are seen along their
     summed vector area at x (engine.collapse knows no surface)."""
     before, after = ([loop for loop in loops if len(loop) >= 3] for loops in (before, after))
-    up = CellFans(before).normals(x).sum(axis=0)
+    fans = CellFans(before)
+    up = fans.normals(x).sum(axis=0)
     up /= max(float(np.linalg.norm(up)), 1e-300)
-    folded_before = _folded_count(x, before, up)
+    folded_before = _folded_count(x, fans, up)
+    after_fans = CellFans(after)
     trial = x.copy()
     for places in candidates:
         for node, place in places.items():
             trial[node] = place
-        if _folded_count(trial, after, up) <= folded_before:
+        if _folded_count(trial, after_fans, up) <= folded_before:
             return places
     return None
 

@@ -444,8 +444,10 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
         if best_score >= (1.0, 1.0, float(share >= HEXAGON_TARGET), 1.0, share):
             break
         polymesh = _polygons(mesh, fine, clusters.labels, clusters.centroids, support_vertices)
-        scored = buildable(polymesh) if buildable is not None else polymesh
-        score = _grid_score(scored, mesh, field) if len(candidates) > 1 else best_score
+        if len(candidates) > 1:  # (one candidate: nothing to compare, nothing to make buildable)
+            score = _grid_score(buildable(polymesh) if buildable is not None else polymesh, mesh, field)
+        else:
+            score = best_score
         if best is None or score > best_score:
             best, best_score = polymesh, score
     if timing is not None:
