@@ -51,7 +51,9 @@ class NonlinearResult:
     bifurcation); displacements (n,6) at the limit point (or the last step); converged: False when
     a step failed to converge even at 1/256 of its arc; load_factors (s,); iterations (s,): Newton
     iterations of each step; monitored (s, k): the ``monitor`` DOFs along the path; factorisations:
-    how many tangent stiffnesses were factored along the whole path (the dead load's included)."""
+    how many tangent stiffnesses were factored along the whole path (the dead load's included);
+    tolerable_load_factor: where the path stopped at the tolerable deformation
+    (``PathSettings.max_displacement``) before any limit point, the load factor there (else None)."""
 
     path: np.ndarray
     limit_load_factor: float | None
@@ -62,6 +64,7 @@ class NonlinearResult:
     iterations: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     monitored: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     factorisations: int = 0
+    tolerable_load_factor: float | None = None
 
 
 
@@ -229,7 +232,10 @@ class PathSettings:
     Newton, False); both converge to the same equilibria, the first with a fraction of the
     factorisations. ``limit_tolerance``: a step over the first maximum is not redone shorter where
     the parabola through the last points puts the peak within this share of the largest load
-    factor found (0: always redone, up to 3 times)."""
+    factor found (0: always redone, up to 3 times). ``max_displacement``: the largest tolerable
+    deformation (m): where a node's translation from the start first reaches it before a limit
+    point, the path stops there (EN 1993-1-6's tolerable-deformation criterion for a path that
+    stiffens instead of buckling: a net hanging under the load); None: no such bound."""
 
     max_load_factor: float = 10.0
     max_steps: int = 80
@@ -237,6 +243,7 @@ class PathSettings:
     steps_past_limit: int = 3
     reuse_factor: bool = True
     limit_tolerance: float = 2e-4
+    max_displacement: float | None = None
 
 
 def _peak_excess(before: float, at: float, *, back: float, after: float | None = None, ahead: float = 0.0,
@@ -263,7 +270,7 @@ def _peak_excess(before: float, at: float, *, back: float, after: float | None =
 def nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *, control: tuple[int, int],
                      max_load_factor: float = 10.0, max_steps: int = 80, initial_loads: np.ndarray | None = None,
                      tolerance: float = 1e-5, steps_past_limit: int = 3,
-                     monitor: list[tuple[int, int]] | None = None,
+                     max_displacement: float | None = None, monitor: list[tuple[int, int]] | None = None,
                      settings: PathSettings | None = None) -> NonlinearResult:
     """Geometrically non-linear static analysis with arc-length control.
 
@@ -271,7 +278,9 @@ def nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *
     constant (applied first, in load steps); control: (node, dof 0..5) whose displacement the
     path reports; monitor: further (node, dof) pairs recorded at every step in
     ``NonlinearResult.monitored`` (s, len(monitor)). The path stops ``steps_past_limit`` steps
-    past the first limit point, at ``max_load_factor`` or after ``max_steps``.
+    past the first limit point, at ``max_load_factor``, after ``max_steps``, or where a node's
+    translation first reaches ``max_displacement`` (m) before any limit point (the load factor
+    there is ``NonlinearResult.tolerable_load_factor``).
 
     Co-rotational elements (rigid motion from the chord and the mean of the end triads, local
     end rotations by the log map), Newton iterations on the consistent tangent (the exact
@@ -282,12 +291,12 @@ def nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, *
     factor is found within a small step. ``tolerance``: residual norm relative to the norm of
     the applied load. ``negative_pivots`` tells a limit point (a pivot turns negative at the
     maximum) from a bifurcation (pivots turn negative while the load still rises). ``settings``
-    (PathSettings), when given, replaces the four stopping and tolerance keywords and sets whether
+    (PathSettings), when given, replaces the five stopping and tolerance keywords and sets whether
     the corrector reuses the factored tangent (by default it does).
     """
     if settings is None:
         settings = PathSettings(max_load_factor=max_load_factor, max_steps=max_steps, tolerance=tolerance,
-                                steps_past_limit=steps_past_limit)
+                                steps_past_limit=steps_past_limit, max_displacement=max_displacement)
     with single_threaded_blas():
         return _nonlinear_static(model, supports, loads, control, settings, initial_loads, monitor)
 
@@ -357,6 +366,17 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     u_ref = np.zeros(6 * cr.n_all)
     u_ref[free] = lu.solve(F_ref[free])
     arc = float(np.linalg.norm(u_ref[free]) * min(max_load_factor, 10.0) / 20.0)
+    tolerable = settings.max_displacement
+
+    def reach(x) -> float:
+        """The largest translation of a node from the start, m."""
+        return float(np.linalg.norm(x - cr.X, axis=1).max())
+    if tolerable is not None:
+        # the first step goes at most a tenth of the tolerable deformation: on a soft roof the
+        # linear prediction is metres, and a few huge steps would pass over the path's shape
+        linear_reach = float(np.linalg.norm(u_ref.reshape(-1, 6)[:, :3], axis=1).max())
+        if linear_reach > 0:
+            arc = min(arc, float(np.linalg.norm(u_ref[free])) * 0.1 * tolerable / linear_reach)
     lam = 0.0
     watch = list(monitor or [])
 
@@ -376,6 +396,8 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     limit_state = None
     past = 0
     converged_all = True
+    tolerable_factor: float | None = None
+    landings = 0                      # steps redone shorter to land on the tolerable deformation
     saved = None                      # the state before the last step, to redo it shorter
     # with reuse_factor, the factor of the corrector's last iteration where it was made there: one
     # correction (under the tolerance) from the step's end, it serves the next step's predictor and
@@ -504,6 +526,17 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             arc *= 0.3
             arc_cap = arc
             continue
+        if tolerable is not None and limit is None and not lam_try < lam and reach(x_try) > tolerable:
+            # the step passed the tolerable deformation on the way up (one that falls has passed a
+            # limit point first): redo it aimed at it (at most 3 times) while it went more than
+            # half the step too far, then read the load factor there off the step
+            before = reach(x)
+            share = (tolerable - before) / max(reach(x_try) - before, 1e-300)
+            if share < 0.5 and landings < 3:
+                landings += 1
+                arc *= max(share, 0.01)
+                continue
+            tolerable_factor = lam + share * (lam_try - lam)
         saved = (x, triads, lam, previous, negatives, arc)
         previous = total
         if limit is None and lam_try < lam and lam > 0:
@@ -527,7 +560,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             past += 1
             if past >= steps_past_limit:
                 break
-        if lam >= max_load_factor:
+        if lam >= max_load_factor or tolerable_factor is not None:
             break
     if len(path) > 1:                                        # pivots of the final state
         try:
@@ -535,8 +568,9 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             factored += 1
         except RuntimeError:
             pass
-    log.info("non-linear path: %d steps, %d Newton iterations, %d factorisations, load factor %.4g, limit %s%s",
+    log.info("non-linear path: %d steps, %d Newton iterations, %d factorisations, load factor %.4g, limit %s%s%s",
              len(path) - 1, int(np.sum(iterations)), factored, lam, "none" if limit is None else f"{limit:.4g}",
+             "" if tolerable_factor is None else f", tolerable deformation at {tolerable_factor:.4g}",
              "" if converged_all else ", a step did not converge")
     if limit_state is None:
         limit_state = (x, triads)
@@ -547,4 +581,5 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     return NonlinearResult(path=np.array(path), limit_load_factor=limit, negative_pivots=np.array(pivots),
                            displacements=displacements[:n], converged=converged_all, load_factors=np.array(factors),
                            iterations=np.array(iterations), factorisations=factored,
+                           tolerable_load_factor=tolerable_factor,
                            monitored=np.array(monitored, dtype=float).reshape(len(path), len(watch)))

@@ -29,7 +29,9 @@ ImperfectionShape = Literal["linear", "nonlinear", "mode1", "mode2", "mode3"]
 @dataclass(frozen=True, kw_only=True)
 class ProtocolSettings:
     """n_modes: buckling modes computed; amplitude: eps (m); shapes: which imperfections;
-    nonlinear: run the GNL analyses; max_load_factor: where a GNL path stops without a limit point."""
+    nonlinear: run the GNL analyses; max_load_factor: where a GNL path stops without a limit point;
+    max_displacement: the tolerable deformation (m), where a GNL path without a limit point before
+    it stops and reads its capacity (None: none)."""
 
     n_modes: int = 6
     amplitude: float = 0.01
@@ -37,18 +39,21 @@ class ProtocolSettings:
     nonlinear: bool = True
     max_load_factor: float = 10.0
     max_steps: int = 80
+    max_displacement: float | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
 class ImperfectionCase:
     """One GNL run: its shape name and sign, limit load factor (None if not reached), path (s, 2),
-    and whether the path ended normally (False: the solver stopped early)."""
+    whether the path ended normally (False: the solver stopped early), and the load factor at the
+    tolerable deformation where the path reached it before any limit point (else None)."""
 
     name: str
     limit_load_factor: float | None
     path: np.ndarray
     negative_pivots: np.ndarray | None = None
     converged: bool = True
+    tolerable_load_factor: float | None = None
 
     @property
     def peak_load_factor(self) -> float:
@@ -57,9 +62,13 @@ class ImperfectionCase:
 
     @property
     def capacity(self) -> float:
-        """The limit load factor, or where no limit point was found the highest factor carried
-        (a lower bound, conservative when the path stopped early)."""
-        return self.limit_load_factor if self.limit_load_factor is not None else self.peak_load_factor
+        """The limit load factor; where the tolerable deformation came first, the load factor there;
+        else the highest factor carried (a lower bound, conservative when the path stopped early)."""
+        if self.limit_load_factor is not None:
+            return self.limit_load_factor
+        if self.tolerable_load_factor is not None:
+            return self.tolerable_load_factor
+        return self.peak_load_factor
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -153,10 +162,11 @@ def nonlinear_path(model, supports: Supports, loads: np.ndarray, control_node: i
     from .frame import nonlinear_static
 
     run = nonlinear_static(model, supports, loads, control=(control_node, 2),
-                           max_load_factor=settings.max_load_factor, max_steps=settings.max_steps)
+                           max_load_factor=settings.max_load_factor, max_steps=settings.max_steps,
+                           max_displacement=settings.max_displacement)
     return (ImperfectionCase(name=name, limit_load_factor=run.limit_load_factor, path=np.asarray(run.path),
-                             negative_pivots=getattr(run, "negative_pivots", None),
-                             converged=bool(getattr(run, "converged", True))), run.displacements)
+                             negative_pivots=run.negative_pivots, converged=run.converged,
+                             tolerable_load_factor=run.tolerable_load_factor), run.displacements)
 
 
 def run_protocol(model, supports: Supports, sls_loads: np.ndarray, uls_loads: np.ndarray,

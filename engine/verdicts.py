@@ -89,7 +89,8 @@ def design_verdicts(*, utilisation: np.ndarray, sls_displacements: np.ndarray, d
     vertical deflection (``sls_displacements`` (n, 6), at most ``deflection_limit``, the span over
     ``deflection_ratio``), then where there is one each: the linear buckling analysis that did not
     solve (``buckling_error``), lambda_LB and the ``worst`` imperfect non-linear path's capacity (its
-    limit load factor, or the load factor it carried), each at least ``required_load_factor``."""
+    limit load factor, the load factor at the tolerable deformation, or the load factor it carried),
+    each at least ``required_load_factor``."""
     utilisation = np.asarray(utilisation)
     vertical = np.abs(np.asarray(sls_displacements)[:, 2])
     largest_utilisation, deflection = float(utilisation.max()), float(vertical.max())
@@ -111,8 +112,12 @@ def design_verdicts(*, utilisation: np.ndarray, sls_displacements: np.ndarray, d
                                 passed=bool(lambda_LB >= required_load_factor), fix=fixes.stiffer))
     if worst is not None:
         capacity = float(worst.capacity)
-        label = ("limit load factor" if worst.limit_load_factor is not None
-                 else "load factor carried (no limit point found)")
+        if worst.limit_load_factor is not None:
+            label = "limit load factor"
+        elif worst.tolerable_load_factor is not None:
+            label = "load factor at the tolerable deflection (no limit point before it)"
+        else:
+            label = "load factor carried (no limit point found)"
         verdicts.append(Verdict(check=f"worst non-linear {label} ({worst.name})", kind="nonlinear_buckling",
                                 value=capacity, limit=required_load_factor, part=worst.name,
                                 passed=bool(capacity >= required_load_factor), fix=fixes.stiffer))

@@ -56,6 +56,18 @@ def test_verdicts_name_the_governing_parts_and_values():
     assert [v.fix for v in verdicts] == ["stiffer", "stiffer or a looser limit", "stiffer", "stiffer"]
 
 
+def test_a_path_stopped_at_the_tolerable_deflection_is_judged_there_not_at_the_load_it_carried():
+    """A soft roof hanging as a net carries 10 times the load metres out of shape: its capacity is
+    the load factor where it reached the tolerable deflection, and the verdict says so."""
+    net = ImperfectionCase(name="mode2+", limit_load_factor=None, tolerable_load_factor=0.4,
+                           path=np.array([[0.0, 0.0], [0.4, -0.7], [10.0, -1.3]]))
+    assert net.capacity == 0.4
+    nonlinear = _verdicts(worst=net)[-1]
+    assert not nonlinear.passed and nonlinear.value == 0.4
+    assert nonlinear.check == ("worst non-linear load factor at the tolerable deflection "
+                               "(no limit point before it) (mode2+)")
+
+
 def test_a_buckling_analysis_that_did_not_solve_fails_with_its_error():
     verdicts = _verdicts(lambda_LB=None, error="no eigenvalue converged")
     assert [v.kind for v in verdicts] == ["utilisation", "deflection", "buckling_not_solved"]

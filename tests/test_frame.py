@@ -103,6 +103,26 @@ def test_cantilever_rolls_into_a_circle():
     assert np.linalg.norm(tip) < 0.01 * length
 
 
+def test_the_path_stops_at_the_tolerable_deformation_of_a_cantilever_elastica():
+    """A cantilever under a tip force stiffens as it bends and has no limit point: the path stops
+    where the tip has moved the tolerable deformation. At P L^2 / EI = 1 the large-deflection tip
+    moves u/L = 0.05643 along and v/L = 0.30172 across (Mattiasson 1981, Table 1), so a tolerable
+    deformation of that translation is reached at the load factor 1."""
+    n, length = 16, 2.0
+    model = _line((1, 0, 0), length, n, (0, 0, 1), A=1.0)
+    loads = np.zeros((n + 1, 6))
+    loads[n, 2] = E * IY / length**2
+    tolerable = float(np.hypot(0.05643, 0.30172)) * length
+    run = nonlinear_static(model, Supports(nodes=np.array([0]), restraints=FIXED[None]), loads, control=(n, 2),
+                           max_load_factor=10.0, max_steps=200, max_displacement=tolerable)
+    assert run.limit_load_factor is None and run.converged
+    assert run.tolerable_load_factor == pytest.approx(1.0, rel=5e-3)
+    assert run.path[-1, 0] < 2.0                        # stopped there, not carried on to 10
+    free_run = nonlinear_static(model, Supports(nodes=np.array([0]), restraints=FIXED[None]), loads,
+                                control=(n, 2), max_load_factor=10.0, max_steps=200)
+    assert free_run.tolerable_load_factor is None and free_run.path[-1, 0] == pytest.approx(10.0)
+
+
 def _lee_frame(n: int = 10):
     column = np.c_[np.zeros(n + 1), np.zeros(n + 1), np.linspace(0, 120.0, n + 1)]
     beam = np.c_[np.linspace(0, 120.0, n + 1)[1:], np.zeros(n), np.full(n, 120.0)]

@@ -406,7 +406,11 @@ class OptimizeConfig(_Section):
 
 class AnalysisConfig(_Section):
     """Beam grid-shell analysis (METHOD.md 5). imperfection_amplitude None: L/300 of the shorter plan side.
-    workers: processes that run the non-linear paths side by side (default: one per core)."""
+    workers: processes that run the non-linear paths side by side (default: one per core).
+    tolerable_deflection_ratio: a non-linear path that reaches no limit point before a node has
+    moved the shorter plan side over this ratio stops there, and its lambda_NL is the load factor
+    there (EN 1993-1-6 8.7: the largest tolerable deformation; a soft roof that hangs as a net
+    would otherwise "carry" max_load_factor metres out of shape)."""
 
     elements_per_beam: int = Field(4, ge=1, le=20)
     n_modes: int = _default_of(ProtocolSettings, "n_modes", ge=1, le=50)
@@ -417,6 +421,7 @@ class AnalysisConfig(_Section):
     max_load_factor: float = _default_of(ProtocolSettings, "max_load_factor", gt=0)
     required_load_factor: float = Field(1.5, gt=0)
     deflection_limit_ratio: float = Field(250.0, gt=0)
+    tolerable_deflection_ratio: float = Field(50.0, gt=0)
     buckling_length_factor: float = Field(1.0, gt=0)
     uls_combination: str | None = None
     sls_combination: str | None = None
@@ -427,10 +432,11 @@ class AnalysisConfig(_Section):
 
     def to_settings(self, span: float) -> ProtocolSettings:
         """The engine's protocol settings; ``span`` (m), the grid's shorter plan side, gives the
-        imperfection amplitude L/300 where none is set."""
+        imperfection amplitude L/300 where none is set and the tolerable deformation."""
         return ProtocolSettings(n_modes=self.n_modes, amplitude=self.imperfection_amplitude or span / 300.0,
                                 shapes=tuple(self.imperfection_shapes), nonlinear=self.nonlinear,
-                                max_load_factor=self.max_load_factor)
+                                max_load_factor=self.max_load_factor,
+                                max_displacement=span / self.tolerable_deflection_ratio)
 
 
 class DesignConfig(_Section):
