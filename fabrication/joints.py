@@ -479,19 +479,25 @@ def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings):
         height = 2.5 * size
         hub = Cylinder(hub_radius, height).moved(Location(_plane((0, 0, 0), axis)))
         plates, holes = [], []
+        in_plates, in_holes = [], []  # a point of each plate near its end, of each bolt hole
         # each plate starts halfway into the hub, not at its centre: there plates met one another
         # as well as the hub, and OCCT's fuse of them all at once left some plate a solid apart
         start = 0.5 * hub_radius
         for d in directions:
             side = _perpendicular(d, axis)  # the plate's normal
+            up = np.cross(d, side)
             plate = Box(setback + sleeve - start, settings.plate_thickness_mm, 0.8 * height,
                         align=(Align.MIN, Align.CENTER, Align.CENTER))
-            plates.append(plate.moved(Location(_plane(start * d, np.cross(d, side), d))).wrapped)
+            plates.append(plate.moved(Location(_plane(start * d, up, d))).wrapped)
+            in_plates.append(d * (setback + 0.95 * sleeve) + 0.3 * height * up / np.linalg.norm(up))
             hole = Cylinder(0.5 * settings.bolt_hole_mm, 3 * settings.plate_thickness_mm)
             holes.append(hole.moved(Location(_plane(d * (setback + 0.5 * sleeve), side))).wrapped)
-        # one fuse and one cut with all tools, as for the sockets: a boolean per plate and hole
-        # took two thirds of the node's time
-        solid = _as_build123d(_boolean("cut", [_boolean("fuse", [hub.wrapped], plates)], holes))
+            in_holes.append(d * (setback + 0.5 * sleeve))
+        # one fuse and one cut with all tools, as for the sockets (a boolean per plate and hole
+        # took two thirds of the node's time), checked at a point of each
+        solid = _as_build123d(_checked_boolean("cut", _checked_boolean("fuse", hub.wrapped, plates,
+                                                                       np.array(in_plates)),
+                                               holes, np.array(in_holes)))
         blank = solid
         report["min_wall_mm"] = float(settings.plate_thickness_mm)
     else:

@@ -353,6 +353,33 @@ def test_flat_sleeves_fused_at_once_are_all_there():
     assert joints._axis_errors_deg(solid, directions, bore) < 1e-6
 
 
+def test_steel_plates_and_bolt_holes_survive_a_boolean_that_drops_a_tool(monkeypatch):
+    """Where OCCT's boolean of many tools at once leaves one out (as it did with flat sleeves), a
+    steel node is built again one tool at a time: every plate reaches the set-back plus its length
+    along its beam and every bolt hole is open."""
+    from fabrication import joints
+
+    boolean = joints._boolean
+
+    def dropping(kind, arguments, tools):  # OCCT's failure, made to happen
+        return boolean(kind, arguments, tools[:-1] if len(tools) > 1 else tools)
+
+    monkeypatch.setattr(joints, "_boolean", dropping)
+    directions = np.array([[0.8387, -0.5431, 0.0410], [0.9157, 0.3909, 0.0936], [-0.9959, -0.0362, -0.0826]])
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    settings = joints.JointSettings(kind="steel")
+    geometry = joints.JointGeometry(node=7, position_mm=np.zeros(3), directions=directions,
+                                    axis=np.array([0.0, 0.0, 1.0]), beam_size_mm=60.3)
+    solid, report = joints.build_joint(geometry, settings)
+    sleeve = joints.joint_sleeve_mm(settings, 60.3)
+    points = np.array([[v.X, v.Y, v.Z] for v in solid.vertices()])
+    for d in directions:
+        assert (points @ d).max() == pytest.approx(report["setback_mm"] + sleeve, abs=0.5)
+    holes = directions * (report["setback_mm"] + 0.5 * sleeve)
+    assert not joints._inside(solid.wrapped, holes).any()
+    assert len(solid.solids()) == 1 and solid.is_valid
+
+
 def test_tessellation_is_build123d_s():
     """The numpy read of the triangulation gives build123d's tessellate() vertices and triangles."""
     import copy
