@@ -216,3 +216,21 @@ def test_the_modes_caption_gives_the_amplitude_the_picture_draws_with_its_colour
     assert any(ax.get_ylabel() == "displacement / the mode's largest" for ax in figure.axes), "a colour bar"
     assert [ax.get_title() for ax in figure.axes if ax.get_title()] == [
         "mode 1: load factor 4.2", "mode 2: load factor 5.1", "mode 3: load factor 6.3"]
+
+
+def test_the_response_marks_where_each_capacity_was_read(drawn, tmp_path):
+    """A limit point is a dot on its curve at the peak; a path stopped at the tolerable deflection
+    a square on its curve at its load factor there; the legend names each kind once."""
+    t = np.linspace(0, 1, 41)
+    peaked = np.column_stack([4 * t * (2 - t), -0.05 * t])          # limit 4.0 at t = 1
+    stiffening = np.column_stack([3 * t, -0.02 * t])                # tolerable at 1.5 (t = 0.5)
+    plot_response({"perfect": peaked, "mode1+": stiffening, "mode1-": stiffening}, tmp_path / "response.png",
+                  worst="mode1+", ends={"perfect": ("limit", 4.0), "mode1+": ("tolerable", 1.5),
+                                        "mode1-": ("tolerable", 1.5)})
+    ax = drawn[-1].axes[0]
+    marks = {line.get_marker(): line.get_xydata() for line in ax.lines if line.get_marker() in ("o", "s")
+             and len(line.get_xydata())}
+    np.testing.assert_allclose(marks["o"], [[50.0, 4.0]])
+    np.testing.assert_allclose(marks["s"], [[10.0, 1.5]])
+    labels = ax.get_legend_handles_labels()[1]
+    assert labels.count("limit point") == 1 and labels.count("tolerable deflection reached") == 1

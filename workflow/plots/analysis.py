@@ -158,10 +158,17 @@ def _drawable(curve) -> tuple[np.ndarray | None, int]:
     return (None if bad.all() else xy[~bad]), int(bad.sum())
 
 
+#: The marker and legend of each way a path's capacity was read.
+_END_MARKERS = {"limit": ("o", "limit point"), "tolerable": ("s", "tolerable deflection reached")}
+
+
 def plot_response(curves: dict[str, np.ndarray], path: Path, *, worst: str | None = None,
-                  required: float | None = None, title: str = "") -> Path:
+                  required: float | None = None, title: str = "",
+                  ends: dict[str, tuple[str, float]] | None = None) -> Path:
     """Load factor against control-node displacement (mm) per curve; the worst bold; the required
-    load factor as a dashed line.
+    load factor as a dashed line. ``ends``: per curve, why its capacity was read and the load
+    factor there: ("limit", lambda) a limit point (a dot), ("tolerable", lambda) the tolerable
+    deflection reached before any (a square), labelled once each in the legend.
 
     Curves are (s, 2) arrays [load factor, displacement m]. Points that are NaN, infinite or beyond
     1e12 are left out (the legend counts them); a curve with nothing left, or empty, is not drawn
@@ -169,6 +176,7 @@ def plot_response(curves: dict[str, np.ndarray], path: Path, *, worst: str | Non
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(9, 6))
     skipped = []
+    labelled: set[str] = set()
     for name, curve in curves.items():
         xy, dropped = _drawable(curve)
         if xy is None:
@@ -176,8 +184,19 @@ def plot_response(curves: dict[str, np.ndarray], path: Path, *, worst: str | Non
             continue
         bold = name == worst
         label = name if not dropped else f"{name} ({dropped} non-finite point{'s' * (dropped > 1)} left out)"
-        ax.plot(xy[:, 0], xy[:, 1], label=label, linewidth=2.6 if bold else 1.1,
-                color="#c0392b" if bold else None, zorder=3 if bold else 2)
+        line, = ax.plot(xy[:, 0], xy[:, 1], label=label, linewidth=2.6 if bold else 1.1,
+                        color="#c0392b" if bold else None, zorder=3 if bold else 2)
+        end = (ends or {}).get(name)
+        if end is not None and np.isfinite(end[1]):
+            kind, factor = end
+            rising = xy[: int(np.argmax(xy[:, 1])) + 1]     # up to the highest load factor
+            at = float(np.interp(factor, np.maximum.accumulate(rising[:, 1]), rising[:, 0]))
+            ax.plot([at], [factor], marker=_END_MARKERS[kind][0], markersize=6, linestyle="none",
+                    color=line.get_color(), markeredgecolor="k", zorder=4)
+            labelled.add(kind)
+    for kind in sorted(labelled):  # one neutral legend entry per kind of end
+        ax.plot([], [], marker=_END_MARKERS[kind][0], linestyle="none", color="white", markeredgecolor="k",
+                label=_END_MARKERS[kind][1])
     if required is not None and np.isfinite(required):
         ax.axhline(required, color="k", linestyle="--", linewidth=1.0, label=f"required factor {required:g}")
     if len(skipped) == len(curves):

@@ -273,8 +273,12 @@ def _draw(ctx, polymesh, result, utilisation, axial, project: Project) -> None:
     curves = {c.name: np.asarray(c.path) for c in ([result.perfect] if result.perfect else []) + list(result.imperfect)}
     if curves:
         worst = result.worst.name if result.worst else None
+        cases = ([result.perfect] if result.perfect else []) + list(result.imperfect)
+        ends = {c.name: ("limit", c.limit_load_factor) if c.limit_load_factor is not None
+                else ("tolerable", c.tolerable_load_factor) for c in cases
+                if c.limit_load_factor is not None or c.tolerable_load_factor is not None}
         plot_response(curves, ctx.folder / "response.png", worst=worst, required=project.analysis.required_load_factor,
-                      title=f"{name}: load factor against control-node deflection")
+                      title=f"{name}: load factor against control-node deflection", ends=ends)
 
 
 def load(folder: Path, project: Project) -> AnalysisSummary:

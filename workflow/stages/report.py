@@ -51,7 +51,8 @@ FIGURES = {
                  ("06-analysis/sections.png", "Sized sections: each beam's tube from the catalogue"),
                  ("06-analysis/modes.png", "Linear buckling modes, coloured by displacement (each drawn at 8 % of "
                                            "the span), with their load factors"),
-                 ("06-analysis/response.png", "Load factor against control-node deflection, worst imperfection bold"),
+                 ("06-analysis/response.png", "Load factor against control-node deflection, worst imperfection bold; "
+                  "dots: limit points, squares: the tolerable deflection reached first"),
                  ("06-analysis/loadtest.png", "Incremental load test: deflection of the control points")],
     "compare": [("compare/response.png", "Same-length comparison: response diagrams of the three grids")],
     "fabrication": [("07-fabrication/assembly/steps_strip.png", "Assembly sequence, from the supports inward"),
