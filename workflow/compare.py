@@ -26,6 +26,7 @@ all the same and the command exits 0 with the table.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -66,6 +67,7 @@ class GridRow:
     worst: str | None
     status: str = "ok"
     message: str = ""
+    ends: dict[str, tuple[str, float]] = dataclasses.field(default_factory=dict)  # per curve, as plot_response's
 
 
 def failure_message(label: str, what: str, error: GridshellError) -> str:
@@ -130,12 +132,16 @@ def _protocol(polymesh: PolyMesh, surface, project: Project, progress, executor=
         values.update({"sized_mass_kg": float((lengths * run.props.mass_per_length).sum()),
                        "sized_tubes": " / ".join(f"{n} x{c}" for n, c in zip(names, counts)),
                        "max_utilisation": float(checks.utilisation.max()), "all_checks_pass": bool(passes)})
-    curves = {}
-    if result.perfect is not None:
-        curves["perfect"] = np.asarray(result.perfect.path)
-    if worst is not None:
-        curves[f"worst ({worst.name})"] = np.asarray(worst.path)
-    return GridRow(values=values, curves=curves, worst=None if worst is None else worst.name)
+    curves, ends = {}, {}
+    for name, case in (("perfect", result.perfect), (f"worst ({worst.name})" if worst else "", worst)):
+        if case is None:
+            continue
+        curves[name] = np.asarray(case.path)
+        if case.limit_load_factor is not None:
+            ends[name] = ("limit", case.limit_load_factor)
+        elif case.tolerable_load_factor is not None:
+            ends[name] = ("tolerable", case.tolerable_load_factor)
+    return GridRow(values=values, curves=curves, worst=None if worst is None else worst.name, ends=ends)
 
 
 def compare_grids(project: Project, surface, voronoi: PolyMesh, *, field: GuidingField | None = None,
@@ -287,11 +293,14 @@ def run_compare(args: argparse.Namespace) -> int:
     folder = out_dir / "compare"
     folder.mkdir(parents=True, exist_ok=True)
     rows = []
-    curves = {}
+    curves: dict[str, np.ndarray] = {}
+    ends: dict[str, tuple[str, float]] = {}
     for label, (grid, row) in results.items():
         rows.append({"grid": label, **row.values, "status": row.status, "message": row.message})
         for name, path in row.curves.items():
             curves[f"{label}: {name}"] = path
+            if name in row.ends:
+                ends[f"{label}: {name}"] = row.ends[name]
         obj = folder / f"{_file_name(label)}.obj"
         if grid is not None:
             write_polymesh_obj(grid, obj, header=f"{project.project.name}: {label} grid")
@@ -311,7 +320,7 @@ def run_compare(args: argparse.Namespace) -> int:
 
     worst_curves = [k for k in curves if "worst" in k]
     not_analysed = ", ".join(row["grid"] for row in failed)
-    plot_response(curves, folder / "response.png", worst=worst_curves[0] if worst_curves else None,
+    plot_response(curves, folder / "response.png", worst=worst_curves[0] if worst_curves else None, ends=ends,
                   required=project.analysis.required_load_factor,
                   title=f"{project.project.name}: grids of equal length"
                         + (f" ({not_analysed}: failed, see compare.md)" if failed else ""))
