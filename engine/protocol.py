@@ -19,8 +19,12 @@ import numpy as np
 
 from .supports import Supports
 
-__all__ = ["ImperfectionCase", "ImperfectionShape", "ProtocolSettings", "ProtocolResult", "imperfection_shapes",
-           "nonlinear_path", "run_protocol"]
+__all__ = ["TOLERABLE_DEFLECTION_RATIO", "ImperfectionCase", "ImperfectionShape", "ProtocolSettings",
+           "ProtocolResult", "imperfection_shapes", "nonlinear_path", "run_protocol"]
+
+#: The tolerable deflection of a non-linear path is the grid's shorter plan side over this ratio
+#: (``ProtocolSettings.max_displacement``, set by the caller that knows the span).
+TOLERABLE_DEFLECTION_RATIO = 50.0
 
 #: The imperfect geometries: the linear (LS) and non-linear (GNL) shapes and the first three buckling modes.
 ImperfectionShape = Literal["linear", "nonlinear", "mode1", "mode2", "mode3"]

@@ -10,7 +10,7 @@ from engine.en1993 import ChecksMethod
 from engine.errors import InputError
 from engine.field import AnisotropyMap, FieldSettings, SizeMap
 from engine.optimize import OptimizeSettings
-from engine.protocol import ImperfectionShape, ProtocolSettings
+from engine.protocol import TOLERABLE_DEFLECTION_RATIO, ImperfectionShape, ProtocolSettings
 from engine.voronoi import RemeshSettings
 from fabrication.joints import JointKind, JointSettings
 from fabrication.limits import BuildLimits
@@ -144,7 +144,8 @@ _DEFAULTS = {
                  lambda: OptimizeSettings(min_beam_length=0.15, min_corner_angle_deg=25.0, max_cell_stretch=3.0,
                                           planar=False)),
     "analysis": (config.AnalysisConfig, lambda: config.AnalysisConfig().to_settings(_SPAN),
-                 lambda: ProtocolSettings(amplitude=_SPAN / 300.0)),
+                 lambda: ProtocolSettings(amplitude=_SPAN / 300.0,
+                                          max_displacement=_SPAN / TOLERABLE_DEFLECTION_RATIO)),
     "fabrication.joints": (config.JointsConfig, lambda: config.JointsConfig(kind="socket").to_settings(),
                            JointSettings),
     "fabrication.beams": (config.BeamsConfig, lambda: config.BeamsConfig().to_settings(**_TUBE),

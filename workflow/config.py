@@ -34,7 +34,7 @@ from engine.errors import GridshellError
 from engine.field import AnisotropyMap, FieldSettings, Orientation, SizeMap
 from engine.grids import GridKind
 from engine.optimize import OptimizeSettings
-from engine.protocol import ImperfectionShape, ProtocolSettings
+from engine.protocol import TOLERABLE_DEFLECTION_RATIO, ImperfectionShape, ProtocolSettings
 from engine.supports import restraint_flags
 from engine.voronoi import RemeshSettings
 from fabrication.joints import JointKind, JointSettings
@@ -421,7 +421,7 @@ class AnalysisConfig(_Section):
     max_load_factor: float = _default_of(ProtocolSettings, "max_load_factor", gt=0)
     required_load_factor: float = Field(1.5, gt=0)
     deflection_limit_ratio: float = Field(250.0, gt=0)
-    tolerable_deflection_ratio: float = Field(50.0, gt=0)
+    tolerable_deflection_ratio: float = Field(TOLERABLE_DEFLECTION_RATIO, gt=0)
     buckling_length_factor: float = Field(1.0, gt=0)
     uls_combination: str | None = None
     sls_combination: str | None = None
