@@ -239,3 +239,19 @@ def test_one_number_format_for_the_report_and_the_terminal(value, page, terminal
 
     assert format_value(value) == page
     assert format_value(value, text=True) == terminal and terminal.isascii()
+
+
+def test_the_report_says_where_each_imperfect_paths_load_factor_was_read(small_run):
+    """The imperfection table's 'read at' follows analysis.json: a limit point, the tolerable
+    deflection reached first, or the highest load factor carried."""
+    import json
+
+    _, out = small_run
+    analysis = json.loads((out / "06-analysis" / "analysis.json").read_text(encoding="utf-8"))
+    expected = {i["shape"]: ("limit point" if i["limit_point"] else "tolerable deflection"
+                             if i["tolerable_deflection_reached"] else "highest carried")
+                for i in analysis["imperfections"]}
+    tables = _tables((out / "report.html").read_text(encoding="utf-8"))
+    (table,) = [t for t in tables if t[0][:3] == ["imperfection", "non-linear load factor", "read at"]]
+    assert {row[0]: row[2] for row in table[1:]} == expected
+    assert analysis["tolerable_deflection_m"] > 0

@@ -72,6 +72,7 @@ LABELS: dict[str, tuple[str, str, float]] = {
     "worst_imperfection": ("worst imperfection", "", 1.0),
     "knock_down": ("knock-down (worst / perfect)", "", 1.0),
     "imperfection_amplitude_m": ("imperfection amplitude", "mm", 1e3),
+    "tolerable_deflection_m": ("tolerable deflection of the non-linear paths", "mm", 1e3),
     "control_node": ("control node", "", 1.0),
     "beam_mass_kg": ("beam mass", "kg", 1.0),
     # fabrication

@@ -103,6 +103,15 @@ def _pairs(name: str, caption: str, values: dict) -> Table:
     return Table(name=name, caption=caption, columns=["item", "value"], rows=[[k, v] for k, v in values.items()])
 
 
+def _read_at(case: dict) -> str:
+    """Where an imperfect path's load factor was read (analysis.json's imperfections)."""
+    if case.get("limit_point"):
+        return "limit point"
+    if case.get("tolerable_deflection_reached"):
+        return "tolerable deflection"
+    return "highest carried" + ("" if case.get("path_complete", True) else " (path stopped early)")
+
+
 def _figures_table(name: str, caption: str, values: dict, keys: tuple[str, ...] | None = None) -> Table:
     """A table of a stage's JSON figures: [figure, value, unit], labelled and in their units."""
     return Table(name=name, caption=caption, columns=["figure", "value", "unit"], rows=figure_rows(values, keys))
@@ -205,14 +214,14 @@ def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
                             if rows else []))
     figure_keys = ("uls_combination", "sls_combination", "delta_L_m", "max_vertical_sls_m", "deflection_limit_m",
                    "max_utilisation", "governing_member", "lambda_LB", "lambda_NL_perfect", "lambda_NL_worst",
-                   "worst_imperfection", "knock_down", "imperfection_amplitude_m", "control_node", "beam_mass_kg",
-                   "equilibrium_error")
+                   "worst_imperfection", "knock_down", "imperfection_amplitude_m", "tolerable_deflection_m",
+                   "control_node", "beam_mass_kg", "equilibrium_error")
     tables = [_figures_table("analysis", "Beam grid-shell analysis", analysis, figure_keys)]
     imperfections = analysis.get("imperfections", [])
     if imperfections:
-        tables.append(Table(name="imperfections", caption="Non-linear limit load factor per imperfection",
-                            columns=["imperfection", "non-linear limit load factor"],
-                            rows=[[i["shape"], i["lambda_NL"]] for i in imperfections]))
+        tables.append(Table(name="imperfections", caption="Non-linear load factor per imperfection",
+                            columns=["imperfection", "non-linear load factor", "read at"],
+                            rows=[[i["shape"], i["lambda_NL"], _read_at(i)] for i in imperfections]))
     design = analysis.get("design")
     if design:
         tables.append(Table(name="design", caption=(
