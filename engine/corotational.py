@@ -530,9 +530,9 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             # the step passed the tolerable deformation on the way up (one that falls has passed a
             # limit point first): redo it aimed at it (at most 3 times) while it went more than
             # half the step too far, then read the load factor there off the step
-            before = reach(x)
-            share = (tolerable - before) / max(reach(x_try) - before, 1e-300)
-            if share < 0.5 and landings < 3:
+            before = reach(x)              # past the bound already under the dead load alone: share 0
+            share = float(np.clip((tolerable - before) / max(reach(x_try) - before, 1e-300), 0.0, 1.0))
+            if 0 < share < 0.5 and landings < 3:
                 landings += 1
                 arc *= max(share, 0.01)
                 continue

@@ -123,6 +123,18 @@ def test_the_path_stops_at_the_tolerable_deformation_of_a_cantilever_elastica():
     assert free_run.tolerable_load_factor is None and free_run.path[-1, 0] == pytest.approx(10.0)
 
 
+def test_a_dead_load_past_the_tolerable_deformation_leaves_no_load_factor_to_carry():
+    """The bound is passed under the held dead load alone: the path stops at once, at load factor 0."""
+    n, length = 8, 2.0
+    model = _line((1, 0, 0), length, n, (0, 0, 1))
+    dead, loads = np.zeros((n + 1, 6)), np.zeros((n + 1, 6))
+    dead[n, 2] = loads[n, 2] = -1000.0
+    tip = 1000.0 * length**3 / (3 * E * IY)                  # the dead load's tip deflection
+    run = nonlinear_static(model, Supports(nodes=np.array([0]), restraints=FIXED[None]), loads, control=(n, 2),
+                           initial_loads=dead, max_load_factor=10.0, max_displacement=0.5 * tip)
+    assert run.tolerable_load_factor == 0.0 and run.limit_load_factor is None
+
+
 def _lee_frame(n: int = 10):
     column = np.c_[np.zeros(n + 1), np.zeros(n + 1), np.linspace(0, 120.0, n + 1)]
     beam = np.c_[np.linspace(0, 120.0, n + 1)[1:], np.zeros(n), np.full(n, 120.0)]
