@@ -521,10 +521,9 @@ def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings):
         start = 0.5 * hub_radius
         for d in directions:
             side = _perpendicular(d, axis)  # the plate's normal
-            up = np.cross(d, side)
             plate = Box(setback + sleeve - start, settings.plate_thickness_mm, 0.8 * height,
                         align=(Align.MIN, Align.CENTER, Align.CENTER))
-            plates.append(plate.moved(Location(_plane(start * d, up, d))).wrapped)
+            plates.append(plate.moved(Location(_plane(start * d, np.cross(d, side), d))).wrapped)
             plate_ends.append(("plane", d, setback + sleeve))
             hole = Cylinder(0.5 * settings.bolt_hole_mm, 3 * settings.plate_thickness_mm)
             holes.append(hole.moved(Location(_plane(d * (setback + 0.5 * sleeve), side))).wrapped)
@@ -540,7 +539,6 @@ def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings):
         hub_height = 2.0 * outer + 1.0  # taller than a sleeve: no tangent faces between hub top and sleeves
         hub = _cylinder(-0.5 * hub_height * axis, axis, hub_radius, hub_height)
         sleeves, tools, features = [], [], []
-        sleeve_walls, hole_walls = [], []  # the outer wall of each sleeve, the wall of each hole
         # each socket fits its own tube; the hub and the set-back take the largest
         for d, own in zip(directions, geometry.sizes_mm):
             bore_k = 0.5 * own + settings.clearance_mm
@@ -548,17 +546,17 @@ def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings):
             side = _upright(d, axis)
             sleeves.append(_cylinder(np.zeros(3), d, outer_k, setback + sleeve_k))
             features.append(("sleeve", np.zeros(3), d * (setback + sleeve_k), outer_k))
-            sleeve_walls.append(("cylinder", np.zeros(3), d, outer_k))
             tools.append(_cylinder(d * setback, d, bore_k, sleeve_k + 1.0))
             features.append(("hole", d * setback, d * (setback + sleeve_k + 1.0), bore_k))
-            hole_walls.append(("cylinder", d * setback, d, bore_k))
             pin_centre = d * (setback + 0.6 * sleeve_k)
             tools.append(_cylinder(pin_centre - 2 * outer_k * side, side, 0.5 * settings.pin_hole_mm, 4 * outer_k))
             features.append(("hole", pin_centre - 2 * outer_k * side, pin_centre + 2 * outer_k * side,
                              0.5 * settings.pin_hole_mm))
-            hole_walls.append(("cylinder", pin_centre, side, 0.5 * settings.pin_hole_mm))
-        # one fuse and one cut with all tools (faster than a boolean per feature), checked
-        shape = _checked_boolean("cut", _checked_boolean("fuse", hub, sleeves, sleeve_walls), tools, hole_walls)
+        # one fuse and one cut with all tools (faster than a boolean per feature), each checked by
+        # the wall its features' cylinders leave (the sleeves' outsides, the bores and pin holes)
+        walls = {kind: [("cylinder", a, b - a, r) for k, a, b, r in features if k == kind]
+                 for kind in ("sleeve", "hole")}
+        shape = _checked_boolean("cut", _checked_boolean("fuse", hub, sleeves, walls["sleeve"]), tools, walls["hole"])
         blank = solid = _as_build123d(shape)
         if settings.engrave:
             solid = _as_build123d(_engrave_id(shape, name, geometry, settings, top_mm=0.5 * hub_height,
