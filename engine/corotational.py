@@ -526,12 +526,13 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             arc *= 0.3
             arc_cap = arc
             continue
-        if tolerable is not None and limit is None and not lam_try < lam and reach(x_try) > tolerable:
+        reached = reach(x_try) if tolerable is not None and limit is None and not lam_try < lam else 0.0
+        if tolerable is not None and reached > tolerable:
             # the step passed the tolerable deformation on the way up (one that falls has passed a
             # limit point first): redo it aimed at it (at most 3 times) while it went more than
             # half the step too far, then read the load factor there off the step
             before = reach(x)              # past the bound already under the dead load alone: share 0
-            share = float(np.clip((tolerable - before) / max(reach(x_try) - before, 1e-300), 0.0, 1.0))
+            share = float(np.clip((tolerable - before) / max(reached - before, 1e-300), 0.0, 1.0))
             if 0 < share < 0.5 and landings < 3:
                 landings += 1
                 arc *= max(share, 0.01)

@@ -65,14 +65,21 @@ class ImperfectionCase:
         return float(np.max(self.path[:, 0])) if len(self.path) else 0.0
 
     @property
+    def read_at(self) -> Literal["limit", "tolerable", "carried"]:
+        """Where the capacity is read: the limit point, the tolerable deformation reached before
+        any, or (neither reached) the highest factor carried."""
+        if self.limit_load_factor is not None:
+            return "limit"
+        return "carried" if self.tolerable_load_factor is None else "tolerable"
+
+    @property
     def capacity(self) -> float:
-        """The limit load factor; where the tolerable deformation came first, the load factor there;
-        else the highest factor carried (a lower bound, conservative when the path stopped early)."""
+        """The load factor where the path's capacity is read (``read_at``): its limit load factor,
+        the load factor at the tolerable deformation, or the highest factor carried (a lower bound,
+        conservative when the path stopped early)."""
         if self.limit_load_factor is not None:
             return self.limit_load_factor
-        if self.tolerable_load_factor is not None:
-            return self.tolerable_load_factor
-        return self.peak_load_factor
+        return self.peak_load_factor if self.tolerable_load_factor is None else self.tolerable_load_factor
 
 
 @dataclass(frozen=True, kw_only=True)

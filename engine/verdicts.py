@@ -112,12 +112,9 @@ def design_verdicts(*, utilisation: np.ndarray, sls_displacements: np.ndarray, d
                                 passed=bool(lambda_LB >= required_load_factor), fix=fixes.stiffer))
     if worst is not None:
         capacity = float(worst.capacity)
-        if worst.limit_load_factor is not None:
-            label = "limit load factor"
-        elif worst.tolerable_load_factor is not None:
-            label = "load factor at the tolerable deflection (no limit point before it)"
-        else:
-            label = "load factor carried (no limit point found)"
+        label = {"limit": "limit load factor",
+                 "tolerable": "load factor at the tolerable deflection (no limit point before it)",
+                 "carried": "load factor carried (no limit point found)"}[worst.read_at]
         verdicts.append(Verdict(check=f"worst non-linear {label} ({worst.name})", kind="nonlinear_buckling",
                                 value=capacity, limit=required_load_factor, part=worst.name,
                                 passed=bool(capacity >= required_load_factor), fix=fixes.stiffer))

@@ -137,10 +137,8 @@ def _protocol(polymesh: PolyMesh, surface, project: Project, progress, executor=
         if case is None:
             continue
         curves[name] = np.asarray(case.path)
-        if case.limit_load_factor is not None:
-            ends[name] = ("limit", case.limit_load_factor)
-        elif case.tolerable_load_factor is not None:
-            ends[name] = ("tolerable", case.tolerable_load_factor)
+        if case.read_at != "carried":
+            ends[name] = (case.read_at, case.capacity)
     return GridRow(values=values, curves=curves, worst=None if worst is None else worst.name, ends=ends)
 
 

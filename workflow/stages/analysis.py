@@ -270,13 +270,11 @@ def _draw(ctx, polymesh, result, utilisation, axial, project: Project) -> None:
     if len(result.buckling_factors):
         plot_buckling_modes(polymesh.nodes, polymesh.edges, result.buckling_modes[:4], result.buckling_factors[:4],
                             ctx.folder / "modes.png", title=f"{name}: linear buckling modes")
-    curves = {c.name: np.asarray(c.path) for c in ([result.perfect] if result.perfect else []) + list(result.imperfect)}
+    cases = ([result.perfect] if result.perfect else []) + list(result.imperfect)
+    curves = {c.name: np.asarray(c.path) for c in cases}
     if curves:
         worst = result.worst.name if result.worst else None
-        cases = ([result.perfect] if result.perfect else []) + list(result.imperfect)
-        ends = {c.name: ("limit", c.limit_load_factor) if c.limit_load_factor is not None
-                else ("tolerable", c.tolerable_load_factor) for c in cases
-                if c.limit_load_factor is not None or c.tolerable_load_factor is not None}
+        ends = {c.name: (c.read_at, c.capacity) for c in cases if c.read_at != "carried"}
         plot_response(curves, ctx.folder / "response.png", worst=worst, required=project.analysis.required_load_factor,
                       title=f"{name}: load factor against control-node deflection", ends=ends)
 
