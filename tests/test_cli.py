@@ -138,3 +138,20 @@ def test_the_library_logs_nothing_without_an_application_handler():
             "import fabrication, workflow; logging.getLogger('workflow.runner').warning('nor this')")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert result.returncode == 0 and result.stderr == ""
+
+
+
+def test_run_without_project_takes_the_folders_project_toml(capsys, tmp_path, monkeypatch):
+    """`gridshell init DIR`, then `gridshell run` in DIR runs that project (here the cap, not the
+    mock-up) to out/DIR; with no project.toml there, the mock-up runs (test above)."""
+    import tomllib
+
+    job = tmp_path / "myroof"
+    assert _run(capsys, "init", str(job), "--template", "cap")[0] == 0
+    monkeypatch.chdir(job)
+    code, out, err = _run(capsys, "run", "--until", "surface", "--quiet")
+    assert code == 0 and "no PROJECT given" in err
+    manifest = json.loads((job / "out" / "myroof" / "manifest.json").read_text())
+    cap = tomllib.loads((job / "project.toml").read_text())["project"]["name"]
+    assert manifest["project_file"] == str((job / "project.toml").resolve())
+    assert manifest["config"]["project"]["name"] == cap != "mockup"

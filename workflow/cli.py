@@ -49,6 +49,15 @@ def _write_json(data: dict, path: str) -> None:
     print(Path(path).resolve())
 
 
+def _job_name(project_path: Path) -> str:
+    """The default output folder's name for a project: its folder's for a project.toml (as ``init``
+    writes it, or a folder given as PROJECT), else the file's stem."""
+    path = project_path.resolve()
+    if path.is_dir():
+        return path.name
+    return path.parent.name if path.name == "project.toml" and path.parent.name else path.stem
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from .config import check_inputs, load_project, project_from_surface, unusual_values
     from .progress import Progress
@@ -72,10 +81,16 @@ def cmd_run(args: argparse.Namespace) -> int:
         default_out = Path("out") / Path(args.surface).stem
         project_file = None
     else:
-        project_path = Path(args.project) if args.project else _template_path("mockup")
+        # no PROJECT: the project.toml of the working folder (as `gridshell init .` writes it), else the mock-up
+        here = Path("project.toml")
+        given = args.project or (str(here) if here.is_file() else None)
+        project_path = Path(given) if given else _template_path("mockup")
         project = load_project(project_path)
-        default_out = Path("out") / (project_path.stem if args.project else "mockup")
+        default_out = Path("out") / (_job_name(project_path) if given else "mockup")
         project_file = str(project_path.resolve())
+        if given and not args.project:
+            print(f"gridshell: running {here.resolve()} (no PROJECT given; where there is no project.toml, "
+                  "`gridshell run` runs the mock-up)", file=sys.stderr)
     check_inputs(project, quick_start=bool(args.surface))   # what validate checks, before any stage runs
     for line in unusual_values(project):
         print(f"warning: {line}", file=sys.stderr)
@@ -201,7 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
                              "and paths (-vv: every step, with times)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    run = sub.add_parser("run", help="run a project (default: the 2.4 m mock-up template)")
+    run = sub.add_parser("run", help="run a project (default: ./project.toml, else the 2.4 m mock-up template)")
     run.add_argument("project", nargs="?", help="project file (TOML)")
     run.add_argument("--surface", metavar="MESH", help="quick start from a mesh file (OBJ, PLY, STL, OFF, 3DM)")
     run.add_argument("--supports", choices=("boundary", "flagged"), help="supports for --surface (default boundary)")
