@@ -3,6 +3,7 @@ panel DXFs with sheet nesting (benchmarks/_bench_panels.py).
 
     .venv/bin/python benchmarks/fabrication_speed.py [--nodes 500] [--workers 2] [--peers 12] [--skip-panels]
     .venv/bin/python benchmarks/fabrication_speed.py --beams 4500   # beams.step only
+    .venv/bin/python benchmarks/fabrication_speed.py --same-joints 3000   # grouping the joints only
 
 Targets (issue 6): under 1 s per joint on average on 2 cores; 1000 panels with nesting under 30 s.
 Peers, measured in the same run on the first ``--peers`` joints, one process, CPU seconds: the id
@@ -12,6 +13,10 @@ from all the solids held in one process (as before the part files streamed by th
 ``--beams N``: beams.step of a grid of about N beams (CHS 60.3 x 3.2), and in the same run the
 same file with every tube extruded from one shared profile face, as it was before 2026-12-03
 (its build and export grew as the square of the tubes).
+
+``--same-joints N``: the grouping of equal joints (fabrication.joints.same_joints) on the joints of
+a grid of about N nodes, and in the same run every joint compared with every group's first, as it
+was before 2026-12-04, with both groupings compared.
 """
 
 from __future__ import annotations
@@ -145,6 +150,32 @@ def bench_beams_step(beams: int) -> None:
                   flush=True)
 
 
+def bench_same_joints(nodes: int) -> None:
+    """Seconds of same_joints on a grid of about ``nodes`` nodes, and of comparing every joint with
+    every group's first member (the peer, as before); both must give the same groups."""
+    grid, normals = _grid(nodes)
+    geometries = joints.joint_geometry(grid, normals, 12.0)
+    start = time.perf_counter()
+    groups = joints.same_joints(geometries)
+    ours = time.perf_counter() - start
+    described = [joints._beams_about_axis(g) for g in geometries]
+    scale = np.array([1e-3, 1e-3, 1e-3])
+    start = time.perf_counter()
+    every: list[list[int]] = []
+    for k, d in enumerate(described):
+        for group in every:
+            a = described[group[0]]
+            if len(a) == len(d) and any(np.all(np.abs(a - np.roll(d, s, axis=0)) <= scale) for s in range(len(d))):
+                group.append(k)
+                break
+        else:
+            every.append([k])
+    peer = time.perf_counter() - start
+    same = groups == [[joints.joint_name(geometries[k].node) for k in g] for g in every if len(g) > 1]
+    print(f"same joints, {len(geometries)} joints ({len(groups)} groups): k-d tree neighbours {ours:.3f} s, "
+          f"every group's first (peer) {peer:.1f} s ({peer / max(ours, 1e-9):.0f}x); same groups: {same}")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--nodes", type=int, default=500)
@@ -152,7 +183,11 @@ def main() -> int:
     parser.add_argument("--peers", type=int, default=12, help="joints for the peer figures (0: none)")
     parser.add_argument("--skip-panels", action="store_true")
     parser.add_argument("--beams", type=int, default=0, help="only beams.step of a grid of about this many beams")
+    parser.add_argument("--same-joints", type=int, default=0, help="only the grouping of equal joints, about N nodes")
     args = parser.parse_args()
+    if args.same_joints:
+        bench_same_joints(args.same_joints)
+        return 0
     if args.beams:
         bench_beams_step(args.beams)
         return 0

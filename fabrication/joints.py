@@ -196,6 +196,25 @@ def _beams_about_axis(geometry: JointGeometry) -> np.ndarray:
     return np.column_stack([d[order] @ axis, gaps, geometry.sizes_mm[order]])
 
 
+def _near_joints(described: list[np.ndarray], scale: np.ndarray) -> list[set[int]]:
+    """For each joint, the others of as many beams whose columns, each sorted, differ by at most
+    ``scale`` (elevation, gap, size): a superset of the joints it can be a turned copy of."""
+    from scipy.spatial import cKDTree
+
+    near: list[set[int]] = [set() for _ in described]
+    by_count: dict[int, list[int]] = {}
+    for k, d in enumerate(described):
+        by_count.setdefault(len(d), []).append(k)
+    for count, members in by_count.items():
+        if count == 0 or len(members) < 2:
+            continue
+        features = np.array([(np.sort(described[k], axis=0) / scale).ravel() for k in members])
+        for i, j in cKDTree(features).query_pairs(r=1.0 + 1e-6, p=np.inf):
+            near[members[i]].add(members[j])
+            near[members[j]].add(members[i])
+    return near
+
+
 def same_joints(geometries: list[JointGeometry], tolerance_rad: float = 1e-3,
                 tolerance_mm: float = 1e-3) -> list[list[str]]:
     """Groups (two or more ids) of joints that are the same part but for the engraved id: the same
@@ -209,13 +228,19 @@ def same_joints(geometries: list[JointGeometry], tolerance_rad: float = 1e-3,
         return len(a) == len(b) and any(np.all(np.abs(a - np.roll(b, shift, axis=0)) <= scale)
                                         for shift in range(len(b)))
 
+    # Only joints whose sorted columns agree within the tolerances can be the same (sorting moves no
+    # value further than the turn that matches them did), so each joint is compared with those
+    # neighbours only, found in a k-d tree; the groups are those of comparing every pair in order.
+    near = _near_joints(described, scale)
     groups: list[list[int]] = []
+    group_of: dict[int, int] = {}  # first member -> its group
     for k, d in enumerate(described):
-        for group in groups:
-            if same(described[group[0]], d):
-                group.append(k)
+        for first in sorted(j for j in near[k] if j in group_of):  # groups in the order they were opened
+            if same(described[first], d):
+                groups[group_of[first]].append(k)
                 break
         else:
+            group_of[k] = len(groups)
             groups.append([k])
     return [[joint_name(geometries[k].node) for k in group] for group in groups if len(group) > 1]
 

@@ -779,3 +779,47 @@ def test_a_steel_node_has_no_stl_and_the_clash_check_takes_its_box_from_the_soli
     broad = joint_clashes_from_step(tmp_path, stl_boxes=True, boxes=boxes)
     every = joint_clashes_from_step(tmp_path)
     assert [c["parts"] for c in broad] == [c["parts"] for c in every] == [["J0007", "J0008"]]
+
+
+def test_same_joints_groups_as_comparing_every_pair():
+    """On many joints, some turned copies of others (within the tolerance), the grouping equals the
+    definition applied to every pair in order (the neighbour search only prunes)."""
+    from fabrication.joints import JointGeometry, _beams_about_axis, same_joints
+
+    rng = np.random.default_rng(7)
+    joints = []
+    for node in range(300):
+        if node >= 100 and rng.random() < 0.5:  # a turned copy of an earlier joint, nudged within 1e-3 rad
+            source = joints[int(rng.integers(0, 100))]
+            angle = rng.uniform(0, 2 * np.pi)
+            c, s = np.cos(angle), np.sin(angle)
+            turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+            directions = (turn @ source.directions.T).T + rng.normal(0, 1e-5, source.directions.shape)
+            directions /= np.linalg.norm(directions, axis=1)[:, None]
+            joints.append(JointGeometry(node=node, position_mm=np.zeros(3), directions=directions,
+                                        axis=turn @ source.axis, beam_size_mm=12.0))
+            continue
+        count = int(rng.integers(2, 5))
+        azimuth = np.sort(rng.uniform(0, 2 * np.pi, count))
+        elevation = rng.choice([-0.1, 0.0, 0.1], count)  # few distinct values: near misses in one column
+        directions = np.column_stack([np.cos(azimuth), np.sin(azimuth), elevation])
+        directions /= np.linalg.norm(directions, axis=1)[:, None]
+        joints.append(JointGeometry(node=node, position_mm=np.zeros(3), directions=directions,
+                                    axis=np.array([0.0, 0.0, 1.0]), beam_size_mm=12.0))
+    described = [_beams_about_axis(g) for g in joints]
+    scale = np.array([1e-3, 1e-3, 1e-3])
+
+    def same(a, b):
+        return len(a) == len(b) and any(np.all(np.abs(a - np.roll(b, s, axis=0)) <= scale) for s in range(len(b)))
+
+    groups: list[list[int]] = []
+    for k, d in enumerate(described):
+        for group in groups:
+            if same(described[group[0]], d):
+                group.append(k)
+                break
+        else:
+            groups.append([k])
+    every_pair = [[f"J{k + 1:04d}" for k in g] for g in groups if len(g) > 1]
+    assert len(every_pair) > 20
+    assert same_joints(joints) == every_pair
