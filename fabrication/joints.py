@@ -40,7 +40,7 @@ from engine.parts import joint_id
 from .files import atomic_path, compact_step_points, stamp_step
 from .settings import check_ranges
 from .step_assembly import StepAssemblyWriter, step_part, write_step_part
-from .workers import exit_with_parent
+from .workers import StepOutcome, exit_with_parent, run_steps
 
 __all__ = ["JointKind", "JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "joint_hub_radius_mm",
            "joint_sleeve_mm", "smallest_angle", "build_joint", "build_joint_and_blank", "build_joints", "same_joints",
@@ -874,6 +874,15 @@ class JointsInBackground:
             self._error = error
             for future in self._futures:
                 future.cancel()
+
+    def run_steps(self, steps: dict, starting=None) -> dict[str, StepOutcome]:
+        """Run independent ``steps`` (name -> a picklable function of no arguments) in this thread
+        and on the joints' workers as soon as one has no joint left to take
+        (fabrication.workers.run_steps); each step's result, seconds and where it ran."""
+        if self._pool is None:
+            return run_steps(steps, starting=starting)
+        return run_steps(steps, self._pool, lambda: self.workers - sum(not f.done() for f in self._futures),
+                         starting=starting)
 
     def wait(self, progress=None, poll_s: float = 0.5) -> None:
         """Wait for the workers, passing the latest progress message to ``progress`` meanwhile."""

@@ -12,8 +12,11 @@ from __future__ import annotations
 import json
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -41,6 +44,7 @@ from fabrication.joints import (
 from fabrication.limits import BuildLimits, default_min_cut_length_mm
 from fabrication.model3d import write_gridshell_3dm, write_gridshell_step
 from fabrication.nesting_bars import nest_bars
+from fabrication.workers import run_steps
 
 from ..config import MM, Project
 from ..runner import StageContext
@@ -49,6 +53,11 @@ from .build_limits import build_limits_of
 from .optimize import OptimizedGrid
 from .sizing import BeamSections, profile_name, project_sections
 from .surface import SurfaceResult
+
+if TYPE_CHECKING:  # pragma: no cover
+    from fabrication.nesting_sheets import StockNesting
+    from fabrication.panels import Panel
+    from fabrication.settings import PanelSettings, SheetSettings
 
 # fabrication.beams and fabrication.nc1 (pandas), fabrication.panels and fabrication.nesting_sheets
 # (shapely) are imported where they are used: a run whose stages are all cached does not load them
@@ -112,7 +121,7 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     with JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
                             workers=config.workers, combined_step=config.joints.combined_step) as joints:
         _beams_panels_drawings_assembly(project, ctx, clock, optimize, normals, joint_settings, limits, summary,
-                                        findings, sections)
+                                        findings, sections, share=joints.run_steps)
         clock.start("joints: waiting")
         joints.wait(ctx.step)
     clock.stop()
@@ -122,7 +131,9 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     summary["joint_problems"] = [{k: v for k, v in r.items() if k != "seconds"} for r in joint_reports
                                  if not r.get("ok", True)]
     # the same part but for the engraved id: one print file would do for each group but the label
+    clock.start("joints: same parts")
     groups = same_joints(joints.geometries)
+    clock.stop()
     summary["same_joints"] = groups
     summary["distinct_joints"] = len(joint_reports) - sum(len(g) - 1 for g in groups)
     findings += _joint_findings(joint_reports, limits)
@@ -246,9 +257,12 @@ def _joint_findings(reports: list[dict], limits: BuildLimits) -> list[Finding]:
 def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: _StepClock, grid: OptimizedGrid,
                                     normals: np.ndarray, joint_settings: JointSettings, limits: BuildLimits,
                                     summary: dict, findings: list[Finding],
-                                    sections: BeamSections | None = None) -> None:
+                                    sections: BeamSections | None = None,
+                                    share: Callable[..., dict] = run_steps) -> None:
     """Every step but the joints (they run meanwhile); fills ``summary`` and ``findings``.
-    ``sections``: the analysis's per-beam tubes where it sized them (workflow.stages.sizing)."""
+    ``sections``: the analysis's per-beam tubes where it sized them (workflow.stages.sizing);
+    ``share`` runs independent steps (fabrication.workers.run_steps, on the joints' workers as they
+    fall idle)."""
     polymesh = grid.polymesh
     config = project.fabrication
     folder: Path = ctx.folder
@@ -307,8 +321,6 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
         members = np.flatnonzero(nestable & (profiles == profile))
         nestings.append((profile, nest_bars(cut[members], [ids[i] for i in members], stock, kerf)))
     _write_bars_by_profile(nestings, folder / "beams" / "bars.csv")
-    clock.start("beams: beams.step")
-    write_beams_step(polymesh, table, folder / "beams" / "beams.step", outer_size_mm=sizes_mm, wall_mm=walls_mm)
     summary.update({"bars_used": sum(int(n.bars_used) for _, n in nestings),
                     "bars_lower_bound": sum(int(n.lower_bound) for _, n in nestings),
                     "bar_nesting_method": ", ".join(sorted({getattr(n, "method", "") for _, n in nestings})),
@@ -319,68 +331,63 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
                     "shortest_beam_m": float(polymesh.beam_lengths.min()) if len(cut) else 0.0,
                     "beam_mass_kg": float(table["mass_kg"].sum())})
 
-    panels = []
+    panels, pieces = [], grid.pieces
+    panel_settings = config.panels.to_settings()
+    steps: dict[str, Callable[[], object]] = {}
     if config.panels.enabled:
-        clock.start("panels: flatten and DXFs")
-        from fabrication.nesting_sheets import nest_on_stock, sheet_overshoot, write_contact_sheet, write_sheet_dxfs
-        from fabrication.panels import flatten_panels, write_panel_dxfs, write_panels_csv
+        clock.start("panels: flatten")
+        from fabrication.panels import flatten_panels
 
-        panel_settings = config.panels.to_settings()
         problems: list[tuple[str, str]] = []
-        pieces = grid.pieces
         glazing = PolyMesh(nodes=polymesh.nodes, faces=tuple(p.loop for p in pieces))
         panels = flatten_panels(glazing, panel_settings, problems=problems)
         findings += [Finding(kind="panel_outline", parts=[pid], stage="fabrication", message=message,
                              fix="[fabrication.panels] clearance, or a new grid ([remesh] seed)")
                      for pid, message in problems]
-        write_panel_dxfs(panels, folder / "panels", panel_settings)
-        clock.start("panels: sheet nesting")
-        stocks = config.sheets.to_settings()
-        stock_nesting = nest_on_stock(panels, stocks)
+        cells = {panel.id: (pieces[panel.face].cell + 1, pieces[panel.face].piece) for panel in panels}
+        steps["panels"] = partial(_panel_files, panels, panel_settings, config.sheets.to_settings(),
+                                  folder / "panels", cells)
+    if sections is not None:  # the sized tubes carry the erection stages too
+        props = sections.frame_properties(beam_properties(project)[2])
+    beam = {"E": props.E, "G": props.G, "A": props.A, "Iy": props.Iy, "Iz": props.Iz, "J": props.J,
+            "mass_per_length": props.mass_per_length}
+    steps["assembly sequence"] = partial(_assembly_files, polymesh, beam, config.assembly.deflection_limit,
+                                         folder / "assembly")
+    steps["drawings"] = partial(write_plan_drawings, polymesh, folder / "drawings",
+                                project_name=project.project.name, support_nodes=np.flatnonzero(polymesh.supports))
+    joint_radius_mm = getattr(joint_settings, "hub_radius_mm", None) or 1.5 * float(sizes_mm.max())
+    steps["model: gridshell.step"] = partial(write_gridshell_step, polymesh, panels, sizes_mm / 2, joint_radius_mm,
+                                             folder / "gridshell.step")
+    steps["beams: beams.step"] = partial(write_beams_step, polymesh, table, folder / "beams" / "beams.step",
+                                         outer_size_mm=sizes_mm, wall_mm=walls_mm)
+    steps["model: gridshell.3dm"] = partial(write_gridshell_3dm, polymesh, panels, sizes_mm / 2, joint_radius_mm,
+                                            folder / "gridshell.3dm")
+    # independent steps, longest first: here one after another, and on the joints' workers as they run
+    # out of joints (the default job's joints outlast them; a large roof's steps outlast its joints)
+    clock.start("panels, assembly, drawings, models (wall clock)")
+    done = share(steps, ctx.step)
+    clock.stop()
+    for name, (result, seconds, where) in done.items():
+        on = " (on a worker)" if where == "worker" else ""
+        parts = result.seconds if isinstance(result, _PanelFiles) else {name: seconds}
+        clock.seconds.update({part: round(s, 3) for part, s in ((k + on, v) for k, v in parts.items())})
+    if "panels" in done:
+        files: _PanelFiles = done["panels"][0]
+        stock_nesting, stocks = files.nesting, files.stocks
         largest = max(stocks, key=lambda s: s.width_mm * s.height_mm)
-        for i in stock_nesting.unfit:
-            w, h, over = sheet_overshoot(panels[i], stocks)
+        for i, (w, h, over) in files.overshoots.items():
             findings.append(Finding(
                 kind="sheet_size", parts=[panels[i].id], measure=over, limit=1.0, unit="x sheet",
                 stage="fabrication",
                 message=(f"panel {panels[i].id} ({w:.0f} x {h:.0f} mm) fits no stock sheet "
                          f"(largest {largest.width_mm:g} x {largest.height_mm:g} mm); its DXF is written"),
                 fix="add a larger size to [fabrication.sheets] sizes, or more cells ([remesh] n_cells)"))
-        clock.start("panels: sheet DXFs, picture, CSV")
-        for first, (_, members, nesting_k) in zip(stock_nesting.first_numbers(), stock_nesting.groups):
-            group = [panels[i] for i in members]
-            write_sheet_dxfs(nesting_k, group, folder / "panels" / "sheets", panel_settings, first_number=first)
-        if stock_nesting.groups:  # every sheet of every stock size, on one contact sheet
-            write_contact_sheet([(nesting_k, [panels[i] for i in members], first) for first, (_, members, nesting_k)
-                                 in zip(stock_nesting.first_numbers(), stock_nesting.groups)],
-                                folder / "panels" / "sheets.png")
-        write_panels_csv(panels, None, panel_settings, folder / "panels" / "panels.csv",
-                         sheet_names=stock_nesting.sheet_of(panels),
-                         cells={panel.id: (pieces[panel.face].cell + 1, pieces[panel.face].piece) for panel in panels})
         summary.update({"panels": len(panels), "sheets": int(stock_nesting.n_sheets),
                         "sheet_sizes_mm": [[s.width_mm, s.height_mm, n.n_sheets] for s, _, n in stock_nesting.groups],
                         "sheet_utilisation": float(stock_nesting.utilisation),
                         "panels_over_planarity_tolerance": [getattr(x, "id", "") for x in panels
                                                             if getattr(x, "nonplanar", False)]})
-
-    clock.start("drawings")
-    write_plan_drawings(polymesh, folder / "drawings", project_name=project.project.name,
-                        support_nodes=np.flatnonzero(polymesh.supports))
-    clock.start("model: gridshell.step")
-    joint_radius_mm = getattr(joint_settings, "hub_radius_mm", None) or 1.5 * float(sizes_mm.max())
-    write_gridshell_step(polymesh, panels, sizes_mm / 2, joint_radius_mm, folder / "gridshell.step")
-    clock.start("model: gridshell.3dm")
-    write_gridshell_3dm(polymesh, panels, sizes_mm / 2, joint_radius_mm, folder / "gridshell.3dm")
-
-    clock.start("assembly sequence: plan")
-    if sections is not None:  # the sized tubes carry the erection stages too
-        props = sections.frame_properties(beam_properties(project)[2])
-    beam = {"E": props.E, "G": props.G, "A": props.A, "Iy": props.Iy, "Iz": props.Iz, "J": props.J,
-            "mass_per_length": props.mass_per_length}
-    sequence = plan_assembly(polymesh, np.flatnonzero(polymesh.supports), beam,
-                             deflection_limit_m=config.assembly.deflection_limit)
-    clock.start("assembly sequence: files")
-    written = dict(write_assembly(sequence, polymesh, folder / "assembly"))
+    written = done["assembly sequence"][0]
     # the stage folder is a temporary one until the stage succeeds: name the file from the stage's folder
     written["csv"] = Path(written["csv"]).relative_to(folder).as_posix()
     summary["assembly"] = written
@@ -388,6 +395,54 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
         clock.start("model: gridshell.ifc")
         _write_ifc(project, folder, polymesh, normals, table, panels, sizes_mm, walls_mm, joint_settings)
         summary["ifc"] = "gridshell.ifc"
+
+
+@dataclass(frozen=True)
+class _PanelFiles:
+    """What the panels' step returns: the nesting on the stock sizes, the panels too large for every
+    size (index -> width, height mm and overshoot), and its sub-steps' seconds."""
+
+    nesting: StockNesting
+    stocks: list[SheetSettings]
+    overshoots: dict[int, tuple[float, float, float]]
+    seconds: dict[str, float]
+
+
+def _panel_files(panels: list[Panel], settings: PanelSettings, stocks: list[SheetSettings], folder: Path,
+                 cells: dict[str, tuple[int, int]]) -> _PanelFiles:
+    """Every panel file: one DXF per panel, the nesting on the stock sheets, the sheets' DXFs and
+    contact sheet, panels.csv (a step that may run in a worker process)."""
+    from fabrication.nesting_sheets import nest_on_stock, sheet_overshoot, write_contact_sheet, write_sheet_dxfs
+    from fabrication.panels import write_panel_dxfs, write_panels_csv
+
+    seconds: dict[str, float] = {}
+    started = time.perf_counter()
+
+    def lap(name: str) -> None:
+        nonlocal started
+        seconds[name] = round(time.perf_counter() - started, 3)
+        started = time.perf_counter()
+
+    write_panel_dxfs(panels, folder, settings)
+    lap("panels: DXFs")
+    nesting = nest_on_stock(panels, stocks)
+    lap("panels: sheet nesting")
+    numbered = [(nesting_k, [panels[i] for i in members], first)
+                for first, (_, members, nesting_k) in zip(nesting.first_numbers(), nesting.groups)]
+    for nesting_k, group, first in numbered:
+        write_sheet_dxfs(nesting_k, group, folder / "sheets", settings, first_number=first)
+    if numbered:  # every sheet of every stock size, on one contact sheet
+        write_contact_sheet(numbered, folder / "sheets.png")
+    write_panels_csv(panels, None, settings, folder / "panels.csv", sheet_names=nesting.sheet_of(panels), cells=cells)
+    lap("panels: sheet DXFs, picture, CSV")
+    return _PanelFiles(nesting=nesting, stocks=list(stocks),
+                       overshoots={i: sheet_overshoot(panels[i], stocks) for i in nesting.unfit}, seconds=seconds)
+
+
+def _assembly_files(polymesh: PolyMesh, beam: dict, deflection_limit_m: float | None, folder: Path) -> dict:
+    """The assembly sequence planned and written (fabrication.assembly); returns write_assembly's summary."""
+    sequence = plan_assembly(polymesh, np.flatnonzero(polymesh.supports), beam, deflection_limit_m=deflection_limit_m)
+    return dict(write_assembly(sequence, polymesh, folder))
 
 
 def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, normals: np.ndarray, table, panels: list,
