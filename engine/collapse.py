@@ -502,7 +502,9 @@ def open_narrow_joints(polymesh: PolyMesh, min_angle_rad: float, *, max_passes: 
 def dissolve_kinks(polymesh: PolyMesh) -> tuple[PolyMesh, int]:
     """Drop the interior nodes with two beams (left by :func:`remove_beams`; not supports) from their
     cells where their two neighbours are not joined already and every cell keeps three nodes: the
-    two beams become one straight beam, and a kinked joint that carries nothing across goes. No
+    two beams become one straight beam, and a kinked joint that carries nothing across goes. Where the
+    two neighbours are joined and one of its cells is the triangle of the three (a spike: its two
+    beams meet at an angle no joint takes), the node goes with its two beams and that triangle. No
     other node moves. Returns the grid (unused nodes dropped, the others renumbered in order) and the
     number of nodes dropped."""
     edges = polymesh.edges
@@ -515,9 +517,19 @@ def dissolve_kinks(polymesh: PolyMesh) -> tuple[PolyMesh, int]:
     neighbours = neighbour_lists(edges, polymesh.n_nodes)
     busy = np.zeros(polymesh.n_nodes, dtype=bool)
     dropped = np.zeros(polymesh.n_nodes, dtype=bool)
+    gone: set[int] = set()
     for v in map(int, kinks):
         p, q = neighbours[v]
-        if busy[v] or busy[p] or busy[q] or (min(p, q), max(p, q)) in joined:
+        if busy[v] or busy[p] or busy[q]:
+            continue
+        if (min(p, q), max(p, q)) in joined:
+            spike = _spike(v, p, q, faces, node_faces)
+            if spike is not None:
+                triangle, other = spike
+                faces[other].remove(v)
+                gone.add(triangle)
+                busy[[v, p, q]] = True
+                dropped[v] = True
             continue
         if any(len(faces[i]) <= 3 for i in node_faces[v]):
             continue
@@ -530,10 +542,34 @@ def dissolve_kinks(polymesh: PolyMesh) -> tuple[PolyMesh, int]:
         return polymesh, 0
     keep = ~dropped
     number = np.cumsum(keep) - 1
-    result = PolyMesh(nodes=polymesh.nodes[keep], faces=tuple(np.asarray(number[f], dtype=np.int64) for f in faces),
+    result = PolyMesh(nodes=polymesh.nodes[keep], faces=tuple(np.asarray(number[f], dtype=np.int64)
+                                                              for i, f in enumerate(faces) if i not in gone),
                       boundary=polymesh.boundary[keep], supports=polymesh.supports[keep],
                       corners=polymesh.corners[keep])
     return result, int(dropped.sum())
+
+
+def _spike(v: int, p: int, q: int, faces: list[list[int]], node_faces: list[list[int]]) -> tuple[int, int] | None:
+    """(triangle, other cell) where the two-beam node ``v`` is the tip of the triangle (v, p, q) on
+    the beam p-q, and its other cell keeps three nodes and does not lie across p-q as well (p-q would
+    then run inside it); else None."""
+    cells = node_faces[v]
+    if len(cells) != 2:
+        return None
+    triangles = [i for i in cells if sorted(faces[i]) == sorted((v, p, q))]
+    if len(triangles) != 1:
+        return None
+    triangle = triangles[0]
+    other = cells[0] if cells[1] == triangle else cells[1]
+    def side(i: int) -> bool:  # p and q are neighbours in cell i's loop: the cell lies along the beam p-q
+        f = faces[i]
+        k = f.index(p)
+        return q in (f[k - 1], f[(k + 1) % len(f)])
+
+    across = [i for i in node_faces[p] if i != triangle and i in node_faces[q] and side(i)]
+    if len(faces[other]) <= 3 or other in across or len(across) > 1:
+        return None
+    return triangle, other
 
 
 def remove_short_beams(polymesh: PolyMesh, required: Callable[[PolyMesh], np.ndarray], *,

@@ -190,6 +190,32 @@ def test_removing_a_beam_merges_its_two_cells_and_moves_no_node():
     assert straight.valence.min() >= 2 and np.all(straight.valence[~straight.boundary] == 3)
 
 
+
+def test_a_spike_goes_with_its_triangle():
+    """A two-beam node at the tip of a thin triangle standing on a beam (its beams meet at 19 deg, no
+    joint takes that; its neighbours are joined, so it cannot be straightened) goes with its two
+    beams and the triangle; the cell around it closes over the beam; area and topology are kept."""
+    p, q, v, a, b, c, d, e, f = range(9)
+    nodes = np.array([[0, 0, 0], [1, 0, 0], [0.5, 3, 0], [2, 0, 0], [2, 4, 0], [-1, 4, 0], [-1, 0, 0],
+                      [2, -1, 0], [-1, -1, 0]], dtype=float)
+    faces = (np.array([p, q, v]), np.array([q, a, b, c, d, p, v]), np.array([d, f, e, a, q, p]))
+    boundary = np.zeros(9, dtype=bool)
+    boundary[[a, b, c, d, e, f]] = True
+    grid = PolyMesh(nodes=nodes, faces=faces, boundary=boundary)
+    _check_valid(grid)
+    result, dropped = dissolve_kinks(grid)
+    assert dropped == 1
+    _check_valid(result)
+    assert result.n_nodes == 8 and len(result.edges) == len(grid.edges) - 2 and result.n_faces == 2
+    assert not any(np.allclose(x, nodes[v]) for x in result.nodes)
+    assert _euler(result) == _euler(grid) and np.isclose(_area(result), _area(grid))
+    # p and q are then straight-through two-beam nodes: the next passes drop them (one per pass: neighbours)
+    straight, first = dissolve_kinks(result)
+    straight, second = dissolve_kinks(straight)
+    assert first + second == 2 and straight.n_nodes == 6 and straight.n_faces == 2
+    assert _euler(straight) == _euler(grid) and np.isclose(_area(straight), _area(grid))
+
+
 def test_boundary_beams_and_beams_at_two_beam_nodes_are_not_removed():
     grid = _honeycomb(3, 3)
     sides = np.sort(np.concatenate([np.stack([f, np.roll(f, -1)], 1) for f in grid.faces]), axis=1)
