@@ -50,6 +50,20 @@ def _check_finished(out: Path, summary) -> dict:
     assert clashes == {tuple(f["parts"]) for f in fabrication["findings"] if f["kind"] == "joint_clash"}
     for f in fabrication["findings"]:
         assert f["parts"] and f["fix"] and "[" in f["fix"], f  # names the part and the TOML key
+    # optimize.json's shortest beam and smallest angle are those of the grid it wrote, measured here
+    from workflow.stages.polymesh_io import read_polymesh_obj
+
+    grid = read_polymesh_obj(out / "05-optimize" / "gridshell.obj")
+    optimize = json.loads((out / "05-optimize" / "optimize.json").read_text())
+    assert optimize["shortest_beam_m"] == pytest.approx(grid.beam_lengths.min(), rel=1e-6)
+    smallest = 180.0
+    for v in range(grid.n_nodes):
+        at = grid.edges[(grid.edges == v).any(axis=1)]
+        d = grid.nodes[np.where(at[:, 0] == v, at[:, 1], at[:, 0])] - grid.nodes[v]
+        d /= np.linalg.norm(d, axis=1)[:, None]
+        smallest = min([smallest] + [np.degrees(np.arccos(np.clip(d[i] @ d[j], -1, 1)))
+                                     for i in range(len(d)) for j in range(i)])
+    assert optimize["smallest_beam_angle_deg"] == pytest.approx(smallest, abs=1e-4)
     # the findings the run reports include those of the stages' files
     reported = summary.findings
     for f in fabrication["findings"] + json.loads((out / "06-analysis" / "analysis.json").read_text())["findings"]:

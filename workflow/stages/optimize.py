@@ -214,8 +214,6 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
             ctx.report_findings([removed_finding(removed, result.polymesh)])
         if result.quality.get("corner_merges"):
             ctx.report_findings([corners_finding(result.quality["corner_merges"], build_limits_of(project))])
-            buildable.update({**grid_figures(result.polymesh),
-                              "short_beams_left": short_count(result.polymesh, project)})
     buildable.update({"collapsed_beams": collapsed, "flipped_beams": flipped, "removed_beams": removed,
                       "reoptimised": rounds, "grading_kept": grading_kept, "short_share_at_grading": share_kept})
     if buildable["too_fine"]:
@@ -232,6 +230,8 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: 
         symmetric = symmetrised_grid(result.polymesh, planes)
         if np.all(np.isfinite(symmetric.nodes)):  # else kept as optimised; the record measures it
             result = dataclasses.replace(result, polymesh=symmetric)
+    if removed or planes:  # the shortest beam and the smallest angle of the grid as written
+        buildable.update({**grid_figures(result.polymesh), "short_beams_left": short_count(result.polymesh, project)})
     write_polymesh_obj(result.polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: optimised grid-shell")
     ctx.step("panels: planar convex pieces of the cells that are not")
