@@ -876,13 +876,21 @@ class JointsInBackground:
                 future.cancel()
 
     def run_steps(self, steps: dict, starting=None) -> dict[str, StepOutcome]:
-        """Run independent ``steps`` (name -> a picklable function of no arguments) in this thread
-        and on the joints' workers as soon as one has no joint left to take
-        (fabrication.workers.run_steps); each step's result, seconds and where it ran."""
+        """Run independent ``steps`` (name -> a picklable function of a module, no arguments) in this
+        thread, and in other processes as soon as a joint worker has no joint left to take
+        (fabrication.workers.run_steps); each step's result, seconds and where it ran.
+
+        Those processes are started fresh ("spawn"), when the first step goes, not forked: a forked
+        child inherits the parent's thread pools without their threads (OCCT's parallel booleans,
+        OpenMP), and a step that uses one there waits for ever."""
         if self._pool is None:
             return run_steps(steps, starting=starting)
-        return run_steps(steps, self._pool, lambda: self.workers - sum(not f.done() for f in self._futures),
-                         starting=starting)
+        import multiprocessing
+
+        with ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=exit_with_parent, initargs=(os.getpid(),)) as fresh:
+            return run_steps(steps, fresh, lambda: self.workers - sum(not f.done() for f in self._futures),
+                             starting=starting)
 
     def wait(self, progress=None, poll_s: float = 0.5) -> None:
         """Wait for the workers, passing the latest progress message to ``progress`` meanwhile."""

@@ -20,7 +20,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from concurrent.futures import Executor, Future
+from concurrent.futures import Executor, Future, wait
 from typing import Any
 
 __all__ = ["exit_with_parent", "POLL_S", "run_steps", "StepOutcome"]
@@ -88,8 +88,11 @@ def run_steps(steps: dict[str, Callable[[], Any]], pool: Executor | None = None,
                     sent[name] = pool.submit(_timed, steps[name])
                     free -= 1
                 if not waiting:
-                    return
+                    break
             done.wait(poll_s)
+        # a pool that starts its workers on demand starts them from this thread, and exit_with_parent
+        # ends them with it (PR_SET_PDEATHSIG follows the thread): it lives until their steps have ended
+        wait(list(sent.values()))
 
     dispatcher = None
     if pool is not None and idle is not None:

@@ -57,3 +57,34 @@ def test_an_error_in_a_workers_step_is_raised_here():
         pool.submit(int).result()
         with pytest.raises(ValueError, match="step failed"):
             run_steps(steps, pool, idle=lambda: 1)
+
+
+def _cut_volume(size: float, wait_s: float = 0.0) -> float:
+    """A box less a cylinder through it (build123d runs the boolean on OCCT's thread pool), mm3."""
+    from build123d import Box, Cylinder
+
+    time.sleep(wait_s)
+    return (Box(size, size, size) - Cylinder(size / 4, 2 * size)).volume
+
+
+@pytest.mark.timeout(300)
+def test_steps_beside_the_joints_run_booleans_after_the_parent_ran_one(tmp_path):
+    """The parent ran a parallel OCCT boolean (its thread pool exists) before the joints' workers
+    started; the steps handed out once the joints are built still finish, with the volume this
+    process computes (in a forked child the boolean waited for the pool's threads for ever)."""
+    import numpy as np
+
+    from engine.mesh import PolyMesh
+    from fabrication.joints import JointSettings, JointsInBackground
+
+    expected = _cut_volume(10.0)
+    assert expected == pytest.approx(1000 - np.pi * 2.5**2 * 10, rel=1e-6)
+    nodes = np.array([[x, y, 0.0] for y in (0.0, 0.2) for x in (0.0, 0.2, 0.4)])
+    polymesh = PolyMesh(nodes=nodes, faces=(np.array([0, 1, 4, 3]), np.array([1, 2, 5, 4])))
+    normals = np.tile([0.0, 0.0, 1.0], (6, 1))
+    with JointsInBackground(polymesh, normals, 12.0, JointSettings(), tmp_path / "joints", workers=2) as joints:
+        done = joints.run_steps({"here": partial(_cut_volume, 10.0, 8.0), "a": partial(_cut_volume, 10.0),
+                                 "b": partial(_cut_volume, 10.0)})
+    assert len(joints.reports) == 6
+    assert "worker" in {w for _, _, w in done.values()}
+    assert all(r == pytest.approx(expected) for r, _, _ in done.values())
