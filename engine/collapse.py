@@ -561,6 +561,7 @@ def _spike(v: int, p: int, q: int, faces: list[list[int]], node_faces: list[list
         return None
     triangle = triangles[0]
     other = cells[0] if cells[1] == triangle else cells[1]
+
     def side(i: int) -> bool:  # p and q are neighbours in cell i's loop: the cell lies along the beam p-q
         f = faces[i]
         k = f.index(p)

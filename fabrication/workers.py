@@ -79,11 +79,11 @@ def run_steps(steps: dict[str, Callable[[], Any]], pool: Executor | None = None,
     outcome: dict[str, StepOutcome] = {}
     done = threading.Event()
 
-    def hand_out() -> None:
+    def hand_out(pool: Executor, idle: Callable[[], int]) -> None:
         while not done.is_set():
             with lock:
-                free = idle() - sum(not f.done() for f in sent.values()) if idle is not None else 0
-                while waiting and free > 0 and pool is not None:
+                free = idle() - sum(not f.done() for f in sent.values())
+                while waiting and free > 0:
                     name = waiting.popleft()
                     sent[name] = pool.submit(_timed, steps[name])
                     free -= 1
@@ -96,7 +96,7 @@ def run_steps(steps: dict[str, Callable[[], Any]], pool: Executor | None = None,
 
     dispatcher = None
     if pool is not None and idle is not None:
-        dispatcher = threading.Thread(target=hand_out, name="steps", daemon=True)
+        dispatcher = threading.Thread(target=hand_out, args=(pool, idle), name="steps", daemon=True)
         dispatcher.start()
     error: BaseException | None = None
     try:

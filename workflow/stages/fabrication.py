@@ -81,9 +81,10 @@ class FabricationResult:
 
 
 class _StepClock:
-    """Seconds per named step of the stage: each ``start`` ends the step before."""
+    """Seconds per named step of the stage: each ``start`` ends the step before (and names it to the
+    stage's progress, where there is a ``ctx``)."""
 
-    def __init__(self, ctx: StageContext) -> None:
+    def __init__(self, ctx: StageContext | None = None) -> None:
         self._ctx = ctx
         self.seconds: dict[str, float] = {}
         self._name: str | None = None
@@ -91,7 +92,8 @@ class _StepClock:
 
     def start(self, name: str) -> None:
         self.stop()
-        self._ctx.step(name)
+        if self._ctx is not None:
+            self._ctx.step(name)
         self._name, self._started = name, time.perf_counter()
 
     def stop(self) -> None:
@@ -332,7 +334,7 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
                     "beam_mass_kg": float(table["mass_kg"].sum())})
 
     panels, pieces = [], grid.pieces
-    panel_settings = config.panels.to_settings()
+    panel_settings, stocks = config.panels.to_settings(), config.sheets.to_settings()
     steps: dict[str, Callable[[], object]] = {}
     if config.panels.enabled:
         clock.start("panels: flatten")
@@ -345,8 +347,7 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
                              fix="[fabrication.panels] clearance, or a new grid ([remesh] seed)")
                      for pid, message in problems]
         cells = {panel.id: (pieces[panel.face].cell + 1, pieces[panel.face].piece) for panel in panels}
-        steps["panels"] = partial(_panel_files, panels, panel_settings, config.sheets.to_settings(),
-                                  folder / "panels", cells)
+        steps["panels"] = partial(_panel_files, panels, panel_settings, stocks, folder / "panels", cells)
     if sections is not None:  # the sized tubes carry the erection stages too
         props = sections.frame_properties(beam_properties(project)[2])
     beam = {"E": props.E, "G": props.G, "A": props.A, "Iy": props.Iy, "Iz": props.Iz, "J": props.J,
@@ -373,7 +374,7 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
         clock.seconds.update({part: round(s, 3) for part, s in ((k + on, v) for k, v in parts.items())})
     if "panels" in done:
         files: _PanelFiles = done["panels"][0]
-        stock_nesting, stocks = files.nesting, files.stocks
+        stock_nesting = files.nesting
         largest = max(stocks, key=lambda s: s.width_mm * s.height_mm)
         for i, (w, h, over) in files.overshoots.items():
             findings.append(Finding(
@@ -403,7 +404,6 @@ class _PanelFiles:
     size (index -> width, height mm and overshoot), and its sub-steps' seconds."""
 
     nesting: StockNesting
-    stocks: list[SheetSettings]
     overshoots: dict[int, tuple[float, float, float]]
     seconds: dict[str, float]
 
@@ -415,18 +415,12 @@ def _panel_files(panels: list[Panel], settings: PanelSettings, stocks: list[Shee
     from fabrication.nesting_sheets import nest_on_stock, sheet_overshoot, write_contact_sheet, write_sheet_dxfs
     from fabrication.panels import write_panel_dxfs, write_panels_csv
 
-    seconds: dict[str, float] = {}
-    started = time.perf_counter()
-
-    def lap(name: str) -> None:
-        nonlocal started
-        seconds[name] = round(time.perf_counter() - started, 3)
-        started = time.perf_counter()
-
+    clock = _StepClock()  # no progress from a worker process
+    clock.start("panels: DXFs")
     write_panel_dxfs(panels, folder, settings)
-    lap("panels: DXFs")
+    clock.start("panels: sheet nesting")
     nesting = nest_on_stock(panels, stocks)
-    lap("panels: sheet nesting")
+    clock.start("panels: sheet DXFs, picture, CSV")
     numbered = [(nesting_k, [panels[i] for i in members], first)
                 for first, (_, members, nesting_k) in zip(nesting.first_numbers(), nesting.groups)]
     for nesting_k, group, first in numbered:
@@ -434,9 +428,9 @@ def _panel_files(panels: list[Panel], settings: PanelSettings, stocks: list[Shee
     if numbered:  # every sheet of every stock size, on one contact sheet
         write_contact_sheet(numbered, folder / "sheets.png")
     write_panels_csv(panels, None, settings, folder / "panels.csv", sheet_names=nesting.sheet_of(panels), cells=cells)
-    lap("panels: sheet DXFs, picture, CSV")
-    return _PanelFiles(nesting=nesting, stocks=list(stocks),
-                       overshoots={i: sheet_overshoot(panels[i], stocks) for i in nesting.unfit}, seconds=seconds)
+    clock.stop()
+    return _PanelFiles(nesting=nesting, overshoots={i: sheet_overshoot(panels[i], stocks) for i in nesting.unfit},
+                       seconds=clock.seconds)
 
 
 def _assembly_files(polymesh: PolyMesh, beam: dict, deflection_limit_m: float | None, folder: Path) -> dict:
