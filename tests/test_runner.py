@@ -167,3 +167,62 @@ def test_manifest_records_artifacts_config_and_versions(tmp_path):
     assert shell["artifacts"][0]["path"] == "02-shell/shell.txt" and len(shell["artifacts"][0]["sha256"]) == 64
     assert manifest["config"]["field"]["max_size_ratio"] == 2.0
     assert "numpy" in manifest["versions"] and "python" in manifest["versions"]
+
+
+def _stages_writing(calls: list[str], contents: dict[str, str]):
+    """The four stages of ``_stages``, each writing ``contents[name]`` (its name by default) after
+    what its upstream stage wrote."""
+    def make(name):
+        def run(*, project, ctx, **upstream):
+            calls.append(name)
+            text = "".join(f"{value}/" for value in upstream.values()) + contents.get(name, name)
+            (ctx.folder / f"{name}.txt").write_text(text)
+            return text
+
+        return run
+
+    def load(folder, project):
+        return (folder / f"{folder.name.split('-')[1]}.txt").read_text()
+
+    names = [("surface", ()), ("shell", ("surface",)), ("field", ("shell",)), ("remesh", ("field",))]
+    return [Stage(name=n, folder=f"0{i + 1}-{n}", run=make(n), load=load, depends=d) for i, (n, d) in enumerate(names)]
+
+
+def test_a_stage_remade_with_other_results_by_only_force_reruns_the_stages_made_from_it(tmp_path):
+    calls: list[str] = []
+    run_project(_project(), tmp_path, _stages_writing(calls, {}))
+    # remade with the same results: nothing downstream is stale
+    calls.clear()
+    run_project(_project(), tmp_path, _stages_writing(calls, {}), only="shell", force=True)
+    run_project(_project(), tmp_path, _stages_writing(calls, {}))
+    assert calls == ["shell"]
+    # remade with other results (as new code would): the stages made from them run again, once
+    calls.clear()
+    run_project(_project(), tmp_path, _stages_writing(calls, {"shell": "other"}), only="shell", force=True)
+    run_project(_project(), tmp_path, _stages_writing(calls, {"shell": "other"}))
+    assert calls == ["shell", "field", "remesh"]
+    calls.clear()
+    run_project(_project(), tmp_path, _stages_writing(calls, {"shell": "other"}))
+    assert calls == []
+    entries = {s["name"]: s for s in json.loads((tmp_path / "manifest.json").read_text())["stages"]}
+    shell_files = {a["path"] for a in entries["shell"]["artifacts"]}
+    assert shell_files == {"02-shell/shell.txt"} and set(entries["field"]["made_from"]) == {"shell"}
+
+
+def test_the_cache_version_follows_every_python_source_and_nothing_else(tmp_path):
+    from workflow.runner import cache_version, product_version, source_digest
+
+    for package in ("engine", "fabrication", "workflow"):
+        (tmp_path / package / "sub").mkdir(parents=True)
+        (tmp_path / package / "a.py").write_text("x = 1\n")
+        (tmp_path / package / "sub" / "b.py").write_text("y = 2\n")
+    first = source_digest(tmp_path)
+    (tmp_path / "workflow" / "notes.txt").write_text("not code")
+    (tmp_path / "README.md").write_text("not code either")
+    assert source_digest(tmp_path) == first
+    (tmp_path / "fabrication" / "sub" / "b.py").write_text("y = 3\n")
+    changed = source_digest(tmp_path)
+    assert changed != first
+    (tmp_path / "fabrication" / "sub" / "b.py").rename(tmp_path / "fabrication" / "b.py")
+    assert source_digest(tmp_path) not in (first, changed)  # a moved module is other code
+    assert cache_version().startswith(product_version() + "+")

@@ -21,7 +21,7 @@ from engine.field import Orientation
 from workflow.cli import main
 from workflow.config import KEYS_LEFT_OUT_AT_DEFAULT, STAGE_SECTIONS, load_project
 from workflow.plots.sweep import pareto_front
-from workflow.runner import NOT_IN_KEYS, _section_value, _stage_key, product_version
+from workflow.runner import NOT_IN_KEYS, _section_value, _stage_key, cache_version
 from workflow.stages import STAGES
 from workflow.sweep import Point, load_sweep, plan_tasks, sweep_points
 
@@ -96,7 +96,7 @@ def test_the_plan_runs_each_shared_stage_once_and_children_after_parents():
 
 def _stage_keys(project) -> dict[str, str]:
     """Every stage's cache key of ``project``, as the runner computes them."""
-    version, out = product_version(), {}
+    version, out = cache_version(), {}
     for stage in STAGES:
         out[stage.name] = _stage_key(stage, project, out, version)
     return out
@@ -132,7 +132,7 @@ def test_later_keys_at_their_default_leave_the_cache_keys_as_they_were(tmp_path)
                 config.get(name, {}).pop(key, None)
         config = {name: {k: v for k, v in value.items() if k not in NOT_IN_KEYS} if isinstance(value, dict)
                   else value for name, value in config.items()}
-        payload = {"stage": stage.name, "version": product_version(), "config": config,
+        payload = {"stage": stage.name, "version": cache_version(), "config": config,
                    "upstream": {d: before[d] for d in stage.depends},
                    "external": stage.external(project) if stage.external else None}
         before[stage.name] = hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()

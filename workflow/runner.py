@@ -1,18 +1,20 @@
 """The stage runner: ordered stages, hash-based caching, atomic stage folders, manifest.
 
 Each stage declares its folder, the project sections it reads and the stages it needs.
-Its cache key hashes the product version, its config sections, the keys of the stages
-it depends on and any external input (the surface file's bytes). A stage is called with the
-typed results of the stages it takes (run, or loaded from their artifacts when cached), the
-project and a :class:`StageContext`; it returns its own result. A stage whose key and
-artifacts are unchanged since the last run is skipped ("cached"). A stage writes into a
-temporary folder that replaces ``OUT/NN-stage`` only when the stage succeeds, so an
-interrupted or failed run never leaves half-written artifacts under the real name.
-``OUT/manifest.json`` records every stage's status, duration, key and artifacts.
+Its cache key hashes the product version and a digest of its source code, its config sections,
+the keys of the stages it depends on and any external input (the surface file's bytes). A stage is
+called with the typed results of the stages it takes (run, or loaded from their artifacts when
+cached), the project and a :class:`StageContext`; it returns its own result. A stage whose key and
+artifacts are unchanged since the last run, and whose upstream results are still those it was made
+from (``made_from`` in its manifest entry; ``--only STAGE --force`` may have remade them), is
+skipped ("cached"). A stage writes into a temporary folder that replaces ``OUT/NN-stage`` only when
+the stage succeeds, so an interrupted or failed run never leaves half-written artifacts under the
+real name. ``OUT/manifest.json`` records every stage's status, duration, key and artifacts.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import logging
@@ -33,7 +35,7 @@ from .config import KEYS_LEFT_OUT_AT_DEFAULT, Project, stage_sections
 from .outdir import remove_leftovers, run_lock
 from .progress import Progress
 
-__all__ = ["Stage", "StageContext", "RunSummary", "run_project", "product_version",
+__all__ = ["Stage", "StageContext", "RunSummary", "run_project", "product_version", "cache_version",
            "STATUS_RAN", "STATUS_CACHED", "STATUS_FAILED", "STATUS_NOT_RUN"]
 
 log = logging.getLogger(__name__)
@@ -46,6 +48,32 @@ def product_version() -> str:
         return metadata.version("gridshell")
     except metadata.PackageNotFoundError:
         return "0+unknown"
+
+
+def source_digest(root: Path, packages: tuple[str, ...] = ("engine", "fabrication", "workflow")) -> str:
+    """A digest of the Python sources of ``packages`` under ``root`` (their paths and bytes)."""
+    digest = hashlib.sha256()
+    for package in packages:
+        for path in sorted((root / package).rglob("*.py")):
+            digest.update(path.relative_to(root).as_posix().encode() + b"\0")
+            digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+@functools.lru_cache(maxsize=1)
+def cache_version() -> str:
+    """The version that goes into every cache key: the product's and a digest of its sources, so
+    that results made by other code (an upgrade, or a working copy changed since) are never taken
+    from the cache."""
+    return f"{product_version()}+{source_digest(Path(__file__).resolve().parents[1])[:16]}"
+
+
+def results_digest(entry: dict | None) -> str | None:
+    """One digest of a stage's results: its artifacts' paths and contents (None: no results)."""
+    if not entry or not entry.get("artifacts"):
+        return None
+    pairs = sorted((a["path"], a["sha256"]) for a in entry["artifacts"])
+    return hashlib.sha256(json.dumps(pairs).encode()).hexdigest()
 
 
 def solvers_describe() -> dict:
@@ -186,18 +214,24 @@ def _artifacts(folder: Path, out_dir: Path, published: tuple[str, ...] = ()) -> 
             for p in files]
 
 
-def _still_valid(entry: dict | None, key: str, out_dir: Path) -> bool:
-    return _why_stale(entry, key, out_dir) is None
+def _still_valid(entry: dict | None, key: str, out_dir: Path, made_from: dict | None = None) -> bool:
+    return _why_stale(entry, key, out_dir, made_from) is None
 
 
-def _why_stale(entry: dict | None, key: str, out_dir: Path) -> str | None:
-    """Why a stage's cached result cannot be used (None: it can), in words for the log."""
+def _why_stale(entry: dict | None, key: str, out_dir: Path, made_from: dict | None = None) -> str | None:
+    """Why a stage's cached result cannot be used (None: it can), in words for the log.
+    made_from: the results digests of the stages it depends on, as they are now (None: not checked)."""
     if not entry:
         return "not run before"
     if entry.get("status") not in (STATUS_RAN, STATUS_CACHED):
         return f"last {entry.get('status')}"
     if entry.get("key") != key:
-        return "its settings or an upstream stage changed"
+        return "its settings, the code or an upstream stage's settings changed"
+    if made_from is not None:
+        was = entry.get("made_from") or {}
+        changed = [name for name, digest in made_from.items() if was.get(name) != digest]
+        if changed:
+            return f"the {changed[0]} stage's results changed since it ran"
     for artifact in entry.get("artifacts", []):
         path = out_dir / artifact["path"]
         if not path.is_file():
@@ -240,7 +274,7 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
     """run_project's body, with the lock held."""
     names = [s.name for s in stages]
     progress = progress or Progress(enabled=False)
-    version = product_version()
+    version = cache_version()
     manifest_path = out_dir / "manifest.json"
     previous = {s["name"]: s for s in _read_manifest(manifest_path).get("stages", [])}
     by_name = {s.name: s for s in stages}
@@ -260,6 +294,10 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
                                  hint=f"run the earlier stages first: gridshell run ... --until {name}")
         results[name] = stage.load(out_dir / stage.folder, project)
         return results[name]
+
+    def made_from(stage: Stage) -> dict[str, str | None]:
+        """The results digests of the stages ``stage`` depends on, as they are now."""
+        return {name: results_digest(records.get(name) or previous.get(name)) for name in stage.depends}
 
     def context(stage: Stage, folder: Path) -> StageContext:
         earlier = names[:names.index(stage.name)]
@@ -291,7 +329,8 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
             continue
         folder = out_dir / stage.folder
         entry = previous.get(stage.name)
-        stale = "--force" if force else _why_stale(entry, keys[stage.name], out_dir)
+        inputs = made_from(stage)
+        stale = "--force" if force else _why_stale(entry, keys[stage.name], out_dir, inputs)
         if stale is None:
             log.info("stage %s: cached (key %s)", stage.name, keys[stage.name][:12])
             records[stage.name] = {**entry, "status": STATUS_CACHED, "duration_s": 0.0,
@@ -324,7 +363,7 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
         duration = time.perf_counter() - started
         records[stage.name] = {"name": stage.name, "folder": stage.folder, "status": STATUS_RAN,
                                "duration_s": round(duration, 3), "computed_s": round(duration, 3),
-                               "key": keys[stage.name],
+                               "key": keys[stage.name], "made_from": inputs,
                                "artifacts": _artifacts(folder, out_dir, stage.published),
                                "findings": ctx.findings,
                                **({"step_seconds": ctx.timings} if ctx.timings else {})}

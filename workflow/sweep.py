@@ -174,10 +174,10 @@ class Task:
 
 def stage_keys(project, until: str) -> list[str]:
     """The cache keys of the stages up to ``until`` for ``project`` (workflow.runner)."""
-    from .runner import _stage_key, product_version
+    from .runner import _stage_key, cache_version
     from .stages import STAGES
 
-    version, keys, out = product_version(), {}, []
+    version, keys, out = cache_version(), {}, []
     for stage in STAGES:
         keys[stage.name] = _stage_key(stage, project, keys, version)
         out.append(keys[stage.name])
