@@ -245,14 +245,6 @@ def same_joints(geometries: list[JointGeometry], tolerance_rad: float = 1e-3,
     return [[joint_name(geometries[k].node) for k in group] for group in groups if len(group) > 1]
 
 
-def _plane(origin, z_dir, x_dir=None):
-    from build123d import Plane
-
-    if x_dir is None:
-        return Plane(origin=tuple(map(float, origin)), z_dir=tuple(map(float, z_dir)))
-    return Plane(origin=tuple(map(float, origin)), x_dir=tuple(map(float, x_dir)), z_dir=tuple(map(float, z_dir)))
-
-
 def _perpendicular(direction: np.ndarray, axis: np.ndarray) -> np.ndarray:
     side = np.cross(axis, direction)
     if np.linalg.norm(side) < 1e-6:
@@ -278,6 +270,35 @@ def _cylinder(base: np.ndarray, direction: np.ndarray, radius: float, length: fl
 
     frame = gp_Ax2(gp_Pnt(*map(float, base)), gp_Dir(*map(float, direction)))
     return BRepPrimAPI_MakeCylinder(frame, float(radius), float(length)).Shape()
+
+
+def _holed_plate(origin: np.ndarray, along: np.ndarray, up: np.ndarray, length: float, height: float,
+                 thickness: float, hole_at: float, hole_radius: float):
+    """(solid, holed) an OCP plate from ``origin`` along ``along`` (unit) for ``length``, ``height``
+    across ``up`` (unit, perpendicular) and ``thickness`` through, both centred, with a round hole
+    through it ``hole_at`` along, made as the prism of a face with a hole: no boolean. Where the hole
+    would not lie inside the face with a millimetre to spare the plate is plain (``holed`` False)."""
+    from OCP.BRepBuilderAPI import (
+        BRepBuilderAPI_MakeEdge,
+        BRepBuilderAPI_MakeFace,
+        BRepBuilderAPI_MakePolygon,
+        BRepBuilderAPI_MakeWire,
+    )
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakePrism
+    from OCP.gp import gp_Ax2, gp_Circ, gp_Dir, gp_Vec
+    from OCP.TopoDS import TopoDS
+
+    through = np.cross(along, up)
+    base = np.asarray(origin, dtype=float) - 0.5 * thickness * through
+    corners = [base + a * along + b * height * up for a, b in ((0, -0.5), (length, -0.5), (length, 0.5), (0, 0.5))]
+    face = BRepBuilderAPI_MakeFace(BRepBuilderAPI_MakePolygon(*map(_gp_point, corners), True).Wire(), True)
+    holed = hole_radius + 1.0 < min(hole_at, length - hole_at, 0.5 * height)
+    if holed:
+        circle = gp_Circ(gp_Ax2(_gp_point(base + hole_at * along), gp_Dir(*map(float, through))), float(hole_radius))
+        wire = BRepBuilderAPI_MakeWire(BRepBuilderAPI_MakeEdge(circle).Edge()).Wire()
+        face.Add(TopoDS.Wire_s(wire.Reversed()))
+    # canonized: the hole's wall is a cylinder (for CAM and the checks), not an extruded circle
+    return BRepPrimAPI_MakePrism(face.Face(), gp_Vec(*map(float, thickness * through)), False, True).Shape(), holed
 
 
 def _boolean(kind: str, arguments: list, tools: list):
@@ -523,7 +544,6 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
 def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings):
     """(blank, solid, report): the joint as ``build_joint`` gives it, and its blank, the same solid
     before the id is engraved (the solid itself where nothing is engraved), both at the origin (mm)."""
-    from build123d import Align, Box, Cylinder, Location
 
     name = joint_name(geometry.node)
     directions, axis = geometry.directions, geometry.axis
@@ -538,25 +558,30 @@ def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings):
     if settings.kind == "steel":
         hub_radius = joint_hub_radius_mm(settings, size)
         height = 2.5 * size
-        hub = Cylinder(hub_radius, height).moved(Location(_plane((0, 0, 0), axis)))
-        plates, holes = [], []
+        hub = _cylinder(-0.5 * height * axis, axis, hub_radius, height)
+        plates, holes = [], []  # holes: those that could not be made with their plate
         plate_ends, bolt_holes = [], []  # the end face of each plate, the wall of each bolt hole
         # each plate starts halfway into the hub, not at its centre: there plates met one another
         # as well as the hub, and OCCT's fuse of them all at once left some plate a solid apart
         start = 0.5 * hub_radius
         for d in directions:
             side = _perpendicular(d, axis)  # the plate's normal
-            plate = Box(setback + sleeve - start, settings.plate_thickness_mm, 0.8 * height,
-                        align=(Align.MIN, Align.CENTER, Align.CENTER))
-            plates.append(plate.moved(Location(_plane(start * d, np.cross(d, side), d))).wrapped)
+            centre = setback + 0.5 * sleeve
+            plate, made = _holed_plate(start * d, d, np.cross(d, side), setback + sleeve - start, 0.8 * height,
+                                       settings.plate_thickness_mm, centre - start, 0.5 * settings.bolt_hole_mm)
+            plates.append(plate)
+            if not made:
+                holes.append(_cylinder(d * centre - 1.5 * settings.plate_thickness_mm * side, side,
+                                       0.5 * settings.bolt_hole_mm, 3 * settings.plate_thickness_mm))
             plate_ends.append(("plane", d, setback + sleeve))
-            hole = Cylinder(0.5 * settings.bolt_hole_mm, 3 * settings.plate_thickness_mm)
-            holes.append(hole.moved(Location(_plane(d * (setback + 0.5 * sleeve), side))).wrapped)
-            bolt_holes.append(("cylinder", d * (setback + 0.5 * sleeve), side, 0.5 * settings.bolt_hole_mm))
-        # one fuse and one cut with all tools, as for the sockets (a boolean per plate and hole
-        # took two thirds of the node's time), checked by a face of each
-        solid = _as_build123d(_checked_boolean("cut", _checked_boolean("fuse", hub.wrapped, plates, plate_ends),
-                                               holes, bolt_holes))
+            bolt_holes.append(("cylinder", d * centre, side, 0.5 * settings.bolt_hole_mm))
+        # one fuse of the holed plates with the hub, checked by a face of each plate end and hole
+        # (a cut of the holes after the fuse took 40 % of the node's booleans); a hole that does
+        # not fit inside its plate is cut afterwards
+        shape = _checked_boolean("fuse", hub, plates, plate_ends + ([] if holes else bolt_holes))
+        if holes:
+            shape = _checked_boolean("cut", shape, holes, bolt_holes)
+        solid = _as_build123d(shape)
         blank = solid
         report["min_wall_mm"] = float(settings.plate_thickness_mm)
     else:

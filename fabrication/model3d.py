@@ -32,14 +32,14 @@ def write_gridshell_step(polymesh: PolyMesh, panels, beam_radius_mm: float | np.
         direction = nodes[b] - nodes[a]
         length = float(np.linalg.norm(direction))
         solid = cq.Solid.makeCylinder(float(radii[k]), length, cq.Vector(*nodes[a]), cq.Vector(*(direction / length)))
-        assembly.add(cq.Workplane().add(solid), name=beam_id(k), color=blue)
+        assembly.add(solid, name=beam_id(k), color=blue)
     for panel in panels:
         outline = 1000 * np.asarray(panel.outline_3d_m)
         normal = np.cross(panel.axes[0], panel.axes[1])
         wire = cq.Wire.makePolygon([cq.Vector(*p) for p in outline], close=True)
         face = cq.Face.makeFromWires(wire)
         solid = cq.Solid.extrudeLinear(face, cq.Vector(*(3.0 * normal)))
-        assembly.add(cq.Workplane().add(solid), name=panel.id, color=glass)
+        assembly.add(solid, name=panel.id, color=glass)
     with atomic_path(path) as tmp:
         # no p-curves (2D copies of the edges on their faces, which readers rebuild): a third of the bytes
         assembly.export(str(tmp), "STEP", write_pcurves=False)

@@ -594,11 +594,21 @@ def test_gridshell_step_is_the_same_bytes_from_run_to_run_with_its_colours(tmp_p
     assert b > r and b > g
 
 
-def test_a_steel_node_is_one_solid_of_the_hub_and_its_plates():
+def _plane(origin, z_dir, x_dir=None):
+    from build123d import Plane
+
+    axes = {"z_dir": tuple(map(float, z_dir))} | ({} if x_dir is None else {"x_dir": tuple(map(float, x_dir))})
+    return Plane(origin=tuple(map(float, origin)), **axes)
+
+
+@pytest.mark.parametrize("sleeve_mm", [None, 20.0], ids=["holes-in-plates", "holes-cut-after"])
+def test_a_steel_node_is_one_solid_of_the_hub_and_its_plates(sleeve_mm):
     """A node of a generated saddle (seed 31, 1068 cells, CHS 168.3 on steel nodes) whose three fin
     plates all started at the node's centre: OCCT's fuse of them at once left one plate a solid
     apart, on 27 of its 1068 nodes. Now one solid, of the volume of the hub and the plates fused
-    one at a time, less the bolt holes (build123d's own booleans)."""
+    one at a time, less the bolt holes (build123d's own booleans). With short plates the holes
+    come within a millimetre of the plates' ends and are cut after the fuse instead of made with
+    the plates."""
     from build123d import Align, Box, Cylinder, Location
 
     from fabrication import joints
@@ -608,23 +618,43 @@ def test_a_steel_node_is_one_solid_of_the_hub_and_its_plates():
     axis = np.array([0.0186972, 0.10223855, 0.99458418])
     geometry = joints.JointGeometry(node=111, position_mm=np.zeros(3), directions=directions,
                                     axis=axis / np.linalg.norm(axis), beam_size_mm=168.3)
-    settings = joints.JointSettings(kind="steel")
+    settings = joints.JointSettings(kind="steel", sleeve_length_mm=sleeve_mm)
     solid, report = joints.build_joint(geometry, settings)
     assert len(solid.solids()) == 1 and solid.is_valid
     size = 168.3
     radius, height = joints.joint_hub_radius_mm(settings, size), 2.5 * size
     length = report["setback_mm"] + joints.joint_sleeve_mm(settings, size)
-    expected = Cylinder(radius, height).moved(Location(joints._plane((0, 0, 0), geometry.axis)))
+    expected = Cylinder(radius, height).moved(Location(_plane((0, 0, 0), geometry.axis)))
     for d in geometry.directions:
         side = joints._perpendicular(d, geometry.axis)
         plate = Box(length, settings.plate_thickness_mm, 0.8 * height, align=(Align.MIN, Align.CENTER, Align.CENTER))
-        expected = expected + plate.moved(Location(joints._plane((0, 0, 0), np.cross(d, side), d)))
+        expected = expected + plate.moved(Location(_plane((0, 0, 0), np.cross(d, side), d)))
     for d in geometry.directions:
         side = joints._perpendicular(d, geometry.axis)
         hole = Cylinder(0.5 * settings.bolt_hole_mm, 3 * settings.plate_thickness_mm)
-        expected = expected - hole.moved(Location(joints._plane(d * (length - 0.5 * joints.joint_sleeve_mm(
+        expected = expected - hole.moved(Location(_plane(d * (length - 0.5 * joints.joint_sleeve_mm(
             settings, size)), side)))
     assert _volume(solid.wrapped) == pytest.approx(expected.volume, rel=1e-6)
+    cylinders, _ = joints._surfaces(solid.wrapped)
+    bolt_walls = [r for _, _, r in cylinders if abs(r - 0.5 * settings.bolt_hole_mm) < 1e-9]
+    assert len(bolt_walls) >= len(directions)  # each hole's wall a cylinder, for CAM and the checks
+
+
+def test_a_holed_plate_is_its_box_less_its_hole_or_plain_where_the_hole_does_not_fit():
+    """The fin plate made as a prism of a face with a hole: the box's volume less pi r^2 t, a
+    cylindrical wall; a hole within a millimetre of the plate's end is left to a cut (plain plate)."""
+    from fabrication import joints
+
+    along, up = np.array([0.6, 0.8, 0.0]), np.array([0.0, 0.0, 1.0])
+    plate, holed = joints._holed_plate(np.array([5.0, -2.0, 1.0]), along, up, 120.0, 90.0, 10.0, 70.0, 9.0)
+    assert holed and _volume(plate) == pytest.approx(120 * 90 * 10 - np.pi * 81 * 10, rel=1e-9)
+    cylinders, planes = joints._surfaces(plate)
+    (base, axis, radius), = cylinders
+    assert radius == pytest.approx(9.0) and abs(abs(axis @ np.cross(along, up)) - 1) < 1e-12
+    assert np.linalg.norm(np.cross(base - (np.array([5.0, -2.0, 1.0]) + 70 * along), axis)) < 1e-9
+    assert len(planes) == 6 and joints._is_valid(plate)
+    plain, holed = joints._holed_plate(np.zeros(3), along, up, 120.0, 90.0, 10.0, 110.5, 9.0)
+    assert not holed and _volume(plain) == pytest.approx(120 * 90 * 10, rel=1e-9)
 
 
 def test_a_joint_that_fails_its_checks_is_a_finding_in_words():
