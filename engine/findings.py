@@ -10,7 +10,10 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
-__all__ = ["Finding", "findings_table"]
+__all__ = ["Finding", "findings_table", "COUNT_UNITS"]
+
+#: Units that count parts: a measure or limit in them is a whole number ("63 beams", not "63.0").
+COUNT_UNITS = frozenset({"beams", "cells", "joints", "nodes", "panels", "sheets", "bars", "steps", "props"})
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -29,11 +32,12 @@ class Finding:
     stage: str = ""
 
     def to_dict(self) -> dict:
-        """JSON-ready record."""
+        """JSON-ready record: measure and limit as floats, or as whole numbers in ``COUNT_UNITS``."""
         out = asdict(self)
         for key in ("measure", "limit"):
             if out[key] is not None:
-                out[key] = float(out[key])
+                value = float(out[key])
+                out[key] = int(value) if self.unit in COUNT_UNITS and value.is_integer() else value
         return out
 
 

@@ -241,6 +241,24 @@ def test_one_number_format_for_the_report_and_the_terminal(value, page, terminal
     assert format_value(value, text=True) == terminal and terminal.isascii()
 
 
+def test_a_finding_that_counts_parts_reads_as_a_whole_number_and_a_length_keeps_its_decimals():
+    """A finding's measure in beams or cells is written "63", not "63.0", in its JSON and in the
+    report's findings table; a length measure stays a float."""
+    import json
+
+    from engine.findings import Finding, findings_table
+    from workflow.report import _format
+
+    removed = Finding(kind="beams_removed", parts=["grid"], measure=63.0, limit=0.0, unit="beams").to_dict()
+    coarsened = Finding(kind="grid_coarsened", parts=["grid"], measure=np.int64(412), limit=1500.0, unit="cells")
+    cut = Finding(kind="cut_length", parts=["B0007"], measure=117.5, limit=120.0, unit="mm").to_dict()
+    rows = findings_table(json.loads(json.dumps([removed, coarsened.to_dict(), cut])))
+    shown = {row["kind"]: (_format(row["worst"]), _format(row["limit"])) for row in rows}
+    assert shown == {"beams_removed": ("63", "0"), "grid_coarsened": ("412", "1\u2009500"),
+                     "cut_length": ("118", "120")}
+    assert isinstance(removed["measure"], int) and isinstance(cut["measure"], float)
+
+
 def test_the_report_says_where_each_imperfect_paths_load_factor_was_read(small_run):
     """The imperfection table's 'read at' follows analysis.json: a limit point, the tolerable
     deflection reached first, or the highest load factor carried."""
