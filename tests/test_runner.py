@@ -209,16 +209,23 @@ def test_a_stage_remade_with_other_results_by_only_force_reruns_the_stages_made_
     assert shell_files == {"02-shell/shell.txt"} and set(entries["field"]["made_from"]) == {"shell"}
 
 
-def test_the_cache_version_follows_every_python_source_and_nothing_else(tmp_path):
+def test_the_cache_version_follows_every_source_and_data_file_and_nothing_else(tmp_path):
     from workflow.runner import cache_version, product_version, source_digest
 
     for package in ("engine", "fabrication", "workflow"):
         (tmp_path / package / "sub").mkdir(parents=True)
         (tmp_path / package / "a.py").write_text("x = 1\n")
         (tmp_path / package / "sub" / "b.py").write_text("y = 2\n")
+    (tmp_path / "engine" / "data").mkdir()
+    (tmp_path / "engine" / "data" / "tubes.csv").write_text("D,t\n60.3,3.2\n")
     first = source_digest(tmp_path)
-    (tmp_path / "workflow" / "notes.txt").write_text("not code")
-    (tmp_path / "README.md").write_text("not code either")
+    (tmp_path / "README.md").write_text("outside the packages")
+    (tmp_path / "workflow" / "__pycache__").mkdir()
+    (tmp_path / "workflow" / "__pycache__" / "a.cpython-311.pyc").write_bytes(b"byte code")
+    assert source_digest(tmp_path) == first
+    (tmp_path / "engine" / "data" / "tubes.csv").write_text("D,t\n60.3,4.0\n")
+    assert source_digest(tmp_path) != first  # a catalogue changes results as code does
+    (tmp_path / "engine" / "data" / "tubes.csv").write_text("D,t\n60.3,3.2\n")
     assert source_digest(tmp_path) == first
     (tmp_path / "fabrication" / "sub" / "b.py").write_text("y = 3\n")
     changed = source_digest(tmp_path)

@@ -51,10 +51,13 @@ def product_version() -> str:
 
 
 def source_digest(root: Path, packages: tuple[str, ...] = ("engine", "fabrication", "workflow")) -> str:
-    """A digest of the Python sources of ``packages`` under ``root`` (their paths and bytes)."""
+    """A digest of the files of ``packages`` under ``root`` (their paths and bytes): the Python
+    sources and the data they read (the tube catalogues), not Python's byte-code caches."""
     digest = hashlib.sha256()
     for package in packages:
-        for path in sorted((root / package).rglob("*.py")):
+        files = (p for p in (root / package).rglob("*")
+                 if p.is_file() and "__pycache__" not in p.parts and p.suffix not in (".pyc", ".pyo"))
+        for path in sorted(files):
             digest.update(path.relative_to(root).as_posix().encode() + b"\0")
             digest.update(path.read_bytes())
     return digest.hexdigest()
@@ -62,9 +65,9 @@ def source_digest(root: Path, packages: tuple[str, ...] = ("engine", "fabricatio
 
 @functools.lru_cache(maxsize=1)
 def cache_version() -> str:
-    """The version that goes into every cache key: the product's and a digest of its sources, so
-    that results made by other code (an upgrade, or a working copy changed since) are never taken
-    from the cache."""
+    """The version that goes into every cache key: the product's and a digest of its sources and
+    data, so that results made by other code (an upgrade, or a working copy changed since) are
+    never taken from the cache."""
     return f"{product_version()}+{source_digest(Path(__file__).resolve().parents[1])[:16]}"
 
 
