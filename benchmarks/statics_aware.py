@@ -2,6 +2,7 @@
 files it writes, on the mock-up, every real roof and generated free-form roofs, at several sizes.
 
     .venv/bin/python benchmarks/statics_aware.py [--cells 60,120,300] [--surfaces 5] [--match NAME,...]
+    .venv/bin/python benchmarks/statics_aware.py --surfaces 5 --first-seed 100 --only-generated   # unseen roofs
         [--out out/statics_aware]
 
 Each roof runs ``gridshell run PROJECT --until optimize`` (a separate, cold process; the mock-up with
@@ -87,19 +88,21 @@ def panel_figures(path: Path) -> tuple[float, float, float, float]:
     return nonconvex / max(len(loops), 1), worst, planarity / mean_beam, mean_beam
 
 
-def roofs(n_generated: int, out: Path) -> list[tuple[str, list[str]]]:
-    """(name, gridshell run arguments before --out) per roof."""
+def roofs(n_generated: int, out: Path, first_seed: int = 0,
+          only_generated: bool = False) -> list[tuple[str, list[str]]]:
+    """(name, gridshell run arguments before --out) per roof: the mock-up and the shared roofs (unless
+    ``only_generated``), and the generated roofs of seeds first_seed .. first_seed + n_generated - 1."""
     from tests.generated_surfaces import generate_surface, write_ply
 
     out_surfaces = out / "surfaces"
     out_surfaces.mkdir(parents=True, exist_ok=True)
-    items = [("mockup", [str(ROOT / "templates" / "mockup.toml")])]
-    if REAL_SURFACES.is_dir():
+    items = [] if only_generated else [("mockup", [str(ROOT / "templates" / "mockup.toml")])]
+    if not only_generated and REAL_SURFACES.is_dir():
         for path in sorted(REAL_SURFACES.glob("*.ply")):
             items.append((path.stem, ["--surface", str(path), "--supports", "flagged"]))
-    else:
+    elif not only_generated:
         print(f"(no real surfaces at {REAL_SURFACES})")
-    for seed in range(n_generated):
+    for seed in range(first_seed, first_seed + n_generated):
         surface = generate_surface(seed)
         path = write_ply(surface, out_surfaces / f"gen{seed:02d}-{surface.kind}.ply")
         items.append((path.stem, ["--surface", str(path), "--supports", "flagged"]))
@@ -228,13 +231,15 @@ def _cell(value) -> str:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cells", default="60,120,300", help="cell counts (default 60,120,300)")
-    parser.add_argument("--surfaces", type=int, default=5, help="generated roofs, seeds 0..N-1 (default 5)")
+    parser.add_argument("--surfaces", type=int, default=5, help="generated roofs, seeds S..S+N-1 (default 5)")
+    parser.add_argument("--first-seed", type=int, default=0, metavar="S", help="first generated seed (default 0)")
+    parser.add_argument("--only-generated", action="store_true", help="the generated roofs only")
     parser.add_argument("--match", default="", help="only roofs whose name contains one of these (comma-separated)")
     parser.add_argument("--out", default=str(ROOT / "out" / "statics_aware"))
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
     args = parser.parse_args()
     out = Path(args.out).resolve()  # the projects written under it name their surfaces by absolute path
-    items = roofs(args.surfaces, out)
+    items = roofs(args.surfaces, out, args.first_seed, args.only_generated)
     if args.match:
         keys = [k for k in args.match.split(",") if k]
         items = [(n, a) for n, a in items if any(k in n for k in keys)]
