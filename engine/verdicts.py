@@ -65,8 +65,9 @@ class Verdict:
     def finding(self, stage: str = "") -> Finding:
         """The finding of this verdict (whether or not it passed): its error, or the check with its
         value against its limit, as the message."""
+        unit = f" {self.unit}" if self.unit else ""
         message = (self.error if self.error is not None
-                   else f"{self.check}: {self.value:.3g} against {self.limit:.3g}")
+                   else f"{self.check}: {self.value:.3g}{unit} against {self.limit:.3g}{unit}")
         return Finding(kind=self.kind, parts=[self.part], measure=self.value, limit=self.limit, unit=self.unit,
                        stage=stage, fix=self.fix, message=message)
 

@@ -87,6 +87,14 @@ def test_findings_only_for_failing_verdicts():
     assert findings[1].message == "linear buckling load factor: 1.2 against 1.5"
 
 
+def test_a_finding_with_a_unit_says_it_in_its_message():
+    """A deflection finding reads "0.06 m against 0.04 m", not two bare numbers."""
+    verdicts = _verdicts(utilisation=(0.5, 0.5), uz=(-0.06, 0.0), lambda_LB=3.0, worst=_case(2.0))
+    (finding,) = findings_of(verdicts, stage="analysis")
+    assert finding.kind == "deflection" and finding.unit == "m"
+    assert finding.message.endswith(f"{finding.measure:.3g} m against {finding.limit:.3g} m")
+
+
 def test_verdict_records_keep_the_keys_of_analysis_json():
     verdicts = _verdicts(error="not solved", worst=_case(1.0))
     records = [v.to_dict() for v in verdicts]

@@ -259,6 +259,20 @@ def test_a_finding_that_counts_parts_reads_as_a_whole_number_and_a_length_keeps_
     assert isinstance(removed["measure"], int) and isinstance(cut["measure"], float)
 
 
+def test_the_findings_table_gives_lengths_in_millimetres_as_the_verdicts_do():
+    """A deflection found in metres reads 5 976 against 76.4 mm in the findings table, the unit of
+    the same check in the verdicts table; counts and load factors are left as they are."""
+    from engine.findings import Finding
+    from workflow.stages.report import _in_mm, findings_rows
+
+    deflection = Finding(kind="deflection", parts=["N0023"], measure=5.976, limit=0.0764, unit="m").to_dict()
+    buckling = Finding(kind="buckling", parts=["mode 1"], measure=0.0157, limit=1.5).to_dict()
+    rows = {row[0]: row[2:5] for row in findings_rows([deflection, buckling])}
+    assert rows["deflection"] == [pytest.approx(5976.0), pytest.approx(76.4), "mm"]
+    assert rows["deflection"] == list(_in_mm(5.976, 0.0764, "m"))  # the verdicts' conversion
+    assert rows["buckling"] == [0.0157, 1.5, ""]
+
+
 def test_the_report_says_where_each_imperfect_paths_load_factor_was_read(small_run):
     """The imperfection table's 'read at' follows analysis.json: a limit point, the tolerable
     deflection reached first, or the highest load factor carried."""

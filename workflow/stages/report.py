@@ -125,6 +125,13 @@ def _in_mm(value, limit, unit: str) -> tuple:
     return value, limit, unit
 
 
+def findings_rows(findings: list[dict]) -> list[list]:
+    """The report's findings table, a row per kind (engine.findings.findings_table): kind, count,
+    worst, limit, unit, worst at, what, fix; lengths in millimetres, as in the verdicts."""
+    return [[r["kind"].replace("_", " "), r["count"], *_in_mm(r["worst"], r["limit"], r["unit"]),
+             ", ".join(r["worst_parts"]), r["message"], r["fix"]] for r in findings_table(findings)]
+
+
 def _summary(project: Project, surface: SurfaceResult, polymesh, analysis: dict, fabrication: FabricationResult,
              shell: dict, findings: list[dict]) -> Section:
     supports = surface.supports
@@ -161,8 +168,7 @@ def _summary(project: Project, surface: SurfaceResult, polymesh, analysis: dict,
             False: "At least one structural check fails: see the verdicts below.",
             None: "No structural verdicts (the analysis did not run)."}[passed]
     if findings:
-        rows = [[r["kind"].replace("_", " "), r["count"], r["worst"], r["limit"], r["unit"],
-                 ", ".join(r["worst_parts"]), r["message"], r["fix"]] for r in findings_table(findings)]
+        rows = findings_rows(findings)
         tables.insert(0, Table(name="findings", caption="Findings: failing checks and parts that cannot be built as "
                                                         "drawn (every file is still written)",
                                columns=["kind", "count", "worst", "limit", "unit", "worst at", "what", "fix"],
