@@ -230,7 +230,7 @@ def test_each_quantity_of_the_report_has_one_unit(small_run):
 
 
 @pytest.mark.parametrize("value, page, terminal", [
-    (1234567, "1\u2009234\u2009567", "1 234 567"), (0.0368, "0.0368", "0.0368"),
+    (1234567, "1\u202f234\u202f567", "1 234 567"), (0.0368, "0.0368", "0.0368"),
     (9.937e-07, "9.94 \u00d7 10\u207b\u2077", "9.94e-07"), (203.2, "203", "203"), (float("inf"), "\u221e", "inf"),
     (None, "-", "-"), (True, "yes", "yes")])
 def test_one_number_format_for_the_report_and_the_terminal(value, page, terminal):
@@ -254,7 +254,7 @@ def test_a_finding_that_counts_parts_reads_as_a_whole_number_and_a_length_keeps_
     cut = Finding(kind="cut_length", parts=["B0007"], measure=117.5, limit=120.0, unit="mm").to_dict()
     rows = findings_table(json.loads(json.dumps([removed, coarsened.to_dict(), cut])))
     shown = {row["kind"]: (_format(row["worst"]), _format(row["limit"])) for row in rows}
-    assert shown == {"beams_removed": ("63", "0"), "grid_coarsened": ("412", "1\u2009500"),
+    assert shown == {"beams_removed": ("63", "0"), "grid_coarsened": ("412", "1\u202f500"),
                      "cut_length": ("118", "120")}
     assert isinstance(removed["measure"], int) and isinstance(cut["measure"], float)
 

@@ -130,11 +130,12 @@ _SUPERSCRIPT = str.maketrans("-0123456789", "\u207b\u2070\u00b9\u00b2\u00b3\u207
 
 
 def format_value(value, digits: int = 3, *, text: bool = False) -> str:
-    """A number as people write it: whole numbers with thin spaces between thousands, others to
-    ``digits`` significant figures in plain decimals, and the very small as 1.2 x 10^-9 with
-    superscripts (never ``1.2e-09``); booleans as yes/no, None as a dash. ``text``: for a
-    terminal or a log, in ASCII (plain spaces, 1.2e-09 for the very small)."""
-    space = " " if text else "\u2009"
+    """A number as people write it: whole numbers with narrow no-break spaces between thousands (so
+    that a table's column never breaks "6 000" over two lines), others to ``digits`` significant
+    figures in plain decimals, and the very small as 1.2 x 10^-9 with superscripts (never
+    ``1.2e-09``); booleans as yes/no, None as a dash. ``text``: for a terminal or a log, in ASCII
+    (plain spaces, 1.2e-09 for the very small)."""
+    space = " " if text else "\u202f"
     if value is None:
         return "-"
     if isinstance(value, bool):
