@@ -148,6 +148,34 @@ def test_later_keys_at_their_default_leave_the_cache_keys_as_they_were(tmp_path)
     assert keys(changed("analysis", elements_per_beam=2))["remesh"] == plain["remesh"]
 
 
+def test_a_point_whose_upstream_results_were_remade_is_not_up_to_date(tmp_path):
+    """The sweep skips a point only where the runner would take every stage from the cache: a shell
+    made from surface results that have since been remade with other bytes (``gridshell run --only
+    surface --force`` in the point's folder) is stale, as the runner finds it."""
+    from workflow.runner import file_digest, results_digest
+    from workflow.sweep import up_to_date
+
+    def entry(name: str, folder: str, text: str, made_from: dict) -> dict:
+        path = tmp_path / folder / f"{name}.txt"
+        path.parent.mkdir(exist_ok=True)
+        path.write_text(text)
+        return {"name": name, "folder": folder, "status": "ran", "key": f"key-{name}", "made_from": made_from,
+                "artifacts": [{"path": f"{folder}/{name}.txt", "sha256": file_digest(path),
+                               "bytes": path.stat().st_size}]}
+
+    surface = entry("surface", "01-surface", "the roof", {})
+    shell = entry("shell", "02-shell", "its statics", {"surface": results_digest(surface)})
+
+    def write(*entries):
+        (tmp_path / "manifest.json").write_text(json.dumps({"stages": list(entries)}))
+
+    write(surface, shell)
+    assert up_to_date(tmp_path, ["key-surface", "key-shell"])
+    write(entry("surface", "01-surface", "the roof, remade otherwise", {}), shell)
+    assert not up_to_date(tmp_path, ["key-surface", "key-shell"])
+    assert up_to_date(tmp_path, ["key-surface"])  # the surface itself is whole
+
+
 def test_a_sweep_over_statics_rounds_is_accepted(tmp_path):
     path = _sweep(tmp_path, '"remesh.statics_rounds" = [1, 2]\n"field.orientation" = ["along", "across"]',
                   until="analysis", template="cap")

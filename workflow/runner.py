@@ -79,6 +79,12 @@ def results_digest(entry: dict | None) -> str | None:
     return hashlib.sha256(json.dumps(pairs).encode()).hexdigest()
 
 
+def made_from(depends: tuple[str, ...], entry_of: Callable[[str], dict | None]) -> dict[str, str | None]:
+    """The results digests of the stages in ``depends`` as they are now (``entry_of``: a stage's
+    manifest entry by name): what a stage made now is made from, and a cached one must have been."""
+    return {name: results_digest(entry_of(name)) for name in depends}
+
+
 def solvers_describe() -> dict:
     """Which library factors the stiffness matrices here (engine.solvers)."""
     from engine.solvers import describe
@@ -298,10 +304,6 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
         results[name] = stage.load(out_dir / stage.folder, project)
         return results[name]
 
-    def made_from(stage: Stage) -> dict[str, str | None]:
-        """The results digests of the stages ``stage`` depends on, as they are now."""
-        return {name: results_digest(records.get(name) or previous.get(name)) for name in stage.depends}
-
     def context(stage: Stage, folder: Path) -> StageContext:
         earlier = names[:names.index(stage.name)]
         return StageContext(folder=folder, out_dir=out_dir, progress=progress, stage=stage.name,
@@ -332,7 +334,7 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
             continue
         folder = out_dir / stage.folder
         entry = previous.get(stage.name)
-        inputs = made_from(stage)
+        inputs = made_from(stage.depends, lambda name: records.get(name) or previous.get(name))
         stale = "--force" if force else _why_stale(entry, keys[stage.name], out_dir, inputs)
         if stale is None:
             log.info("stage %s: cached (key %s)", stage.name, keys[stage.name][:12])

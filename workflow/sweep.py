@@ -228,11 +228,14 @@ def _read_manifest(folder: Path) -> dict:
 
 
 def up_to_date(folder: Path, keys: list[str]) -> bool:
-    """Whether every stage with these keys has valid results in ``folder`` (the runner's own test)."""
-    from .runner import _still_valid
+    """Whether every stage with these keys has valid results in ``folder`` (the runner's own test:
+    its key, its artifacts, and the upstream results it was made from)."""
+    from .runner import _still_valid, made_from
+    from .stages import STAGES
 
     entries = {s.get("name"): s for s in _read_manifest(folder).get("stages", [])}
-    return all(_still_valid(entries.get(name), key, Path(folder)) for name, key in zip(_stage_names(), keys))
+    return all(_still_valid(entries.get(stage.name), key, Path(folder), made_from(stage.depends, entries.get))
+               for stage, key in zip(STAGES, keys))
 
 
 def _link_tree(source: Path, target: Path) -> None:
