@@ -544,7 +544,6 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
 def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings):
     """(blank, solid, report): the joint as ``build_joint`` gives it, and its blank, the same solid
     before the id is engraved (the solid itself where nothing is engraved), both at the origin (mm)."""
-
     name = joint_name(geometry.node)
     directions, axis = geometry.directions, geometry.axis
     size = geometry.beam_size_mm
