@@ -233,3 +233,69 @@ def test_the_cache_version_follows_every_source_and_data_file_and_nothing_else(t
     (tmp_path / "fabrication" / "sub" / "b.py").rename(tmp_path / "fabrication" / "b.py")
     assert source_digest(tmp_path) not in (first, changed)  # a moved module is other code
     assert cache_version().startswith(product_version() + "+")
+
+
+def _reading(section_reads: dict[str, str], calls: list[str]):
+    """The four stages of ``_stages``, each reading the dotted project key ``section_reads[name]``
+    (if any) and using its value."""
+    def make(name):
+        def run(*, project, ctx, **upstream):
+            calls.append(name)
+            value = project
+            for part in section_reads.get(name, "").split(".") if name in section_reads else ():
+                value = getattr(value, part)
+            (ctx.folder / f"{name}.txt").write_text(f"{name} {value!s}")
+            return name
+
+        return run
+
+    stages = _stages([])
+    return [dataclasses.replace(s, run=make(s.name)) for s in stages]
+
+
+def test_a_stage_reads_its_own_and_its_upstream_sections_only(tmp_path):
+    """A stage's cache key holds its sections (STAGE_SECTIONS) and its upstream stages' keys, so a
+    stage may read those sections and no other: reading another would leave a stale cache when it
+    changes. The runner hands each stage a view of the project that refuses the others."""
+    from workflow.stage_view import UndeclaredSetting
+
+    calls: list[str] = []
+    # field reads its own section, remesh reads field's (upstream) and shell's through the chain
+    run_project(_project(), tmp_path, _reading({"field": "field.max_size_ratio", "remesh": "shell.thickness"}, calls))
+    assert calls == ["surface", "shell", "field", "remesh"]
+    assert (tmp_path / "03-field" / "field.txt").read_text() == "field 2.0"
+    # shell reads the field section, which is downstream of it: refused, with the stage named
+    with pytest.raises(UndeclaredSetting, match=r"the shell stage read \[field\]"):
+        run_project(_project(ratio=5.0), tmp_path / "b", _reading({"shell": "field.max_size_ratio"}, []))
+    # a key of a section declared only in part ("project.name" for surface): the rest is refused
+    with pytest.raises(UndeclaredSetting, match=r"\[project.description\]"):
+        run_project(_project(), tmp_path / "c", _reading({"surface": "project.description"}, []))
+    run_project(_project(), tmp_path / "d", _reading({"surface": "project.name"}, []))
+
+
+def test_renaming_the_project_remakes_the_files_that_carry_its_name(tmp_path):
+    """The name titles every stage's pictures and names the NC1 order and the IFC project, so it is
+    in the first stage's key (and through it in every later one)."""
+    calls: list[str] = []
+    named = parse_project({"project": {"name": "a"}, "surface": {"template": "cap"}})
+    run_project(named, tmp_path, _stages(calls))
+    calls.clear()
+    run_project(named.model_copy(update={"project": named.project.model_copy(update={"description": "x"})}),
+                tmp_path, _stages(calls))
+    assert calls == []
+    run_project(parse_project({"project": {"name": "b"}, "surface": {"template": "cap"}}), tmp_path, _stages(calls))
+    assert calls == ["surface", "shell", "field", "remesh"]
+
+
+def test_a_setting_outside_the_view_refuses_every_use():
+    from workflow.stage_view import UndeclaredSetting, stage_view
+
+    view = stage_view(_project(), ("field", "fabrication.joints"), "field")
+    assert view.field.max_size_ratio == 2.0
+    assert view.fabrication.joints.kind == _project().fabrication.joints.kind
+    for use in (lambda: view.shell.thickness, lambda: view.fabrication.beams.stock_length,
+                lambda: float(view.fabrication.panels), lambda: f"{view.loads}", lambda: bool(view.material),
+                lambda: view.remesh + 1, lambda: list(view.supports)):
+        with pytest.raises(UndeclaredSetting):
+            use()
+    assert "not in the cache key" in repr(view.shell)

@@ -669,7 +669,8 @@ class Project(_Section):
 
 
 STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
-    "surface": ("surface", "supports", "loads"),
+    # the project's name titles every stage's pictures and names the NC1 order and the IFC project
+    "surface": ("project.name", "surface", "supports", "loads"),
     "shell": ("shell", "loads"),
     "field": ("field",),
     "remesh": ("remesh", "section", "material", "fabrication.joints", "fabrication.beams"),
@@ -678,7 +679,9 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
     "fabrication": ("fabrication", "material", "section"),
     "report": ("report", "project"),
 }
-"""The project sections each stage reads: its cache key."""
+"""The project sections (or dotted keys) each stage reads: its cache key. A stage may also read
+those of the stages upstream of it (their keys are in its key); the runner lets it read nothing
+else (workflow.stage_view)."""
 
 #: Keys that came after runs were cached, left out of the cache keys at these defaults (what those
 #: runs did), so that the caches of earlier runs stay valid.

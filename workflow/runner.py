@@ -34,6 +34,7 @@ from fabrication.files import atomic_folder, write_text_atomic
 from .config import KEYS_LEFT_OUT_AT_DEFAULT, Project, stage_sections
 from .outdir import remove_leftovers, run_lock
 from .progress import Progress
+from .stage_view import stage_view
 
 __all__ = ["Stage", "StageContext", "RunSummary", "run_project", "product_version", "cache_version",
            "STATUS_RAN", "STATUS_CACHED", "STATUS_FAILED", "STATUS_NOT_RUN"]
@@ -216,6 +217,22 @@ def _stage_key(stage: Stage, project: Project, keys: dict[str, str], version: st
     return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
 
 
+def readable_sections(stage: Stage, by_name: dict[str, Stage], project: Project) -> tuple[str, ...]:
+    """The project sections ``stage`` may read: its own (its cache key) and those of every stage
+    upstream of it, whose keys are in its key."""
+    sections: list[str] = []
+    seen: set[str] = set()
+    todo = [stage.name]
+    while todo:
+        name = todo.pop()
+        if name in seen or name not in by_name:
+            continue
+        seen.add(name)
+        sections += stage_sections(name, project)
+        todo += by_name[name].depends
+    return tuple(dict.fromkeys(sections))
+
+
 def _artifacts(folder: Path, out_dir: Path, published: tuple[str, ...] = ()) -> list[dict]:
     files = sorted(p for p in folder.rglob("*") if p.is_file()) if folder.is_dir() else []
     files += [out_dir / name for name in published if (out_dir / name).is_file()]
@@ -301,8 +318,12 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
         if not entry or entry.get("status") not in (STATUS_RAN, STATUS_CACHED) or entry.get("key") != keys.get(name):
             raise GridshellError(f"stage '{name}' has no up-to-date results in {out_dir}",
                                  hint=f"run the earlier stages first: gridshell run ... --until {name}")
-        results[name] = stage.load(out_dir / stage.folder, project)
+        results[name] = stage.load(out_dir / stage.folder, view_of(stage))
         return results[name]
+
+    def view_of(stage: Stage) -> Project:
+        """The project as ``stage`` may read it (workflow.stage_view)."""
+        return stage_view(project, readable_sections(stage, by_name, project), stage.name)
 
     def context(stage: Stage, folder: Path) -> StageContext:
         earlier = names[:names.index(stage.name)]
@@ -350,7 +371,7 @@ def _run(project: Project, out_dir: Path, stages: list[Stage], *, until: str | N
         ctx = context(stage, tmp)
         try:
             upstream = {name: result_of(name) for name in stage.inputs}
-            results[stage.name] = stage.run(**upstream, project=project, ctx=ctx)
+            results[stage.name] = stage.run(**upstream, project=view_of(stage), ctx=ctx)
         except BaseException as exc:
             shutil.rmtree(tmp, ignore_errors=True)
             shutil.rmtree(folder, ignore_errors=True)
