@@ -7,7 +7,7 @@ import re
 
 from workflow.cli import main
 from workflow.config import load_project
-from workflow.stages.remesh import field_of_grid
+from workflow.stages import remesh as remesh_stage
 
 
 def test_a_cap_with_two_statics_rounds_runs_to_the_analysis(tmp_path, capsys):
@@ -23,8 +23,15 @@ def test_a_cap_with_two_statics_rounds_runs_to_the_analysis(tmp_path, capsys):
     assert all(abs(r["cells"] / 40 - 1) <= 0.12 for r in rounds)  # symmetric: cells come in mirror orbits
     assert 0.8 < rounds[1]["total_length_m"] / rounds[0]["total_length_m"] < 1.25
     assert (out / "04-remesh" / "field_round_2.png").stat().st_size > 0
-    field = field_of_grid(out, load_project(path))  # the optimiser follows the field the grid was made under
+    # the optimiser follows the field the grid was made under: the remesh's result carries it,
+    # the same when loaded from a cached run
+    loaded = remesh_stage.load(out / "04-remesh", load_project(path))
+    field = loaded.rounds_field
     assert field is not None and field.size.min() == 1.0 and field.anisotropy.max() <= 2.0 + 1e-12
+    shell_field = object()
+    assert loaded.field(shell_field) is field  # type: ignore[arg-type]
+    single = remesh_stage.RemeshedGrid(loaded.polymesh)
+    assert single.field(shell_field) is shell_field  # type: ignore[arg-type]
     analysis = json.loads((out / "06-analysis" / "analysis.json").read_text())
     assert analysis["lambda_LB"] is not None and analysis["lambda_NL_worst"] is None
     manifest = json.loads((out / "manifest.json").read_text())

@@ -7,7 +7,7 @@ the stages that made them (workflow.runner.Stage):
 - surface: () -> surface.SurfaceResult
 - shell: (surface) -> engine.shell.ShellResult
 - field: (surface, shell) -> engine.field.GuidingField
-- remesh: (surface, field) -> engine.mesh.PolyMesh
+- remesh: (surface, field) -> remesh.RemeshedGrid (the grid, and the field of its statics rounds)
 - optimize: (surface, field, remesh) -> optimize.OptimizedGrid
 - analysis: (surface, optimize) -> analysis.AnalysisSummary
 - fabrication: (surface, optimize, analysis) -> fabrication.FabricationResult

@@ -37,8 +37,8 @@ from .build_limits import build_limits_of
 from .polymesh_io import read_polymesh_obj, write_polymesh_obj
 from .remesh import (
     MAX_COLLAPSE_SHARE,
+    RemeshedGrid,
     buildable_grid,
-    field_of_grid,
     grid_figures,
     short_count,
     short_share,
@@ -137,16 +137,15 @@ def changed_region(before: PolyMesh, after: PolyMesh, rings: int = REOPTIMISED_R
     return region
 
 
-def run(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, project: Project,
+def run(surface: SurfaceResult, field: GuidingField, remesh: RemeshedGrid, project: Project,
         ctx: StageContext) -> OptimizedGrid:
     grid = GridKind(project.remesh.grid)
     if grid in LATTICES:  # a lattice is not a grid of Voronoi cells: it goes through as built
-        return lattice.run_optimize(surface, field, remesh, project, ctx)
+        return lattice.run_optimize(surface, field, remesh.polymesh, project, ctx)
     if grid == GridKind.ISOTROPIC:  # the control is held to uniform cells, not to the field's grading
         field = isotropic_field(field)
-    polymesh = remesh
-    rounds_field = field_of_grid(ctx.out_dir, project)  # statics rounds: the field the grid was made under
-    field = field if rounds_field is None else rounds_field
+    polymesh = remesh.polymesh
+    field = remesh.field(field)  # statics rounds: the field the grid was made under
     settings = optimize_settings(project)
     defects = 0
     if not settings.symmetry_planes:  # (a flip on one side of a plane would break the mirror)

@@ -4,7 +4,7 @@ Artifacts (04-remesh/): gridshell.obj (+ gridshell.nodes.json), remesh.json (qua
 figures) and pictures coloured by face degree. With ``[remesh] statics_rounds`` N > 1 the field
 is rebuilt N - 1 times from the grid's own beam forces and the surface remeshed under it
 (remeshed_from_beam_forces): remesh.json gains the rounds, field_round_N.npz holds the last field
-(the one the grid was made under, which the optimiser follows: field_of_grid) and
+(the one the grid was made under, which the optimiser follows: ``RemeshedGrid.field``) and
 field_round_N.png shows it.
 """
 
@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -40,13 +41,26 @@ from .field import load_field, save_field
 from .polymesh_io import read_polymesh_obj, write_polymesh_obj
 from .surface import SurfaceResult
 
-__all__ = ["run", "load", "remesh_settings", "buildable_grid", "remeshed_from_beam_forces", "field_of_grid"]
+__all__ = ["RemeshedGrid", "run", "load", "remesh_settings", "buildable_grid", "remeshed_from_beam_forces"]
 
 
-def run(surface: SurfaceResult, field: GuidingField, project: Project, ctx: StageContext) -> PolyMesh:
+@dataclass(frozen=True)
+class RemeshedGrid:
+    """The remesh stage's result: the grid, and the field it was made under where statics rounds
+    rebuilt that field from the grid's beam forces (``rounds_field``; None: the field stage's)."""
+
+    polymesh: PolyMesh
+    rounds_field: GuidingField | None = None
+
+    def field(self, field_stage: GuidingField) -> GuidingField:
+        """The field the grid was made under, given the field stage's."""
+        return field_stage if self.rounds_field is None else self.rounds_field
+
+
+def run(surface: SurfaceResult, field: GuidingField, project: Project, ctx: StageContext) -> RemeshedGrid:
     grid = GridKind(project.remesh.grid)
     if grid in LATTICES:  # squares, triangles, the statics-aware quads: .lattice
-        return lattice.run_remesh(surface, field, project, ctx)
+        return RemeshedGrid(lattice.run_remesh(surface, field, project, ctx))
     if grid == GridKind.ISOTROPIC:  # the control: the same remesher under a uniform field
         field = isotropic_field(field)
     support_vertices = np.zeros(surface.mesh.n_vertices, dtype=bool)
@@ -94,7 +108,7 @@ def run(surface: SurfaceResult, field: GuidingField, project: Project, ctx: Stag
     ctx.step("drawing")
     plot_gridshell(polymesh, ctx.folder / "degree.png", color_by="degree",
                    title=f"{project.project.name}: remeshed grid-shell, cells by number of sides")
-    return polymesh
+    return RemeshedGrid(polymesh, field if rounds else None)
 
 
 def remesh_settings(project: Project) -> RemeshSettings:
@@ -138,13 +152,6 @@ def remeshed_from_beam_forces(result: RemeshResult, field: GuidingField, surface
     plot_field(mesh, field, ctx.folder / f"field_round_{count}.png",
                title=f"{project.project.name}: guiding field of round {count} (beam forces of round {count - 1})")
     return result, field, rounds
-
-
-def field_of_grid(out_dir: Path, project: Project) -> GuidingField | None:
-    """The field the remeshed grid was made under where statics rounds rebuilt it (read from the
-    run's 04-remesh/field_round_N.npz), else None: the field stage's."""
-    count = project.remesh.statics_rounds
-    return load_field(out_dir / "04-remesh" / f"field_round_{count}.npz") if count > 1 else None
 
 
 def _round_figures(number: int, result: RemeshResult) -> dict:
@@ -266,5 +273,8 @@ def too_fine_finding(record: dict, stage: str) -> dict:
                        "([fabrication.joints] kind, hub_radius, sleeve_length)").to_dict()
 
 
-def load(folder: Path, project: Project) -> PolyMesh:
-    return read_polymesh_obj(folder / "gridshell.obj")
+def load(folder: Path, project: Project) -> RemeshedGrid:
+    count = project.remesh.statics_rounds
+    rounds_field = folder / f"field_round_{count}.npz"
+    return RemeshedGrid(read_polymesh_obj(folder / "gridshell.obj"),
+                        load_field(rounds_field) if count > 1 and rounds_field.is_file() else None)
