@@ -29,8 +29,8 @@ imports this module.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
-from typing import Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -312,17 +312,10 @@ def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: floa
     energy whose hexagon shares differ by up to 20 points. With symmetry planes (and a symmetric
     mesh) seeds and clusters are made symmetric at every step, and only symmetric clusterings are
     candidates while there are any."""
-    from .clustering import centred_moments, cluster_vertices
+    from .clustering import cluster_vertices
 
     rng = np.random.default_rng(settings.seed)
-    adjacency = _adjacency(fine)
-    weights = fine.areas * fine.inverse_h2 ** (DENSITY_POWER / 2)
-    if fine.moments is None:
-        fine.moments = centred_moments(fine.vertices, fine.metric, weights)
-    moments = fine.moments
-    if fine.tree is None:
-        fine.tree = cKDTree(fine.vertices)
-    tree = fine.tree
+    adjacency, weights, moments, tree = _clustering_inputs(fine)
     counts = _level_counts(n_cells)
     sweeps = 0
     result = None
@@ -394,6 +387,25 @@ def _cluster(fine: _Fine, n_cells: int, settings: RemeshSettings, turn_deg: floa
     return candidates
 
 
+def _clustering_inputs(fine: _Fine):
+    """(adjacency, vertex weights, centred moments, k-d tree) of the clustering, the ones that are
+    kept on ``fine`` made on first use."""
+    from .clustering import centred_moments
+
+    adjacency = _adjacency(fine)
+    weights = fine.areas * fine.inverse_h2 ** (DENSITY_POWER / 2)
+    if fine.moments is None:
+        fine.moments = centred_moments(fine.vertices, fine.metric, weights)
+    if fine.tree is None:
+        fine.tree = cKDTree(fine.vertices)
+    return adjacency, weights, fine.moments, fine.tree
+
+
+def _cluster_start(job: tuple) -> list[_Clusters]:
+    """``_cluster(*job)``: one start, as a process pool runs it."""
+    return _cluster(*job)
+
+
 def _candidate_order(clusters: _Clusters) -> tuple[float, float]:
     """Sort key, best first: the larger interior hexagon share, then the lower energy."""
     return -clusters.hexagon_share, clusters.energy
@@ -401,15 +413,24 @@ def _candidate_order(clusters: _Clusters) -> tuple[float, float]:
 
 # ----------------------------------------------------------------------------- driver
 
+#: ``map(function, jobs)`` that runs a tessellation's starts: the builtin one after another, or a
+#: process pool's (``concurrent.futures.Executor.map``) side by side, with the same results.
+StartsMap = Callable[[Callable[[tuple], list], list], Iterable[list]]
+
+
 @dataclass
-class _Timing:
+class _Tessellations:
+    """What the tessellations of one remesh share: their seconds and sweeps, and the map that runs
+    their starts."""
+
     clustering_s: float = 0.0
     extraction_s: float = 0.0
     sweeps: int = 0
+    starts_map: StartsMap | None = None
 
 
 def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: RemeshSettings,
-                support_vertices: np.ndarray | None, say, timing: _Timing | None = None,
+                support_vertices: np.ndarray | None, say, timing: _Tessellations | None = None,
                 buildable: Buildable | None = None) -> PolyMesh:
     """The grid-shell of ``n_cells`` cells. Where the clustered mesh is small, several lattice
     offsets (seeds settings.seed, +1, ...; the lattice turned by LATTICE_TURNS_DEG in turn) are
@@ -426,12 +447,19 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
     starts = int(max(1, min(MAX_STARTS, START_BUDGET // len(fine.vertices))))
     candidates: list[_Clusters] = []
     start = perf_counter()
-    for start_index in range(starts):
-        say(f"clustering {len(fine.vertices)} vertices into {n_cells} cells"
-            + (f" (start {start_index + 1}/{starts})" if starts > 1 else ""), 0.1 + 0.8 * start_index / starts)
-        candidates += _cluster(fine, n_cells, replace(settings, seed=settings.seed + start_index),
-                               LATTICE_TURNS_DEG[start_index % len(LATTICE_TURNS_DEG)],
-                               keep=CANDIDATES_PER_START if starts > 1 else 1)
+    turns = LATTICE_TURNS_DEG
+    jobs = [(fine, n_cells, replace(settings, seed=settings.seed + index), turns[index % len(turns)],
+             CANDIDATES_PER_START if starts > 1 else 1) for index in range(starts)]
+    starts_map = timing.starts_map if timing is not None and starts > 1 else None
+    if starts_map is not None:  # the starts side by side: the caches they share made once, here
+        _clustering_inputs(fine)
+    say(f"clustering {len(fine.vertices)} vertices into {n_cells} cells"
+        + (f" ({starts} starts)" if starts > 1 else ""), 0.1)
+    for done, found in enumerate((starts_map or map)(_cluster_start, jobs)):
+        candidates += found
+        if starts > 1:
+            say(f"clustering {len(fine.vertices)} vertices into {n_cells} cells (start {done + 1}/{starts} done)",
+                0.1 + 0.8 * (done + 1) / starts)
     middle = perf_counter()
     # polygons of the candidates, best clustering first, until none left could score higher (the
     # clusters' hexagon share is the grid's but where extraction collapses a short beam)
@@ -487,26 +515,28 @@ def _cells_for_length(mesh: TriMesh, field: GuidingField, mean_beam_length: floa
 
 def remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
            support_vertices: np.ndarray | None = None, progress: Progress | None = None,
-           buildable: Buildable | None = None) -> RemeshResult:
+           buildable: Buildable | None = None, starts_map: StartsMap | None = None) -> RemeshResult:
     """The statics-aware Voronoi grid-shell of ``mesh`` under ``field`` (see the module docstring).
     ``buildable``: the grid as the caller will make it buildable (collapses of the beams its joints
     cannot take); where several candidate grids are made, they are compared as such.
+    ``starts_map``: runs the starts of a tessellation (a process pool's ``map`` puts them on the
+    cores; the grid is the same).
     With symmetry planes, a grid that cannot be made symmetric (too few cells for the planes to
     keep seeds on every part, or nodes that do not settle) is remeshed without them, and the
     quality's ``symmetry`` says so (``symmetric`` false, ``reason``)."""
     if not settings.symmetry_planes:
         return _remesh(mesh, field, settings, support_vertices=support_vertices, progress=progress,
-                       buildable=buildable)
+                       buildable=buildable, starts_map=starts_map)
     try:
         result = _remesh(mesh, field, settings, support_vertices=support_vertices, progress=progress,
-                         buildable=buildable)
+                         buildable=buildable, starts_map=starts_map)
         if np.all(np.isfinite(result.polymesh.nodes)):
             return result
         reason = "its nodes did not settle (non-finite positions)"
     except MeshError as error:
         reason = str(error).splitlines()[0]
     result = _remesh(mesh, field, replace(settings, symmetry_planes=()), support_vertices=support_vertices,
-                     progress=progress, buildable=buildable)
+                     progress=progress, buildable=buildable, starts_map=starts_map)
     result.quality["symmetry"] = {"symmetric": False, "reason": f"not made symmetric: {reason}",
                                   "planes": [list(map(list, plane)) for plane in settings.symmetry_planes]}
     return result
@@ -514,7 +544,7 @@ def remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
 
 def _remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
             support_vertices: np.ndarray | None = None, progress: Progress | None = None,
-            buildable: Buildable | None = None) -> RemeshResult:
+            buildable: Buildable | None = None, starts_map: StartsMap | None = None) -> RemeshResult:
     """The grid of ``remesh`` with the settings as given.
 
     The quality dict also holds ``clustering_s`` and ``extraction_s`` (seconds spent in the
@@ -541,7 +571,7 @@ def _remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
     if n_cells > max_cells:
         raise InputError(f"remesh: {n_cells} cells is more than this remesher handles ({max_cells})",
                          hint="ask for fewer cells or a longer mean beam length")
-    timing = _Timing()
+    timing = _Tessellations(starts_map=starts_map)
     polymesh = _tessellate(mesh, field, n_cells, settings, support_vertices, say, timing, buildable)
     if settings.mean_beam_length is not None:
         for _ in range(3):

@@ -401,3 +401,31 @@ def test_candidates_are_compared_as_the_caller_will_build_them():
 
     chosen = remesh(mesh, field, settings, buildable=spoil_all_but_one).polymesh
     assert np.array_equal(chosen.nodes, calls[favoured].nodes), "the candidate that builds best is kept, as extracted"
+
+
+def test_the_starts_side_by_side_in_worker_processes_give_the_grid_made_one_after_another():
+    """A small grid is clustered from several starts (lattice offsets); a process pool may run them
+    on the cores (``starts_map``, the remesh stage's ``[remesh] workers``). Each start is seeded by
+    its own index, so the grid is the same, node for node, as from the starts in turn."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from engine.voronoi import MAX_STARTS
+
+    mesh = _square(12)
+    size = 0.6 + 0.4 * np.abs(mesh.vertices[:, 0])  # graded: the starts' candidates differ
+    settings = RemeshSettings(n_cells=30, lloyd_iterations=6)
+    order: list[int] = []
+
+    def in_turn(function, jobs):
+        for job in jobs:
+            order.append(job[2].seed)
+            yield function(job)
+
+    serial = remesh(mesh, _field(mesh, size=size), settings, starts_map=in_turn)
+    assert order == list(range(MAX_STARTS)), "a small mesh is clustered from every start"
+    with ProcessPoolExecutor(max_workers=2) as pool:
+        pooled = remesh(mesh, _field(mesh, size=size), settings, starts_map=pool.map)
+    assert np.array_equal(serial.polymesh.nodes, pooled.polymesh.nodes)
+    assert [f.tolist() for f in serial.polymesh.faces] == [f.tolist() for f in pooled.polymesh.faces]
+    plain = remesh(mesh, _field(mesh, size=size), settings)
+    assert np.array_equal(plain.polymesh.nodes, serial.polymesh.nodes)

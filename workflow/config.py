@@ -339,7 +339,9 @@ class RemeshConfig(_Section):
     "triangular", "statics_quad" (squares along the field's dominant direction, lines graded by
     its size). A lattice meets total_length within 1 %; n_cells or mean_beam_length give it the
     length of a regular lattice of that many cells, or of that spacing, over the surface's area
-    (engine.grids.lattice_total_length); coarsen_for_joints does not apply to lattices."""
+    (engine.grids.lattice_total_length); coarsen_for_joints does not apply to lattices.
+    workers: processes that cluster a small grid's starts side by side (default: one per core; the
+    grid is the same with any count)."""
 
     n_cells: int | None = Field(None, ge=4)
     mean_beam_length: Length | None = Field(None, gt=0.0)
@@ -349,6 +351,7 @@ class RemeshConfig(_Section):
     coarsen_for_joints: bool = True
     statics_rounds: int = Field(1, ge=1, le=10)
     grid: GridKind = GridKind.VORONOI
+    workers: int | None = Field(None, ge=1)
 
     @model_validator(mode="after")
     def _one_target(self) -> "RemeshConfig":

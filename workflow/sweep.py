@@ -22,7 +22,7 @@ A task that fails fails the points below it, each with the message; the others c
 results are one row per point in ``OUT/sweep.csv`` and ``OUT/sweep.parquet`` and pictures in
 ``OUT/sweep.html`` (see :func:`write_results`).
 
-Each point runs with one process: ``analysis.workers`` and ``fabrication.workers`` are 1 unless
+Each point runs with one process: ``remesh.workers``, ``analysis.workers`` and ``fabrication.workers`` are 1 unless
 the sweep varies them (the cache keys leave worker counts out: they change no result).
 """
 
@@ -48,7 +48,7 @@ FIGURES = {"lambda_LB": "lambda_LB", "lambda_NL_worst": "lambda_NL_worst", "delt
            "total_beam_length_m": "total_beam_length_m", "beam_mass_kg": "beam_mass_kg", "n_nodes": "nodes",
            "n_beams": "beams", "max_utilisation": "max_utilisation"}
 #: Keys a point's project gets unless the sweep varies them: one process per point.
-ONE_PROCESS = {"analysis.workers": 1, "fabrication.workers": 1}
+ONE_PROCESS = {"remesh.workers": 1, "analysis.workers": 1, "fabrication.workers": 1}
 #: The longest the progress stays silent (s).
 PROGRESS_INTERVAL_S = 10.0
 

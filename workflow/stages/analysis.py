@@ -10,9 +10,6 @@ table), members.csv, response.csv and pictures (response, modes, utilisation, ax
 from __future__ import annotations
 
 import json
-import os
-from concurrent.futures import ProcessPoolExecutor
-from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -36,10 +33,10 @@ from engine.structure import BeamProperties, beam_up_vectors, gridshell_loads, n
 from engine.supports import Supports
 from engine.verdicts import VerdictFixes, design_verdicts, findings_of
 from fabrication.files import atomic_path, write_text_atomic
-from fabrication.workers import exit_with_parent
 
 from ..config import Project
 from ..plots.analysis import plot_axial_forces, plot_buckling_modes, plot_response, plot_sections, plot_utilisation
+from ..pools import process_pool
 from ..runner import StageContext
 from .optimize import OptimizedGrid
 from .sizing import (
@@ -108,17 +105,10 @@ def build_frame(polymesh: PolyMesh, surface: SurfaceResult, props: BeamPropertie
     return model, Supports(nodes=nodes, restraints=flags), normals
 
 
-@contextmanager
 def path_pool(workers: int | None):
     """A process pool of ``workers`` (default: one per core) for the non-linear paths, or None
-    with one worker (the paths then run here, one after another). Its workers end with this
-    process (fabrication.workers)."""
-    count = workers or os.cpu_count() or 1
-    if count < 2:
-        yield None
-        return
-    with ProcessPoolExecutor(max_workers=count, initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
-        yield pool
+    with one worker (the paths then run here, one after another): workflow.pools.process_pool."""
+    return process_pool(workers)
 
 
 def _plan_span(polymesh) -> float:

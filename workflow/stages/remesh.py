@@ -27,13 +27,14 @@ from engine.grids import LATTICES, GridKind, isotropic_field
 from engine.mesh import PolyMesh
 from engine.structure import node_normals
 from engine.symmetry import symmetrised_grid, symmetry_record
-from engine.voronoi import RemeshResult, RemeshSettings, remesh
+from engine.voronoi import RemeshResult, RemeshSettings, StartsMap, remesh
 from fabrication.files import write_text_atomic
 from fabrication.limits import node_smallest_angles, required_beam_lengths_m
 
 from ..config import Project
 from ..plots.field import plot_field
 from ..plots.remesh import plot_gridshell
+from ..pools import process_pool
 from ..runner import StageContext
 from . import lattice
 from .build_limits import build_limits_of
@@ -61,6 +62,13 @@ def run(surface: SurfaceResult, field: GuidingField, project: Project, ctx: Stag
     grid = GridKind(project.remesh.grid)
     if grid in LATTICES:  # squares, triangles, the statics-aware quads: .lattice
         return RemeshedGrid(lattice.run_remesh(surface, field, project, ctx))
+    with process_pool(project.remesh.workers) as pool:  # a small grid's starts side by side
+        return _voronoi(surface, field, project, ctx, grid, None if pool is None else pool.map)
+
+
+def _voronoi(surface: SurfaceResult, field: GuidingField, project: Project, ctx: StageContext, grid: GridKind,
+             starts_map: StartsMap | None) -> RemeshedGrid:
+    """The run of a Voronoi grid (the statics-aware one or its isotropic control)."""
     if grid == GridKind.ISOTROPIC:  # the control: the same remesher under a uniform field
         field = isotropic_field(field)
     support_vertices = np.zeros(surface.mesh.n_vertices, dtype=bool)
@@ -68,17 +76,18 @@ def run(surface: SurfaceResult, field: GuidingField, project: Project, ctx: Stag
     settings = remesh_settings(project)
     made_buildable = buildable_as_remeshed(project)
     result = remesh(surface.mesh, field, settings, support_vertices=support_vertices, progress=ctx.step,
-                    buildable=made_buildable)
+                    buildable=made_buildable, starts_map=starts_map)
     rounds: list[dict] = []
     if grid == GridKind.VORONOI:  # the control stays uniform: its field is not the forces'
-        result, field, rounds = remeshed_from_beam_forces(result, field, surface, project, ctx)
+        result, field, rounds = remeshed_from_beam_forces(result, field, surface, project, ctx, starts_map)
     asked, remeshes = settings.n_cells or result.polymesh.n_faces, 0
     if project.remesh.coarsen_for_joints:
         result, remeshes = fitted_to_joints(
             result, project,
             lambda n: remesh(surface.mesh, field, dataclasses.replace(settings, n_cells=n, mean_beam_length=None,
                                                                       total_length=None),
-                             support_vertices=support_vertices, progress=ctx.step, buildable=made_buildable),
+                             support_vertices=support_vertices, progress=ctx.step, buildable=made_buildable,
+                             starts_map=starts_map),
             progress=ctx.step)
     if remeshes:
         ctx.report_findings([coarsened_finding(asked, result)])
@@ -117,7 +126,8 @@ def remesh_settings(project: Project) -> RemeshSettings:
 
 
 def remeshed_from_beam_forces(result: RemeshResult, field: GuidingField, surface: SurfaceResult, project: Project,
-                              ctx: StageContext) -> tuple[RemeshResult, GuidingField, list[dict]]:
+                              ctx: StageContext, starts_map: StartsMap | None = None
+                              ) -> tuple[RemeshResult, GuidingField, list[dict]]:
     """(result, field, rounds): with ``[remesh] statics_rounds`` N > 1, N - 1 times the field rebuilt
     from the last grid's beam forces (linear analysis under the ULS combination, as the analysis
     stage builds it; engine.grid_stress) with the project's field settings, and the surface
@@ -144,7 +154,7 @@ def remeshed_from_beam_forces(result: RemeshResult, field: GuidingField, surface
         field = guiding_field(mesh, forces, field_settings)
         ctx.step(f"statics round {number} of {count}: remeshing under the field of the beam forces")
         result = remesh(mesh, field, settings, support_vertices=support_vertices, progress=ctx.step,
-                        buildable=buildable_as_remeshed(project))
+                        buildable=buildable_as_remeshed(project), starts_map=starts_map)
         rounds.append(_round_figures(number, result))
         ctx.step(f"statics round {number} of {count}: {rounds[-1]['cells']} cells, "
                  f"{rounds[-1]['total_length_m']:.1f} m of beams")
