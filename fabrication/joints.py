@@ -17,7 +17,10 @@ pockets' faces into the hub's top face (fabrication.engraving) where the label i
 pin holes and the hub's rim by the least wall and no sleeve rises through the face over it, else
 by a boolean cut as before. Workers write each joint's files (and its entities for joints.step,
 fabrication.step_assembly); the parent streams them into the combined file and is free for other
-work meanwhile (JointsInBackground). Each joint's report records its seconds (``seconds``).
+work meanwhile (JointsInBackground). Joints that are the same part go to one worker, which
+builds the first and turns its blank onto the others, each then engraved with its own id and
+checked as any joint (``turned_copy``; half the booleans of the symmetric mock-up). Each joint's
+report records its seconds (``seconds``).
 """
 
 from __future__ import annotations
@@ -185,15 +188,20 @@ def _beams_about_axis(geometry: JointGeometry) -> np.ndarray:
     """(k, 3) per beam, in the order of their azimuths about the joint's axis: the beam's
     elevation (its direction's component along the axis), the azimuth on to the next beam (rad)
     and its outer size (mm). Unchanged by rotating the joint."""
+    azimuth = _azimuths(geometry)
+    order = np.argsort(azimuth, kind="stable")
+    gaps = np.mod(np.diff(np.r_[azimuth[order], azimuth[order][0] + 2 * np.pi]), 2 * np.pi)
+    return np.column_stack([geometry.directions[order] @ geometry.axis, gaps, geometry.sizes_mm[order]])
+
+
+def _azimuths(geometry: JointGeometry) -> np.ndarray:
+    """(k,) each beam's azimuth about the joint's axis, in [0, 2 pi), from an axis-made frame."""
     axis = geometry.axis
     e1 = np.cross([0.0, 0.0, 1.0] if abs(axis[2]) < 0.9 else [1.0, 0.0, 0.0], axis)
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(axis, e1)
     d = geometry.directions
-    azimuth = np.mod(np.arctan2(d @ e2, d @ e1), 2 * np.pi)
-    order = np.argsort(azimuth, kind="stable")
-    gaps = np.mod(np.diff(np.r_[azimuth[order], azimuth[order][0] + 2 * np.pi]), 2 * np.pi)
-    return np.column_stack([d[order] @ axis, gaps, geometry.sizes_mm[order]])
+    return np.mod(np.arctan2(d @ e2, d @ e1), 2 * np.pi)
 
 
 def _near_joints(described: list[np.ndarray], scale: np.ndarray) -> list[set[int]]:
@@ -215,34 +223,89 @@ def _near_joints(described: list[np.ndarray], scale: np.ndarray) -> list[set[int
     return near
 
 
+def _groups_of_same(geometries: list[JointGeometry], tolerance_rad: float = 1e-3,
+                    tolerance_mm: float = 1e-3) -> list[list[tuple[int, int]]]:
+    """Every joint in a group of the joints that are the same part (see ``same_joints``), in the
+    order the groups were opened: (index, shift) pairs, shift 0 for the first, else the turn of the
+    member's beams (in azimuth order) that matches the first's."""
+    described = [_beams_about_axis(g) for g in geometries]
+    scale = np.array([tolerance_rad, tolerance_rad, tolerance_mm])
+
+    def shift_onto(a: np.ndarray, b: np.ndarray) -> int | None:
+        if len(a) != len(b):
+            return None
+        return next((shift for shift in range(len(b)) if np.all(np.abs(a - np.roll(b, shift, axis=0)) <= scale)),
+                    None)
+
+    # Only joints whose sorted columns agree within the tolerances can be the same (sorting moves no
+    # value further than the turn that matches them did), so each joint is compared with those
+    # neighbours only, found in a k-d tree; the groups are those of comparing every pair in order.
+    near = _near_joints(described, scale)
+    groups: list[list[tuple[int, int]]] = []
+    group_of: dict[int, int] = {}  # first member -> its group
+    for k, d in enumerate(described):
+        for first in sorted(j for j in near[k] if j in group_of):  # groups in the order they were opened
+            shift = shift_onto(described[first], d)
+            if shift is not None:
+                groups[group_of[first]].append((k, shift))
+                break
+        else:
+            group_of[k] = len(groups)
+            groups.append([(k, 0)])
+    return groups
+
+
 def same_joints(geometries: list[JointGeometry], tolerance_rad: float = 1e-3,
                 tolerance_mm: float = 1e-3) -> list[list[str]]:
     """Groups (two or more ids) of joints that are the same part but for the engraved id: the same
     beams (sizes within ``tolerance_mm``) at the same angles about the axis and to it (within
     ``tolerance_rad``; 1e-3 rad is 0.05 mm at a sleeve's end), one turned onto the other. A
     mirror image is not the same part. The hub, set-back, bores and pin holes follow from these."""
-    described = [_beams_about_axis(g) for g in geometries]
-    scale = np.array([tolerance_rad, tolerance_rad, tolerance_mm])
+    return [[joint_name(geometries[k].node) for k, _ in group]
+            for group in _groups_of_same(geometries, tolerance_rad, tolerance_mm) if len(group) > 1]
 
-    def same(a: np.ndarray, b: np.ndarray) -> bool:
-        return len(a) == len(b) and any(np.all(np.abs(a - np.roll(b, shift, axis=0)) <= scale)
-                                        for shift in range(len(b)))
 
-    # Only joints whose sorted columns agree within the tolerances can be the same (sorting moves no
-    # value further than the turn that matches them did), so each joint is compared with those
-    # neighbours only, found in a k-d tree; the groups are those of comparing every pair in order.
-    near = _near_joints(described, scale)
-    groups: list[list[int]] = []
-    group_of: dict[int, int] = {}  # first member -> its group
-    for k, d in enumerate(described):
-        for first in sorted(j for j in near[k] if j in group_of):  # groups in the order they were opened
-            if same(described[first], d):
-                groups[group_of[first]].append(k)
-                break
-        else:
-            group_of[k] = len(groups)
-            groups.append([k])
-    return [[joint_name(geometries[k].node) for k in group] for group in groups if len(group) > 1]
+def _azimuth_order(geometry: JointGeometry) -> np.ndarray:
+    """The beams in the order of their azimuths about the joint's axis (as _beams_about_axis)."""
+    return np.argsort(_azimuths(geometry), kind="stable")
+
+
+def turned_copy(first: JointGeometry, other: JointGeometry, shift: int,
+                tolerance_rad: float = 2e-3) -> tuple[JointGeometry, np.ndarray] | None:
+    """(``first`` turned onto ``other``, the rotation): ``first``'s beams and axis turned by the
+    rotation that best maps them onto ``other``'s (its beams matched in azimuth order rolled by
+    ``shift``, as ``same_joints`` found them), at ``other``'s node and position. None where no
+    rotation brings every beam and the axis within ``tolerance_rad`` (a mirror image, say)."""
+    k = len(first.directions)
+    a_order, b_order = _azimuth_order(first), _azimuth_order(other)
+    matched = b_order[(np.arange(k) - shift) % k]
+    source = np.vstack([first.directions[a_order], first.axis])
+    target = np.vstack([other.directions[matched], other.axis])
+    u, _, vt = np.linalg.svd(target.T @ source)
+    rotation = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+    turned = source @ rotation.T
+    if np.linalg.det(rotation) < 0 or np.max(np.linalg.norm(turned - target, axis=1)) > tolerance_rad:
+        return None
+    directions = np.empty_like(first.directions)
+    directions[matched] = turned[:k]
+    sizes = None
+    if first.beam_sizes_mm is not None:
+        sizes = np.empty(k)
+        sizes[matched] = np.asarray(first.beam_sizes_mm, dtype=float)[a_order]
+    return JointGeometry(node=other.node, position_mm=other.position_mm, directions=directions, axis=turned[k],
+                         beam_size_mm=first.beam_size_mm, beam_sizes_mm=sizes), rotation
+
+
+def _turned_shape(shape, rotation: np.ndarray):
+    """A copy of the OCP ``shape`` turned by ``rotation`` (3, 3) about the origin."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
+    from OCP.gp import gp_Trsf
+
+    trsf = gp_Trsf()
+    r = rotation
+    trsf.SetValues(*map(float, (r[0, 0], r[0, 1], r[0, 2], 0.0, r[1, 0], r[1, 1], r[1, 2], 0.0,
+                                r[2, 0], r[2, 1], r[2, 2], 0.0)))
+    return BRepBuilderAPI_Transform(shape, trsf, True).Shape()
 
 
 def _perpendicular(direction: np.ndarray, axis: np.ndarray) -> np.ndarray:
@@ -541,9 +604,11 @@ def build_joint(geometry: JointGeometry, settings: JointSettings):
     return solid, report
 
 
-def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings):
+def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings, *, blank_shape=None):
     """(blank, solid, report): the joint as ``build_joint`` gives it, and its blank, the same solid
-    before the id is engraved (the solid itself where nothing is engraved), both at the origin (mm)."""
+    before the id is engraved (the solid itself where nothing is engraved), both at the origin (mm).
+    ``blank_shape``: the blank already made (an OCP shape: an equal joint's, turned onto this one
+    by ``turned_copy``), which then takes the place of the booleans."""
     name = joint_name(geometry.node)
     directions, axis = geometry.directions, geometry.axis
     size = geometry.beam_size_mm
@@ -577,9 +642,12 @@ def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings):
         # one fuse of the holed plates with the hub, checked by a face of each plate end and hole
         # (a cut of the holes after the fuse took 40 % of the node's booleans); a hole that does
         # not fit inside its plate is cut afterwards
-        shape = _checked_boolean("fuse", hub, plates, plate_ends + ([] if holes else bolt_holes))
-        if holes:
-            shape = _checked_boolean("cut", shape, holes, bolt_holes)
+        if blank_shape is not None:
+            shape = blank_shape
+        else:
+            shape = _checked_boolean("fuse", hub, plates, plate_ends + ([] if holes else bolt_holes))
+            if holes:
+                shape = _checked_boolean("cut", shape, holes, bolt_holes)
         solid = _as_build123d(shape)
         blank = solid
         report["min_wall_mm"] = float(settings.plate_thickness_mm)
@@ -605,7 +673,8 @@ def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings):
         # the wall its features' cylinders leave (the sleeves' outsides, the bores and pin holes)
         walls = {kind: [("cylinder", a, b - a, r) for k, a, b, r in features if k == kind]
                  for kind in ("sleeve", "hole")}
-        shape = _checked_boolean("cut", _checked_boolean("fuse", hub, sleeves, walls["sleeve"]), tools, walls["hole"])
+        shape = blank_shape if blank_shape is not None else _checked_boolean(
+            "cut", _checked_boolean("fuse", hub, sleeves, walls["sleeve"]), tools, walls["hole"])
         blank = solid = _as_build123d(shape)
         if settings.engrave:
             solid = _as_build123d(_engrave_id(shape, name, geometry, settings, top_mm=0.5 * hub_height,
@@ -731,13 +800,42 @@ def _watertight_stl(solid, path: Path, report: dict | None = None) -> bool:
     return bool(mesh.is_watertight)
 
 
+def _build_and_write_group(jobs: tuple) -> list[dict]:
+    """``_build_and_write`` of each joint of a group of equal joints (``_groups_of_same``): the first
+    is built; the blank of each other one is the first's turned onto it (``turned_copy``), then
+    engraved with its own id, checked and written like any joint. Where the turn is not found, or a
+    copy fails a check, that joint is built by itself."""
+    reports: list[dict] = []
+    first_blank = None
+    for index, (job, shift) in enumerate(jobs):
+        report = None
+        if index > 0 and first_blank is not None:
+            copy = turned_copy(jobs[0][0][0], job[0], shift)
+            if copy is not None:
+                report, _ = _build_and_write_one(job, turned=(copy[0], _turned_shape(first_blank, copy[1])))
+                if not report.get("ok"):
+                    report = None
+        if report is None:
+            report, blank = _build_and_write_one(job)
+            if index == 0 and report.get("ok"):
+                first_blank = blank
+        reports.append(report)
+    return reports
+
+
 def _build_and_write(job: tuple) -> dict:
     """Build, check and write one joint (J0001.step, J0001.stl) and its entities for joints.step.
     A joint the modeller cannot build is a report with ``ok`` False and its ``error``, no files."""
+    return _build_and_write_one(job)[0]
+
+
+def _build_and_write_one(job: tuple, turned: tuple | None = None) -> tuple[dict, object]:
+    """(report, the blank as an OCP shape or None) of ``_build_and_write``; ``turned``: (the joint's
+    geometry as an equal joint's turned onto it, that joint's blank turned likewise)."""
     geometry = job[0]
     started = time.perf_counter()
     try:
-        return _build_and_write_checked(job)
+        return _build_and_write_checked(job, turned)
     except Exception as error:  # noqa: BLE001 - the OCP kernel's failures are many; the joint is reported
         name = joint_name(geometry.node)
         for suffix in (".step", ".stl"):
@@ -745,15 +843,18 @@ def _build_and_write(job: tuple) -> dict:
         return {"id": name, "node": geometry.node, "beams": int(len(geometry.directions)), "ok": False,
                 "built": False, "error": f"{type(error).__name__}: {error}".splitlines()[0],
                 "smallest_angle_deg": float(np.degrees(smallest_angle(geometry.directions))), "_part": False,
-                "seconds": {"build": round(time.perf_counter() - started, 4)}}
+                "seconds": {"build": round(time.perf_counter() - started, 4)}}, None
 
 
-def _build_and_write_checked(job: tuple) -> dict:
+def _build_and_write_checked(job: tuple, turned: tuple | None = None) -> tuple[dict, object]:
     geometry, settings, folder, parts_folder, first_id, last_id = job
     from build123d import Location, export_step
 
     started = time.perf_counter()
-    blank, solid, report = build_joint_and_blank(geometry, settings)
+    if turned is None:
+        blank, solid, report = build_joint_and_blank(geometry, settings)
+    else:  # the checks below measure the copy against this joint's own beams
+        blank, solid, report = build_joint_and_blank(turned[0], settings, blank_shape=turned[1])
     built = time.perf_counter()
     bores = 0.5 * geometry.sizes_mm + settings.clearance_mm
     report["max_axis_error_deg"] = (_axis_errors_deg(solid, geometry.directions, bores) if settings.kind == "socket"
@@ -796,7 +897,7 @@ def _build_and_write_checked(job: tuple) -> dict:
     finished = time.perf_counter()
     report["seconds"] = {"build": round(built - started, 4), "check_and_step": round(written - built, 4),
                          "stl": round(finished - written, 4)}
-    return report
+    return report, blank.wrapped
 
 
 def _id_ranges(n_joints: int) -> list[tuple[int, int]]:
@@ -861,11 +962,15 @@ class JointsInBackground:
                 self._writer = StepAssemblyWriter(self._file, "joints")
             self._jobs = [(g, self.settings, str(self.folder), parts, *self._ranges[k])
                           for k, g in enumerate(self.geometries)]
-            self._order = sorted(range(len(self._jobs)), key=lambda k: -len(self.geometries[k].directions))
+            # equal joints go to one worker, which builds the first and turns its blank onto the
+            # others (their booleans were two thirds of a printed socket's time); most beams first
+            groups = _groups_of_same(self.geometries)
+            groups.sort(key=lambda group: -len(self.geometries[group[0][0]].directions))
+            self._groups = [tuple((self._jobs[k], shift) for k, shift in group) for group in groups]
             if self.workers > 1 and len(self._jobs) > 4:
                 self._pool = self._stack.enter_context(ProcessPoolExecutor(
                     max_workers=self.workers, initializer=exit_with_parent, initargs=(os.getpid(),)))
-                self._futures = [self._pool.submit(_build_and_write, self._jobs[k]) for k in self._order]
+                self._futures = [self._pool.submit(_build_and_write_group, group) for group in self._groups]
                 self._thread = threading.Thread(target=self._collect_all, name="joints", daemon=True)
                 self._thread.start()
         except BaseException:
@@ -893,7 +998,8 @@ class JointsInBackground:
     def _collect_all(self) -> None:
         try:
             for future in self._futures:  # in the order given, so that joints.step is the same bytes
-                self._collect(future.result())
+                for report in future.result():
+                    self._collect(report)
         except BaseException as error:  # noqa: BLE001 - raised again in the caller's thread
             self._error = error
             for future in self._futures:
@@ -928,8 +1034,9 @@ class JointsInBackground:
         if error is None:
             try:
                 if self._thread is None:
-                    for k in self._order:
-                        self._collect(_build_and_write(self._jobs[k]))
+                    for group in self._groups:
+                        for report in _build_and_write_group(group):
+                            self._collect(report)
                 self.wait()
                 if self._error is not None:
                     raise self._error

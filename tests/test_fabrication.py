@@ -4,6 +4,7 @@ part files) against the slower ways they replace."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -756,6 +757,75 @@ def test_same_joints_are_turned_copies_not_mirror_images():
 
     joints = [joint(0, np.eye(3)), joint(1, tilt @ turn), joint(2, mirror), joint(3, turn, np.array([12, 12, 10.0]))]
     assert same_joints(joints) == [["J0001", "J0002"]]
+
+
+def test_a_joint_turned_onto_an_equal_one_has_its_beams_and_a_mirror_image_has_none():
+    """turned_copy finds the rotation that maps a joint onto an equal one whose beams are listed in
+    another order: the copy's beams and axis are the other joint's (exactly, for an exact turn), its
+    rotation is the one applied, and a mirror image (no proper rotation) gives None."""
+    from scipy.spatial.transform import Rotation
+
+    from fabrication.joints import JointGeometry, _groups_of_same, turned_copy
+
+    base = _joint_geometry(tilt_deg=5.0, beams=4, node=0)
+    directions = base.directions + np.array([[0.0, 0.0, 0.0], [0.05, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.1, 0.0]])
+    base = dataclasses.replace(base, directions=directions / np.linalg.norm(directions, axis=1)[:, None])
+    sizes = np.array([12.0, 10.0, 12.0, 8.0])  # no mirror symmetry: the beams' gaps and sizes differ
+    first = JointGeometry(node=0, position_mm=np.zeros(3), directions=base.directions, axis=base.axis,
+                          beam_size_mm=12.0, beam_sizes_mm=sizes)
+    rotation = Rotation.from_rotvec([0.3, -1.1, 0.7]).as_matrix()
+    order = np.array([2, 0, 3, 1])
+    other = JointGeometry(node=5, position_mm=np.array([100.0, 0.0, 0.0]),
+                          directions=(base.directions @ rotation.T)[order], axis=rotation @ base.axis,
+                          beam_size_mm=12.0, beam_sizes_mm=sizes[order])
+    mirror = np.diag([1.0, -1.0, 1.0])
+    image = JointGeometry(node=6, position_mm=np.zeros(3), directions=base.directions @ mirror, axis=mirror @ base.axis,
+                          beam_size_mm=12.0, beam_sizes_mm=sizes)
+    groups = _groups_of_same([first, other, image])
+    assert [[k for k, _ in g] for g in groups] == [[0, 1], [2]]
+    copy, found = turned_copy(first, other, groups[0][1][1])
+    assert np.allclose(found, rotation, atol=1e-12)
+    assert np.allclose(copy.directions, other.directions, atol=1e-12) and np.allclose(copy.axis, other.axis)
+    assert np.array_equal(copy.sizes_mm, other.sizes_mm) and copy.node == 5
+    assert np.array_equal(copy.position_mm, other.position_mm)
+    assert all(turned_copy(first, image, shift) is None for shift in range(4))
+
+
+def test_equal_joints_are_built_once_and_turned_each_engraved_with_its_own_id(tmp_path):
+    """A group of equal joints is built once: each other joint's blank is the first's turned onto it
+    (read back from the STEP files, the same volume to 1e-9, against 1e-4 for a joint built by
+    itself), each is checked as any joint, and each STL carries its own engraved id (the STL of a
+    copy differs from the first's, and its volume from its blank's by the engraved pockets)."""
+    import trimesh
+    from scipy.spatial.transform import Rotation
+
+    from fabrication import joints
+
+    base = _joint_geometry(tilt_deg=8.0, beams=3, node=0)
+    settings = joints.JointSettings()
+    turns = [np.eye(3), Rotation.from_rotvec([0.2, 0.5, -1.3]).as_matrix(),
+             Rotation.from_rotvec([-0.9, 0.1, 2.0]).as_matrix()]
+    geometries = [joints.JointGeometry(node=k, position_mm=np.array([200.0 * k, 0.0, 0.0]),
+                                       directions=(base.directions @ r.T)[::-1 if k == 2 else 1], axis=r @ base.axis,
+                                       beam_size_mm=12.0) for k, r in enumerate(turns)]
+    ranges = joints._id_ranges(3)
+    group = tuple(((g, settings, str(tmp_path), None, *ranges[k]), shift)
+                  for (k, shift) in joints._groups_of_same(geometries)[0] for g in [geometries[k]])
+    assert len(group) == 3
+    reports = joints._build_and_write_group(group)
+    assert [r["id"] for r in reports] == ["J0001", "J0002", "J0003"] and all(r["ok"] for r in reports)
+    assert all(r["max_axis_error_deg"] < 1e-6 for r in reports)
+    volumes = [_volume(_read_step(tmp_path / f"J000{k}.step")) for k in (1, 2, 3)]
+    assert volumes[1] == pytest.approx(volumes[0], rel=1e-9) and volumes[2] == pytest.approx(volumes[0], rel=1e-9)
+    alone = tmp_path / "alone"
+    alone.mkdir()
+    joints._build_and_write((geometries[1], settings, str(alone), None, *ranges[1]))
+    assert _volume(_read_step(alone / "J0002.step")) == pytest.approx(volumes[1], rel=1e-4)
+    stls = [trimesh.load(tmp_path / f"J000{k}.stl") for k in (1, 2, 3)]
+    assert all(m.is_watertight for m in stls)
+    assert (tmp_path / "J0002.stl").read_bytes() != (tmp_path / "J0003.stl").read_bytes()
+    for mesh, volume in zip(stls, volumes):
+        assert 0.0 < volume - mesh.volume < 0.01 * volume  # the engraved pockets, within the STL's chord
 
 
 def test_step_points_written_to_8_places_read_back_the_same_solid(tmp_path):
