@@ -68,9 +68,9 @@ class _Pardiso:
         import pypardiso  # noqa: F401
 
     def factor(self, A):
-        import pypardiso
+        from engine.solvers import pardiso_solver  # MKL's library found once, as the product does
 
-        solver = pypardiso.PyPardisoSolver(mtype=-2)
+        solver = pardiso_solver(mtype=-2)
         upper = sp.triu(A, format="csr")
         upper.sort_indices()
         solver.factorize(upper)

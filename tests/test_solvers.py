@@ -97,3 +97,23 @@ def test_a_loose_part_of_a_shell_is_a_mechanism_for_either_library(library, monk
     with pytest.raises(MechanismError, match="beyond rigid-body|singular") as info:
         analyse_shell(two, supports, loads, thickness=0.02, material=ShellMaterial(E=1e9, nu=0.3))
     assert info.value.n_modes >= 1
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="pypardiso is not installed")
+def test_pardiso_looks_for_mkl_once_per_process_and_each_factor_stays_its_own(monkeypatch):
+    """pypardiso searches sys.prefix for MKL at every solver it makes where the loader does not
+    know the library (0.6-1.4 s, twenty times a small factorisation): after the first factor no
+    search runs. Two factors alive at once each solve their own matrix."""
+    import glob
+
+    first_matrix, second_matrix = _laplacian(20, 0.0), _laplacian(20, 0.7)
+    first = factor_symmetric(first_matrix, library="pardiso")
+
+    def no_search(*args, **kwargs):
+        raise AssertionError("pypardiso searched for MKL again")
+
+    monkeypatch.setattr(glob, "glob", no_search)
+    second = factor_symmetric(second_matrix, library="pardiso")
+    b = np.random.default_rng(2).normal(size=400)
+    for factor, matrix in ((first, first_matrix), (second, second_matrix)):
+        assert np.linalg.norm(matrix @ factor.solve(b) - b) / np.linalg.norm(b) < 1e-10
