@@ -139,7 +139,8 @@ def describe() -> dict:
             "pardiso_from_dofs": PARDISO_FROM_DOFS if pardiso else None,
             "shell": f"PARDISO from {PARDISO_FROM_DOFS} DOF, SuperLU below" if pardiso
             else "SuperLU (pypardiso is not installed)",
-            "frame": "SuperLU (its matrices are below the size where PARDISO is faster)"}
+            "frame": "SuperLU (PARDISO is faster on its matrices too, but not yet used in the forked path "
+                     "workers; docs/decisions.md, Factorisations)"}
 
 
 def factor_symmetric(matrix: sp.spmatrix, *, library: str = "auto") -> SymmetricFactor:
