@@ -284,7 +284,7 @@ def turned_copy(first: JointGeometry, other: JointGeometry, shift: int,
     u, _, vt = np.linalg.svd(target.T @ source)
     rotation = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
     turned = source @ rotation.T
-    if np.linalg.det(rotation) < 0 or np.max(np.linalg.norm(turned - target, axis=1)) > tolerance_rad:
+    if np.max(np.linalg.norm(turned - target, axis=1)) > tolerance_rad:  # a mirror image, say
         return None
     directions = np.empty_like(first.directions)
     directions[matched] = turned[:k]

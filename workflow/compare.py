@@ -152,7 +152,8 @@ def compare_grids(project: Project, surface, voronoi: PolyMesh, *, field: Guidin
     failed row with its size); any other exception is a bug and propagates."""
     from engine import grids as lattices
 
-    from .stages.analysis import beam_properties, path_pool
+    from .pools import process_pool
+    from .stages.analysis import beam_properties
 
     def say(text: str) -> None:
         if progress is not None:
@@ -200,7 +201,7 @@ def compare_grids(project: Project, surface, voronoi: PolyMesh, *, field: Guidin
         grids[name] = voronoi
     mass_per_length = beam_properties(project)[0].mass_per_length
     config = project.analysis
-    with path_pool(config.workers if config.nonlinear else 1) as pool:  # each grid's paths side by side
+    with process_pool(config.workers if config.nonlinear else 1) as pool:  # each grid's paths side by side
         for label, grid in grids.items():
             if grid is None:
                 continue

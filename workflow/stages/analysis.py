@@ -105,12 +105,6 @@ def build_frame(polymesh: PolyMesh, surface: SurfaceResult, props: BeamPropertie
     return model, Supports(nodes=nodes, restraints=flags), normals
 
 
-def path_pool(workers: int | None):
-    """A process pool of ``workers`` (default: one per core) for the non-linear paths, or None
-    with one worker (the paths then run here, one after another): workflow.pools.process_pool."""
-    return process_pool(workers)
-
-
 def _plan_span(polymesh) -> float:
     extent = np.ptp(polymesh.nodes[:, :2], axis=0)
     return float(extent.min())
@@ -344,7 +338,7 @@ def protocol_with_design(ctx, project: Project, polymesh, surface, material, met
             result = run_protocol(model, supports, sls_loads, uls_loads, settings, progress=ctx.step,
                                   executor=executor)
         else:
-            with path_pool(config.workers if config.nonlinear else 1) as pool:
+            with process_pool(config.workers if config.nonlinear else 1) as pool:
                 result = run_protocol(model, supports, sls_loads, uls_loads, settings, progress=ctx.step,
                                       executor=pool)
         worst = result.worst
