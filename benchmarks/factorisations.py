@@ -8,7 +8,8 @@ the beam-end nodes, as ``engine.condensed`` factors it; its tangent past a limit
 indefinite, and the inertia is checked on K - sigma I with sigma above the lowest eigenvalues).
 Per matrix and library: factor seconds, solve seconds, the residual of one solve and the count of
 negative pivots against scipy's dense count (small matrices) or SuperLU's. Libraries: SuperLU
-(scipy ``splu``, the product's), PARDISO (pypardiso, MKL; symmetric indefinite) and CHOLMOD
+(scipy ``splu``), PARDISO (MKL through pypardiso, symmetric indefinite, as ``engine.solvers``
+factors: the product's from 2 000 DOF) and CHOLMOD
 (scikit-sparse, LDL^T) where they import. Each factorisation is timed three times, the median printed.
 """
 
@@ -62,26 +63,21 @@ class _SuperLU:
 
 
 class _Pardiso:
-    name = "PARDISO (pypardiso, MKL)"
+    name = "PARDISO (MKL, engine.solvers' settings)"
 
     def __init__(self):
         import pypardiso  # noqa: F401
 
     def factor(self, A):
-        from engine.solvers import pardiso_solver  # MKL's library found once, as the product does
+        from engine.solvers import factor_symmetric  # MKL found once, iparm as the product sets it
 
-        solver = pardiso_solver(mtype=-2)
-        upper = sp.triu(A, format="csr")
-        upper.sort_indices()
-        solver.factorize(upper)
-        return solver, upper
+        return factor_symmetric(A, library="pardiso")
 
     def solve(self, f, b):
-        solver, upper = f
-        return solver.solve(upper, b)
+        return f.solve(b)
 
     def negative(self, f, A):
-        return int(f[0].iparm[22])
+        return int(f.negative_pivots)
 
 
 class _Cholmod:

@@ -285,37 +285,41 @@ def factor_free_stiffness(K_elements: np.ndarray, el: ElementMesh, free: np.ndar
     except RuntimeError as exc:
         raise MechanismError("the frame is a mechanism: its stiffness matrix is singular", n_modes=1,
                              hint="check for loose beams or nodes held by pinned ends only") from exc
-    diagonal = lu.pivots
-    scale = np.abs(diagonal).max() if diagonal.size else 1.0
-    tiny = np.abs(diagonal) <= 1e-12 * scale
-    if np.any(tiny):
-        raise MechanismError(f"the frame is a mechanism with {int(tiny.sum())} free mode(s) beyond rigid-body motion",
-                             n_modes=int(tiny.sum()),
+    tiny = lu.tiny_pivots
+    if tiny:
+        raise MechanismError(f"the frame is a mechanism with {tiny} free mode(s) beyond rigid-body motion",
+                             n_modes=tiny,
                              hint=short_beam_hint(beam_lengths) or "check for loose beams, beams released at both "
                              "ends (a free spin about their axis) or nodes joined by pinned ends only")
     return lu
 
 
 def condensed_factor(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray,
-                     ordering: FillOrdering | None = None) -> CondensedFactor:
-    """The condensed factor (``engine.condensed``) of element matrices on ``el``'s free DOFs."""
+                     ordering: FillOrdering | None = None, library: str = "auto") -> CondensedFactor:
+    """The condensed factor (``engine.condensed``) of element matrices on ``el``'s free DOFs;
+    ``library``: S's (engine.solvers.library_for)."""
     return CondensedFactor(K_elements, el.connectivity, len(el.nodes), el.n_original, free,
-                           len(el.connectivity) // len(el.first), ordering=ordering)
+                           len(el.connectivity) // len(el.first), ordering=ordering, library=library)
 
 
 def factor_or_none(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray,
-                   ordering: FillOrdering | None = None) -> CondensedFactor | None:
-    """The condensed factor, or None where the matrix is exactly singular."""
+                   ordering: FillOrdering | None = None, library: str = "auto") -> CondensedFactor | None:
+    """The condensed factor, or None where the matrix is singular (an exactly zero pivot, or one
+    PARDISO perturbed)."""
     try:
-        return condensed_factor(K_elements, el, free, ordering)
+        lu = condensed_factor(K_elements, el, free, ordering, library)
     except RuntimeError:
         return None
+    return None if lu.singular else lu
 
 
 def factor_with_inertia(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray,
                         ordering: FillOrdering | None = None) -> tuple[CondensedFactor, int]:
-    """The condensed factor and its count of negative pivots."""
+    """The condensed factor and its count of negative pivots. Raises RuntimeError where the matrix
+    is singular (as factor_or_none's None)."""
     lu = condensed_factor(K_elements, el, free, ordering)
+    if lu.singular:
+        raise RuntimeError("Factor is singular (a pivot perturbed)")
     return lu, lu.negative_pivots
 
 

@@ -14,9 +14,14 @@ to factor, and a solve (all DOFs, internal ones included: this is exact, not a r
 takes half the time of the full LU's (docs/decisions.md, "Frame finite elements").
 
 The inertia is kept: the pivots are those of an elimination of the K_ii without row exchanges
-followed by S's LU with diagonal pivots, which are the pivots of the whole matrix eliminated in
-that order (Haynsworth), so the negative-pivot count of the co-rotational path is unchanged.
-The element matrices need not be symmetric (the co-rotational tangent is not quite).
+followed by S's factor, which are the pivots of the whole matrix eliminated in that order
+(Haynsworth), so the negative-pivot count of the co-rotational path is unchanged.
+
+S is factored by ``engine.solvers``' choice for its size: PARDISO's LDL^T (its inertia from the
+factor's counts) or SuperLU with diagonal pivots (the signs of U's diagonal). The element
+matrices need not be symmetric (the co-rotational tangent is not quite): PARDISO then factors
+the symmetric part of S, so the solve is that of a tangent whose end-node block is symmetrised,
+which Newton's corrector, judged by the residual, does not notice (tests/test_frame.py).
 """
 
 from __future__ import annotations
@@ -26,8 +31,12 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .linalg import assemble_blocks
+from .solvers import factor_symmetric, library_for
 
 __all__ = ["CondensedFactor", "FillOrdering", "sparse_lu"]
+
+#: A pivot this small against the largest of its kind is taken for zero (a mechanism).
+TINY_PIVOT = 1e-12
 
 
 def sparse_lu(matrix: sp.spmatrix):
@@ -77,6 +86,93 @@ class FillOrdering:
         return _PermutedLU(lu, order)
 
 
+class _SchurLU:
+    """S's SuperLU (kept ordering or not) with the inertia read from U's diagonal when asked for
+    (SuperLU builds all of U for it)."""
+
+    library = "superlu"
+    singular = False  # an exactly zero pivot raised already
+
+    def __init__(self, matrix: sp.spmatrix, ordering: FillOrdering | None) -> None:
+        self._lu = sparse_lu(matrix) if ordering is None else ordering.factor(matrix)
+        self._pivots: np.ndarray | None = None
+
+    def _diagonal(self) -> np.ndarray:
+        if self._pivots is None:
+            self._pivots = self._lu.U.diagonal()
+        return self._pivots
+
+    @property
+    def negative_pivots(self) -> int:
+        return int(np.sum(self._diagonal() < 0))
+
+    @property
+    def tiny_pivots(self) -> int:
+        return _tiny(self._diagonal())
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        return self._lu.solve(rhs)
+
+
+class _SchurLDLT:
+    """S's PARDISO factor (engine.solvers): LDL^T of S's symmetric part, perturbed pivots standing
+    for the zero ones (which SuperLU refuses). ``skew``: S's skew-symmetric part, where S is not
+    symmetric (a co-rotational tangent): a solve is then refined towards S's own by
+    x <- x0 - (S_sym)^-1 (skew x), while that contracts, up to REFINEMENTS times."""
+
+    library = "pardiso"
+
+    def __init__(self, symmetric: sp.spmatrix, skew: sp.csr_matrix | None) -> None:
+        self._factor = factor_symmetric(symmetric, library="pardiso")
+        self._skew = skew
+        self.negative_pivots = self._factor.negative_pivots
+        self.tiny_pivots = self._factor.tiny_pivots
+        self.singular = self.tiny_pivots > 0
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        first = self._factor.solve(rhs)
+        if self._skew is None:
+            return first
+        x, change = first, np.inf
+        for _ in range(REFINEMENTS):
+            refined = first - self._factor.solve(self._skew @ x)
+            new_change = float(np.abs(refined - x).max())
+            if not new_change < 0.5 * change:       # not contracting: keep the last that did
+                break
+            x, change = refined, new_change
+            if change <= 1e-9 * float(np.abs(x).max()):
+                break
+        return x
+
+
+#: At most this many refinements of a solve on S's symmetric part towards S's own.
+REFINEMENTS = 3
+#: Blocks this close to symmetric (against their largest entry) are symmetric: a linear stiffness.
+SYMMETRIC = 1e-13
+
+
+def _factor_of_s(blocks: np.ndarray, pairs: np.ndarray, n_nodes: int, rows: np.ndarray,
+                 ordering: FillOrdering | None, library: str) -> _SchurLU | _SchurLDLT:
+    """The factor of S, the blocks (m, 12, 12) assembled on the node pairs (m, 2), on ``rows``."""
+    if library_for(len(rows), library) == "pardiso":
+        skew_blocks = 0.5 * (blocks - blocks.transpose(0, 2, 1))
+        symmetric = assemble_blocks(blocks - skew_blocks, pairs, n_nodes)[rows][:, rows]
+        skew = None
+        if len(blocks) and np.abs(skew_blocks).max() > SYMMETRIC * np.abs(blocks).max():
+            skew = sp.csr_matrix(assemble_blocks(skew_blocks, pairs, n_nodes)[rows][:, rows])
+        try:
+            return _SchurLDLT(symmetric, skew)
+        except (ImportError, OSError):  # installed, but MKL does not load here
+            if library == "pardiso":
+                raise
+    return _SchurLU(assemble_blocks(blocks, pairs, n_nodes)[rows][:, rows], ordering)
+
+
+def _tiny(pivots: np.ndarray) -> int:
+    scale = np.abs(pivots).max() if pivots.size else 1.0
+    return int(np.sum(np.abs(pivots) <= TINY_PIVOT * scale))
+
+
 def _block_pivots(blocks: np.ndarray) -> np.ndarray:
     """(m, g) pivots of the Gaussian elimination of each block without row exchanges (as SuperLU
     with diagonal pivots), vectorised over the blocks (block index last, for contiguous rows)."""
@@ -101,20 +197,20 @@ class CondensedFactor:
     (6 per node, node-major), every internal DOF among them. ``solve(f)`` takes (n_free,) or
     (n_free, r). ``pivots``: the pivots of the elimination (internal blocks, then the diagonal of
     S's U), whose signs give the inertia of a symmetric K. Raises RuntimeError when K is exactly
-    singular (an internal block or S), as SuperLU does. With k = 1 it is a plain SuperLU of the
-    assembled matrix. ``ordering``: S's elimination order, kept from one factorisation of a
-    pattern to the next.
+    singular (an internal block, or S for SuperLU); PARDISO's factor of a singular S is
+    ``singular`` instead, its zero pivots counted in ``tiny_pivots``. With k = 1, S is the
+    assembled matrix. ``ordering``: S's elimination order for SuperLU, kept from one factorisation
+    of a pattern to the next. ``library``: S's, as ``engine.solvers.library_for``.
     """
 
     def __init__(self, element_matrices: np.ndarray, connectivity: np.ndarray, n_nodes: int, n_original: int,
-                 free: np.ndarray, elements_per_beam: int, *, ordering: FillOrdering | None = None) -> None:
+                 free: np.ndarray, elements_per_beam: int, *, ordering: FillOrdering | None = None,
+                 library: str = "auto") -> None:
         k = int(elements_per_beam)
-        lu_of = sparse_lu if ordering is None else ordering.factor
         self.free = free
         self.n_dofs = 6 * n_nodes
         if k == 1:
-            K = assemble_blocks(element_matrices, connectivity, n_nodes)
-            self._lu = lu_of(K[free][:, free])
+            self._lu = _factor_of_s(element_matrices, connectivity, n_nodes, free, ordering, library)
             self._beams = None
             self._block_pivots: np.ndarray | None = np.zeros(0)
             self._K_ii: np.ndarray | None = None
@@ -150,12 +246,11 @@ class CondensedFactor:
         condensed[:, :6] -= np.matmul(first[:, :6, 6:], self._W[:, :6, :])
         condensed[:, 6:] -= np.matmul(last[:, 6:, :6], self._W[:, g - 6:, :])
         beam_ends = np.stack([connectivity[::k, 0], connectivity[k - 1::k, 1]], axis=1)
-        S = assemble_blocks(condensed, beam_ends, n_original)
         self._n_boundary_dofs = 6 * n_original
         self._boundary = free[free < 6 * n_original]
         if len(free) - len(self._boundary) != m * g:
             raise ValueError("every internal DOF of the beams must be free")
-        self._lu = lu_of(S[self._boundary][:, self._boundary])
+        self._lu = _factor_of_s(condensed, beam_ends, n_original, self._boundary, ordering, library)
         self._end_dofs = (6 * beam_ends[:, :, None] + np.arange(6)).reshape(m, 12)
         # scatter of the (m, 12) end contributions onto the end-node DOFs
         self._scatter = sp.csr_matrix((np.ones(12 * m), (self._end_dofs.ravel(), np.arange(12 * m))),
@@ -164,18 +259,32 @@ class CondensedFactor:
         self._block_pivots = None
 
     @property
-    def pivots(self) -> np.ndarray:
-        """The pivots of the elimination: the internal blocks' (without row exchanges), then the
-        diagonal of S's U (made when asked for: SuperLU builds all of U for it)."""
+    def library(self) -> str:
+        """The library that factored S: "superlu" or "pardiso"."""
+        return self._lu.library
+
+    @property
+    def singular(self) -> bool:
+        """Whether PARDISO perturbed a zero pivot of S (SuperLU raised instead)."""
+        return self._lu.singular
+
+    def _internal_pivots(self) -> np.ndarray:
+        """The pivots of the internal blocks' elimination without row exchanges."""
         if self._block_pivots is None:
             assert self._K_ii is not None  # beams of several elements: their internal blocks are kept
             self._block_pivots = _block_pivots(self._K_ii).ravel()
-        return np.concatenate([self._block_pivots, self._lu.U.diagonal()])
+        return self._block_pivots
 
     @property
     def negative_pivots(self) -> int:
         """Number of negative pivots (for a symmetric K: of negative eigenvalues)."""
-        return int(np.sum(self.pivots < 0))
+        return int(np.sum(self._internal_pivots() < 0)) + self._lu.negative_pivots
+
+    @property
+    def tiny_pivots(self) -> int:
+        """Number of pivots under TINY_PIVOT of the largest of the internal blocks', and of S's
+        (SuperLU's, or those PARDISO perturbed): zero eigenvalues, a mechanism."""
+        return _tiny(self._internal_pivots()) + self._lu.tiny_pivots
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """x with K x = rhs on the free DOFs, for rhs (n_free,) or (n_free, r)."""

@@ -315,11 +315,12 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     free = cr.free
     factored = 0
 
-    def factor(cache):
-        """The factored tangent at an element state, or None where it is singular."""
+    def factor(cache, exact: bool = False):
+        """The factored tangent at an element state, or None where it is singular. ``exact``: the
+        whole tangent by SuperLU, where PARDISO would take its symmetric part (engine.condensed)."""
         nonlocal factored
         factored += 1
-        return factor_or_none(cr.tangent(cache), cr.el, free, cr.ordering)
+        return factor_or_none(cr.tangent(cache), cr.el, free, cr.ordering, "superlu" if exact else "auto")
     F_ref = np.zeros(6 * cr.n_all)
     F_ref[:6 * n] = loads.ravel()
     F_dead = np.zeros(6 * cr.n_all)
@@ -477,7 +478,10 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
                     full, correction_norm, restarted_at = True, np.inf, _iteration
                 fresh = full or lu_i is None or df is None or reused >= 8
                 if fresh:
-                    lu_i = factor(cache)
+                    # on a step redone shorter, Newton's own tangent: where PARDISO factors its
+                    # symmetric part (engine.condensed), that may be what failed to converge (a
+                    # cantilever rolled up by an end moment: tangents up to 6e-2 from symmetric)
+                    lu_i = factor(cache, exact=_attempt > 0)
                     if lu_i is None:
                         break
                     df = np.zeros(6 * cr.n_all)

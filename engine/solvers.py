@@ -3,20 +3,23 @@
 Two libraries, chosen by the matrix's size from the figures of ``benchmarks/factorisations.py``
 on our own matrices (docs/benchmarks.md, "Factorisations"):
 
-- SuperLU (scipy ``splu``): minimum degree on A^T + A and diagonal pivots, so the signs of U's
-  diagonal give the inertia. Fastest up to some tens of thousands of DOF (the shell at 10k
-  triangles, 30k DOF: 2.5 times faster than PARDISO; every frame of the benchmarks).
 - PARDISO (Intel MKL, through pypardiso), symmetric indefinite LDL^T with Bunch-Kaufman pivots,
-  its inertia and its perturbed (near-zero) pivots from ``iparm``: 1.9 times faster than SuperLU at
-  150k DOF, and accurate on indefinite matrices where SuperLU's diagonal pivots are not (relative
-  residual 1e-9 against 7e-4). Used from PARDISO_FROM_DOFS up when pypardiso imports (it needs
-  MKL, which has wheels for x86-64 Linux and Windows only).
+  its inertia and its perturbed (near-zero) pivots from ``iparm``: 1.7 times faster than SuperLU
+  on a frame's 2 200-DOF matrix, 2.4-3.3 times at 29 000 DOF, 5.5 times on a 150 000-DOF shell,
+  and accurate on indefinite matrices where SuperLU's diagonal pivots are not (relative residual
+  1e-9 against 7e-4). Used from PARDISO_FROM_DOFS up when pypardiso imports (it needs MKL, which
+  has wheels for x86-64 Linux and Windows only).
+- SuperLU (scipy ``splu``): minimum degree on A^T + A and diagonal pivots, so the signs of U's
+  diagonal give the inertia. As fast below some thousand DOF (no library to load), and the
+  fallback everywhere else.
 
-``factor_symmetric`` returns a :class:`SymmetricFactor` either way.
+``factor_symmetric`` returns a :class:`SymmetricFactor` either way. ``limit_threads`` sets MKL's
+threads (the worker processes of a pool take one each).
 """
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import os
 import time
@@ -26,12 +29,13 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 __all__ = ["SymmetricFactor", "factor_symmetric", "library_for", "pardiso_available", "pardiso_solver", "describe",
-           "PARDISO_FROM_DOFS", "SingularMatrix"]
+           "limit_threads", "PARDISO_FROM_DOFS", "SingularMatrix"]
 
 log = logging.getLogger(__name__)
 
-#: Matrices of at least this many rows are factored by PARDISO when it is installed.
-PARDISO_FROM_DOFS = 60_000
+#: Matrices of at least this many rows are factored by PARDISO when it is installed (a frame's
+#: 765-DOF matrix: 2.0 ms against SuperLU's 1.8; 2 205 DOF: 5.0 against 8.7 ms).
+PARDISO_FROM_DOFS = 2_000
 #: A pivot this small against the largest is taken for zero (a mechanism).
 TINY_PIVOT = 1e-11
 
@@ -90,6 +94,31 @@ class _SuperLU(SymmetricFactor):
         return self._lu.solve(np.asarray(rhs, dtype=float))
 
 
+_threads: int | None = None
+_mkl = None                       # MKL's library, once a solver has loaded it
+_mkl_default_threads = 0
+
+
+def limit_threads(count: int | None) -> int | None:
+    """Run PARDISO on ``count`` threads in this process from now on (None: MKL's own choice), and
+    return the previous limit. A pool's worker processes take one each, so that two of them do
+    not share two cores four ways."""
+    global _threads
+    previous, _threads = _threads, count
+    if _mkl is not None:
+        _apply_threads()
+    return previous
+
+
+def _apply_threads() -> None:
+    """Tell MKL: its process-wide count and this thread's, which threadpoolctl sets (and leaves
+    set after its context, so that a forked worker inherits it) and which overrides the other."""
+    assert _mkl is not None
+    count = _threads or _mkl_default_threads
+    _mkl.MKL_Set_Num_Threads(count)
+    _mkl.MKL_Set_Num_Threads_Local(count)
+
+
 def pardiso_solver(mtype: int):
     """A new ``pypardiso.PyPardisoSolver``, MKL's library found once per process. Where the loader
     does not know it (pip's wheels), pypardiso looks for it at every solver it makes, by a recursive
@@ -97,30 +126,68 @@ def pardiso_solver(mtype: int):
     path found first is handed to the next ones through pypardiso's own PYPARDISO_MKL_RT."""
     import pypardiso
 
+    global _mkl, _mkl_default_threads
     solver = pypardiso.PyPardisoSolver(mtype=mtype)
-    name = getattr(solver.libmkl, "_name", None)
-    if name and "PYPARDISO_MKL_RT" not in os.environ:
-        os.environ["PYPARDISO_MKL_RT"] = name
+    if _mkl is None:
+        name = getattr(solver.libmkl, "_name", None)
+        if name and "PYPARDISO_MKL_RT" not in os.environ:
+            os.environ["PYPARDISO_MKL_RT"] = name
+        _mkl, _mkl_default_threads = solver.libmkl, int(solver.libmkl.MKL_Get_Max_Threads())
+        if _threads is not None:
+            _apply_threads()
     return solver
 
 
+#: PARDISO's settings (1-based iparm index: value), all others MKL's documented default of 0:
+#: given settings (1); nested dissection, METIS (2); iterative refinement only where a pivot was
+#: perturbed (8: 0); perturb pivots under 1e-13 of the norm and count them (10); no scaling or
+#: matching, as MKL's default for symmetric matrices (11, 13: 0); Bunch-Kaufman 1x1 and 2x2
+#: pivots (21). Without iparm(1) = 1, MKL ignores the others: its default then perturbs under
+#: 1e-8 and refines twice at every solve (three times its cost, measured).
+PARDISO_SETTINGS = {1: 1, 2: 2, 8: 0, 10: 13, 21: 1}
+
+
 class _Pardiso(SymmetricFactor):
+    """PARDISO's LDL^T of the upper triangle, called through MKL directly with the matrix's index
+    arrays made once: pypardiso's ``solve`` compares the matrix with the factored one at every
+    call, and ``factorize`` copies it."""
+
     library = "pardiso"
 
     def __init__(self, matrix: sp.spmatrix) -> None:
-        self._solver = pardiso_solver(mtype=-2)  # real symmetric indefinite
-        self._solver.set_iparm(10, 13)  # perturb pivots under 1e-13 of the norm (and count them)
-        upper = sp.triu(sp.csr_matrix(matrix), format="csr")
-        upper.sort_indices()
-        self._upper = upper
-        self._solver.factorize(upper)
+        self._solver = pardiso_solver(mtype=-2)  # real symmetric indefinite: reads the upper triangle
+        for index, value in PARDISO_SETTINGS.items():
+            self._solver.iparm[index - 1] = value
+        upper = _upper_with_diagonal(matrix)
+        self._data = np.ascontiguousarray(upper.data, dtype=float)
+        self._ia = (upper.indptr + 1).astype(np.int32)  # one-based, as iparm(35) = 0 says
+        self._ja = (upper.indices + 1).astype(np.int32)
+        self._n = upper.shape[0]
+        self._call(12, np.zeros((self._n, 1), order="F"))
         iparm = self._solver.iparm
         self.negative_pivots = int(iparm[22])
         self.tiny_pivots = int(iparm[13])
 
+    def _call(self, phase: int, rhs: np.ndarray) -> np.ndarray:
+        solver, out = self._solver, np.zeros_like(rhs)
+        error = ctypes.c_int32(0)
+        int_p, float_p = ctypes.POINTER(ctypes.c_int32), ctypes.POINTER(ctypes.c_double)
+        solver._mkl_pardiso(solver.pt.ctypes.data_as(ctypes.POINTER(solver._pt_type[0])),
+                            ctypes.byref(ctypes.c_int32(1)), ctypes.byref(ctypes.c_int32(1)),  # maxfct, mnum
+                            ctypes.byref(ctypes.c_int32(solver.mtype)), ctypes.byref(ctypes.c_int32(phase)),
+                            ctypes.byref(ctypes.c_int32(self._n)), self._data.ctypes.data_as(float_p),
+                            self._ia.ctypes.data_as(int_p), self._ja.ctypes.data_as(int_p),
+                            solver.perm.ctypes.data_as(int_p), ctypes.byref(ctypes.c_int32(rhs.shape[1])),
+                            solver.iparm.ctypes.data_as(int_p), ctypes.byref(ctypes.c_int32(0)),  # msglvl
+                            rhs.ctypes.data_as(float_p), out.ctypes.data_as(float_p), ctypes.byref(error))
+        if error.value != 0:
+            raise SingularMatrix(f"PARDISO failed with error {error.value} (phase {phase})")
+        return out
+
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         rhs = np.asarray(rhs, dtype=float)
-        return np.asarray(self._solver.solve(self._upper, np.ascontiguousarray(rhs))).reshape(rhs.shape)
+        columns = np.asfortranarray(rhs.reshape(self._n, -1))
+        return np.ascontiguousarray(self._call(33, columns)).reshape(rhs.shape)
 
     def __del__(self) -> None:
         solver = getattr(self, "_solver", None)
@@ -131,6 +198,19 @@ class _Pardiso(SymmetricFactor):
                 pass
 
 
+def _upper_with_diagonal(matrix: sp.spmatrix) -> sp.csr_matrix:
+    """The upper triangle (CSR, sorted) with every diagonal entry stored, zeros too: PARDISO
+    needs them, and a zero one (a DOF without stiffness) is then a perturbed pivot, counted."""
+    upper = sp.triu(matrix, k=1, format="coo")
+    n = matrix.shape[0]
+    diagonal = np.arange(n)
+    out = sp.csr_matrix((np.concatenate([upper.data, matrix.diagonal()]),
+                         (np.concatenate([upper.row, diagonal]), np.concatenate([upper.col, diagonal]))),
+                        shape=matrix.shape)
+    out.sort_indices()
+    return out
+
+
 def describe() -> dict:
     """What factors the stiffness here, for the manifest: the libraries installed and from which
     size PARDISO takes over."""
@@ -139,8 +219,9 @@ def describe() -> dict:
             "pardiso_from_dofs": PARDISO_FROM_DOFS if pardiso else None,
             "shell": f"PARDISO from {PARDISO_FROM_DOFS} DOF, SuperLU below" if pardiso
             else "SuperLU (pypardiso is not installed)",
-            "frame": "SuperLU (PARDISO is faster on its matrices too, but not yet used in the forked path "
-                     "workers; docs/decisions.md, Factorisations)"}
+            "frame": (f"the beams' internal nodes condensed out, then PARDISO from {PARDISO_FROM_DOFS} DOF (the "
+                      "symmetric part of a co-rotational tangent), SuperLU below" if pardiso
+                      else "the beams' internal nodes condensed out, then SuperLU (pypardiso is not installed)")}
 
 
 def factor_symmetric(matrix: sp.spmatrix, *, library: str = "auto") -> SymmetricFactor:

@@ -117,3 +117,36 @@ def test_pardiso_looks_for_mkl_once_per_process_and_each_factor_stays_its_own(mo
     b = np.random.default_rng(2).normal(size=400)
     for factor, matrix in ((first, first_matrix), (second, second_matrix)):
         assert np.linalg.norm(matrix @ factor.solve(b) - b) / np.linalg.norm(b) < 1e-10
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="pypardiso is not installed")
+def test_pardiso_takes_its_settings_a_small_pivot_is_not_a_zero_one_and_a_solve_is_not_refined():
+    """MKL ignores every iparm unless iparm(1) = 1: its defaults then take pivots under 1e-8 of
+    the norm for zero (a stiff member beside a soft one would read as a mechanism) and refine
+    every solve twice. diag(1, 1e-10) is regular; a zero diagonal is one zero pivot."""
+    regular = factor_symmetric(sp.diags([1.0, 1e-10, 2.0]).tocsr(), library="pardiso")
+    assert regular.tiny_pivots == 0 and regular.negative_pivots == 0
+    assert np.allclose(regular.solve(np.array([1.0, 1e-10, 2.0])), 1.0, rtol=1e-12)
+    assert regular._solver.iparm[6] == 0, "no iterative refinement without perturbed pivots"
+    singular = factor_symmetric(sp.csr_matrix(np.diag([1.0, 0.0, 2.0])), library="pardiso")
+    assert singular.tiny_pivots == 1
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="pypardiso is not installed")
+def test_the_workers_of_a_pool_factor_on_one_thread_each():
+    """Two worker processes on two cores: MKL in each runs one thread (asked of MKL itself), and
+    the parent keeps its own count."""
+    from workflow.pools import process_pool
+
+    parent = _mkl_threads()
+    with process_pool(2) as pool:
+        assert pool is not None
+        assert list(pool.map(_mkl_threads, range(2))) == [1, 1]
+    assert _mkl_threads() == parent
+
+
+def _mkl_threads(_: int = 0) -> int:
+    from engine.solvers import factor_symmetric as factor
+
+    made = factor(_laplacian(3, 0.0), library="pardiso")
+    return int(made._solver.libmkl.MKL_Get_Max_Threads())

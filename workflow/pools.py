@@ -8,6 +8,7 @@ from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 
+from engine.solvers import limit_threads
 from fabrication.workers import exit_with_parent
 
 __all__ = ["process_pool"]
@@ -23,5 +24,11 @@ def process_pool(workers: int | None) -> Iterator[ProcessPoolExecutor | None]:
     if count < 2:
         yield None
         return
-    with ProcessPoolExecutor(max_workers=count, initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
+    with ProcessPoolExecutor(max_workers=count, initializer=_start_worker, initargs=(os.getpid(),)) as pool:
         yield pool
+
+
+def _start_worker(parent: int) -> None:
+    """A worker ends with its parent and factors on one thread (the pool takes the cores)."""
+    exit_with_parent(parent)
+    limit_threads(1)
