@@ -23,13 +23,15 @@ import ctypes
 import logging
 import os
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 __all__ = ["SymmetricFactor", "factor_symmetric", "library_for", "pardiso_available", "pardiso_solver", "describe",
-           "limit_threads", "PARDISO_FROM_DOFS", "SingularMatrix"]
+           "limit_threads", "limited_threads", "PARDISO_FROM_DOFS", "SingularMatrix"]
 
 log = logging.getLogger(__name__)
 
@@ -108,6 +110,16 @@ def limit_threads(count: int | None) -> int | None:
     if _mkl is not None:
         _apply_threads()
     return previous
+
+
+@contextmanager
+def limited_threads(count: int | None) -> Iterator[None]:
+    """limit_threads(count) for the time of a ``with`` block, the previous limit restored after."""
+    previous = limit_threads(count)
+    try:
+        yield
+    finally:
+        limit_threads(previous)
 
 
 def _apply_threads() -> None:

@@ -8,8 +8,7 @@ from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 
-from engine.solvers import limit_threads
-from fabrication.workers import exit_with_parent
+from fabrication.workers import start_worker
 
 __all__ = ["process_pool"]
 
@@ -17,18 +16,13 @@ __all__ = ["process_pool"]
 @contextmanager
 def process_pool(workers: int | None) -> Iterator[ProcessPoolExecutor | None]:
     """A pool of ``workers`` processes (default: one per core), or None with one worker (the work
-    then runs here, one piece after another). Its workers end with this process
-    (fabrication.workers.exit_with_parent). They are forked: they run numpy, scipy and the engine's
+    then runs here, one piece after another). Its workers end with this process and factor on one
+    thread (fabrication.workers.start_worker). They are forked: they run numpy, scipy and the engine's
     kernels only, never the CAD kernel, whose thread pool a forked child cannot use."""
     count = workers or os.cpu_count() or 1
     if count < 2:
         yield None
         return
-    with ProcessPoolExecutor(max_workers=count, initializer=_start_worker, initargs=(os.getpid(),)) as pool:
+    with ProcessPoolExecutor(max_workers=count, initializer=start_worker, initargs=(os.getpid(),)) as pool:
         yield pool
 
-
-def _start_worker(parent: int) -> None:
-    """A worker ends with its parent and factors on one thread (the pool takes the cores)."""
-    exit_with_parent(parent)
-    limit_threads(1)

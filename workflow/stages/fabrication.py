@@ -24,6 +24,7 @@ from engine.findings import Finding
 from engine.mesh import PolyMesh
 from engine.parts import joint_id
 from engine.sections import material
+from engine.solvers import limited_threads
 from engine.structure import node_normals
 from fabrication.assembly import plan_assembly, write_assembly
 from fabrication.clearance import joint_clashes_parallel
@@ -118,9 +119,10 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     findings: list[Finding] = []
     joint_settings = config.joints.to_settings()
     summary.update({"joints": 0, "joint_problems": []})
-    # the joints take both cores in worker processes; the other steps run here meanwhile
+    # the joints take both cores in worker processes; the other steps run here meanwhile, their
+    # factorisations (the assembly plan's partial frames) on one thread
     clock.start("joints: start")
-    with JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
+    with limited_threads(1), JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
                             workers=config.workers, combined_step=config.joints.combined_step) as joints:
         _beams_panels_drawings_assembly(project, ctx, clock, optimize, normals, joint_settings, limits, summary,
                                         findings, sections, share=joints.run_steps)
