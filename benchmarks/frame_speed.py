@@ -311,6 +311,9 @@ def main() -> int:
     parser.add_argument("--limit-tolerances", metavar="T,...",
                         help="also follow the path with these limit tolerances (0: the first maximum always "
                              "refined), for comparison with the default")
+    parser.add_argument("--superlu", action="store_true",
+                        help="also run linear static, buckling and the path with SuperLU for every factor "
+                             "(the library below engine.solvers.PARDISO_FROM_DOFS), for comparison")
     args = parser.parse_args()
     frame, supports, loads = model(args.nodes, args.elements_per_beam)
     n_all = len(frame.nodes) + len(frame.beams) * (args.elements_per_beam - 1)
@@ -318,6 +321,34 @@ def main() -> int:
           f"elements per beam, {6 * n_all} DOF, {len(supports.nodes)} pinned supports")
     print(f"assembly           {_assembly_seconds(frame):7.2f} s   (element kernels + sparse stiffness); "
           f"{_pyfe3d_seconds(frame)}")
+    from engine.solvers import factor_symmetric, pardiso_available
+
+    if pardiso_available():  # MKL loads once per process (about a second): not in the first analysis's time
+        import scipy.sparse as sp
+
+        start = time.perf_counter()
+        factor_symmetric(sp.identity(3, format="csr"), library="pardiso")
+        print(f"MKL loaded         {time.perf_counter() - start:7.2f} s")
+    for label, limit in [("", None)] + ([("SuperLU: ", 10**12)] if args.superlu else []):
+        if limit is not None:
+            import engine.solvers
+
+            engine.solvers.PARDISO_FROM_DOFS = limit
+        _analyses(frame, supports, loads, args, label)
+    print(f"peak memory        {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:7.0f} MiB")
+    if not args.no_peers:
+        pynite_nodes = args.nodes if args.pynite_nodes is None else args.pynite_nodes
+        for line in _peer_lines(frame, supports, loads, args.nodes, args.elements_per_beam, pynite_nodes,
+                                args.path_nodes):
+            print(line)
+    return 0
+
+
+def _analyses(frame, supports, loads, args, label: str) -> None:
+    """Linear static, 10 buckling modes and the path(s), timed; ``label`` starts the first line."""
+    from engine.solvers import library_for
+
+    print(f"{label}the beam ends' matrix factored by {library_for(6 * len(frame.nodes))} (engine.solvers)")
     start = time.perf_counter()
     stiffness = frame_module.factor_stiffness(frame, supports)
     linear = frame_module.linear_static(frame, supports, loads, stiffness=stiffness)
@@ -349,13 +380,6 @@ def main() -> int:
         print(f"{label:<18} {t_nonlinear:7.2f} s   {len(run.path) - 1} steps ({int(run.iterations.sum())} "
               f"iterations, {run.factorisations} factorisations), largest load factor {run.path[:, 0].max():.3f}, "
               f"limit {limit}, {pivots}, converged {run.converged}")
-    print(f"peak memory        {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:7.0f} MiB")
-    if not args.no_peers:
-        pynite_nodes = args.nodes if args.pynite_nodes is None else args.pynite_nodes
-        for line in _peer_lines(frame, supports, loads, args.nodes, args.elements_per_beam, pynite_nodes,
-                                args.path_nodes):
-            print(line)
-    return 0
 
 
 if __name__ == "__main__":
