@@ -20,8 +20,8 @@ followed by S's factor, which are the pivots of the whole matrix eliminated in t
 S is factored by ``engine.solvers``' choice for its size: PARDISO's LDL^T (its inertia from the
 factor's counts) or SuperLU with diagonal pivots (the signs of U's diagonal). The element
 matrices need not be symmetric (the co-rotational tangent is not quite): PARDISO then factors
-the symmetric part of S, so the solve is that of a tangent whose end-node block is symmetrised,
-which Newton's corrector, judged by the residual, does not notice (tests/test_frame.py).
+S's symmetric part, its inertia is that part's, and each solve is refined towards S's own (a
+path then takes the steps and iterations it takes on SuperLU; docs/decisions.md).
 """
 
 from __future__ import annotations
@@ -195,8 +195,9 @@ class CondensedFactor:
     nodes, beam by beam, k elements per beam, the internal nodes of beam j numbered
     n_original + j (k - 1) + t (as ``engine.frame`` builds them); ``free``: the sorted free DOFs
     (6 per node, node-major), every internal DOF among them. ``solve(f)`` takes (n_free,) or
-    (n_free, r). ``pivots``: the pivots of the elimination (internal blocks, then the diagonal of
-    S's U), whose signs give the inertia of a symmetric K. Raises RuntimeError when K is exactly
+    (n_free, r). ``negative_pivots`` and ``tiny_pivots``: counts over the pivots of the
+    elimination (internal blocks, then S's factor), the inertia of a symmetric K and its zero
+    eigenvalues. Raises RuntimeError when K is exactly
     singular (an internal block, or S for SuperLU); PARDISO's factor of a singular S is
     ``singular`` instead, its zero pivots counted in ``tiny_pivots``. With k = 1, S is the
     assembled matrix. ``ordering``: S's elimination order for SuperLU, kept from one factorisation
