@@ -35,10 +35,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from engine.field import GuidingField  # noqa: E402
-from engine.parametric import mockup  # noqa: E402
-from engine.structure import node_normals  # noqa: E402
-from engine.voronoi import RemeshSettings, remesh  # noqa: E402
+from engine.geometry.parametric import mockup  # noqa: E402
+from engine.remeshing.field import GuidingField  # noqa: E402
+from engine.remeshing.voronoi import RemeshSettings, remesh  # noqa: E402
+from engine.structure.grid_model import node_normals  # noqa: E402
 from fabrication import joints  # noqa: E402
 from fabrication.joints import JointSettings, build_joints  # noqa: E402
 

@@ -2,13 +2,13 @@
 
     .venv/bin/python benchmarks/factorisations.py [--triangles 10000 50000 100000] [--nodes 1500 5000]
 
-Matrices: the Scordelis-Lo shell roof (free DOFs of ``engine.shell.shell_stiffness``, symmetric
+Matrices: the Scordelis-Lo shell roof (free DOFs of ``engine.structure.shell.shell_stiffness``, symmetric
 positive definite) and the frame grid-shell of benchmarks/frame_speed.py (its Schur complement on
-the beam-end nodes, as ``engine.condensed`` factors it; its tangent past a limit point is
+the beam-end nodes, as ``engine.structure.condensed`` factors it; its tangent past a limit point is
 indefinite, and the inertia is checked on K - sigma I with sigma above the lowest eigenvalues).
 Per matrix and library: factor seconds, solve seconds, the residual of one solve and the count of
 negative pivots against scipy's dense count (small matrices) or SuperLU's. Libraries: SuperLU
-(scipy ``splu``), PARDISO (MKL through pypardiso, symmetric indefinite, as ``engine.solvers``
+(scipy ``splu``), PARDISO (MKL through pypardiso, symmetric indefinite, as ``engine.structure.solvers``
 factors: the product's from 2 000 DOF) and CHOLMOD
 (scikit-sparse, LDL^T) where they import. Each factorisation is timed three times, the median printed.
 """
@@ -26,12 +26,12 @@ import scipy.sparse as sp
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from engine.condensed import sparse_lu  # noqa: E402
+from engine.structure.condensed import sparse_lu  # noqa: E402
 
 
 def shell_matrix(triangles: int) -> sp.csc_matrix:
     from benchmarks.shell_scaling import MATERIAL, THICKNESS, roof
-    from engine.shell import shell_stiffness
+    from engine.structure.shell import shell_stiffness
 
     model = roof(triangles)
     K, _ = shell_stiffness(model.mesh.vertices, model.mesh.faces, THICKNESS, MATERIAL)
@@ -42,7 +42,7 @@ def shell_matrix(triangles: int) -> sp.csc_matrix:
 def frame_matrix(nodes: int) -> sp.csc_matrix:
     """The Schur complement on the beam ends (one element per beam: the matrix SuperLU factors)."""
     from benchmarks.frame_speed import model
-    from engine import frame as fr
+    from engine.structure import frame as fr
 
     frame, supports, _ = model(nodes, 1)
     stiffness = fr.factor_stiffness(frame, supports)
@@ -63,13 +63,13 @@ class _SuperLU:
 
 
 class _Pardiso:
-    name = "PARDISO (MKL, engine.solvers' settings)"
+    name = "PARDISO (MKL, engine.structure.solvers' settings)"
 
     def __init__(self):
         import pypardiso  # noqa: F401
 
     def factor(self, A):
-        from engine.solvers import factor_symmetric  # MKL found once, iparm as the product sets it
+        from engine.structure.solvers import factor_symmetric  # MKL found once, iparm as the product sets it
 
         return factor_symmetric(A, library="pardiso")
 

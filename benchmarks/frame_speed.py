@@ -27,11 +27,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from engine import beam_elements  # noqa: E402
-from engine import frame as frame_module  # noqa: E402
-from engine.corotational import PathSettings  # noqa: E402
-from engine.frame import FrameModel  # noqa: E402
-from engine.supports import Supports  # noqa: E402
+from engine.structure import beam_elements  # noqa: E402
+from engine.structure import frame as frame_module  # noqa: E402
+from engine.structure.corotational import PathSettings  # noqa: E402
+from engine.structure.frame import FrameModel  # noqa: E402
+from engine.structure.supports import Supports  # noqa: E402
 
 STEEL_E, STEEL_G, STEEL_DENSITY, GRAVITY = 210e9, 81e9, 7850.0, 9.81
 
@@ -313,7 +313,7 @@ def main() -> int:
                              "refined), for comparison with the default")
     parser.add_argument("--superlu", action="store_true",
                         help="also run linear static, buckling and the path with SuperLU for every factor "
-                             "(the library below engine.solvers.PARDISO_FROM_DOFS), for comparison")
+                             "(the library below engine.structure.solvers.PARDISO_FROM_DOFS), for comparison")
     args = parser.parse_args()
     frame, supports, loads = model(args.nodes, args.elements_per_beam)
     n_all = len(frame.nodes) + len(frame.beams) * (args.elements_per_beam - 1)
@@ -321,7 +321,7 @@ def main() -> int:
           f"elements per beam, {6 * n_all} DOF, {len(supports.nodes)} pinned supports")
     print(f"assembly           {_assembly_seconds(frame):7.2f} s   (element kernels + sparse stiffness); "
           f"{_pyfe3d_seconds(frame)}")
-    from engine.solvers import factor_symmetric, pardiso_available
+    from engine.structure.solvers import factor_symmetric, pardiso_available
 
     if pardiso_available():  # MKL loads once per process (about a second): not in the first analysis's time
         import scipy.sparse as sp
@@ -331,9 +331,9 @@ def main() -> int:
         print(f"MKL loaded         {time.perf_counter() - start:7.2f} s")
     for label, limit in [("", None)] + ([("SuperLU: ", 10**12)] if args.superlu else []):
         if limit is not None:
-            import engine.solvers
+            import engine.structure.solvers
 
-            engine.solvers.PARDISO_FROM_DOFS = limit
+            engine.structure.solvers.PARDISO_FROM_DOFS = limit
         _analyses(frame, supports, loads, args, label)
     print(f"peak memory        {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:7.0f} MiB")
     if not args.no_peers:
@@ -346,9 +346,9 @@ def main() -> int:
 
 def _analyses(frame, supports, loads, args, label: str) -> None:
     """Linear static, 10 buckling modes and the path(s), timed; ``label`` starts the first line."""
-    from engine.solvers import library_for
+    from engine.structure.solvers import library_for
 
-    print(f"{label}the beam ends' matrix factored by {library_for(6 * len(frame.nodes))} (engine.solvers)")
+    print(f"{label}the beam ends' matrix factored by {library_for(6 * len(frame.nodes))} (engine.structure.solvers)")
     start = time.perf_counter()
     stiffness = frame_module.factor_stiffness(frame, supports)
     linear = frame_module.linear_static(frame, supports, loads, stiffness=stiffness)

@@ -3,7 +3,7 @@
 For the mock-up (templates/mockup.toml) and every PLY in the real surfaces folder (with its
 flagged supports, the whole boundary where a file flags none), the stages surface -> shell ->
 field -> remesh run as ``gridshell run`` runs them (workflow.runner, into a scratch folder or
-``--cache DIR`` to reuse), then ``engine.optimize.optimize`` runs with the project's optimize
+``--cache DIR`` to reuse), then ``engine.remeshing.optimize.optimize`` runs with the project's optimize
 settings (workflow.stages.optimize.optimize_settings) and, as the peer in the same process, the
 local/global iterations alone (planarity_iterations = 0, split_cells = false: the optimiser as
 it was before the end game). Printed per surface and method: planarity max and p95 (relative to
@@ -41,7 +41,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engine.optimize import optimize  # noqa: E402
+from engine.remeshing.optimize import optimize  # noqa: E402
 from workflow.config import load_project, project_from_surface  # noqa: E402
 from workflow.progress import Progress  # noqa: E402
 from workflow.runner import run_project  # noqa: E402

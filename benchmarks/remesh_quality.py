@@ -35,9 +35,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from engine.field import guiding_field  # noqa: E402
-from engine.shell import ShellMaterial, analyse_shell, shell_nodal_loads  # noqa: E402
-from engine.voronoi import remesh  # noqa: E402
+from engine.remeshing.field import guiding_field  # noqa: E402
+from engine.remeshing.voronoi import remesh  # noqa: E402
+from engine.structure.shell import ShellMaterial, analyse_shell, shell_nodal_loads  # noqa: E402
 from workflow.config import load_project, project_from_surface  # noqa: E402
 from workflow.stages.shell import notional_thickness, shell_load_case  # noqa: E402
 from workflow.stages.surface import build_surface, resolve_loads, resolve_supports  # noqa: E402

@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 
 
 def surface(triangles: int):
-    from engine.parametric import mockup
+    from engine.geometry.parametric import mockup
 
     divisions = 2 * max(2, int(round(np.sqrt(triangles / 2) / 2)))  # mockup needs an even count
     return mockup(divisions=divisions).mesh
@@ -38,7 +38,7 @@ def surface(triangles: int):
 
 def field_on(mesh):
     """Size 1 -> 2 and aspect 1 -> 2 from the centre out (D = 2, A = 2), cells along the rings."""
-    from engine.field import GuidingField
+    from engine.remeshing.field import GuidingField
 
     x, y = mesh.vertices[:, 0], mesh.vertices[:, 1]
     r = np.hypot(x, y) / np.hypot(x, y).max()
@@ -57,7 +57,7 @@ def _time_cache_load(cache: str) -> float:
 
 
 def _child_cache_load() -> int:
-    from engine.voronoi import RemeshSettings, remesh
+    from engine.remeshing.voronoi import RemeshSettings, remesh
 
     mesh = surface(5000)
     field = field_on(mesh)
@@ -72,9 +72,9 @@ def _child_cache_load() -> int:
 
 def _one_clustering(mesh, field, cells: int, repeat: int) -> tuple[float, int]:
     """Seconds (median) and sweeps of one anisotropic clustering from the grown seed lattice."""
-    from engine import voronoi
-    from engine.clustering import cluster_vertices
-    from engine.fine_mesh import _refine
+    from engine.geometry.fine_mesh import _refine
+    from engine.remeshing import voronoi
+    from engine.remeshing.clustering import cluster_vertices
 
     fine = _refine(mesh, field, cells)
     seeds = voronoi._initial_seeds(fine, cells, np.random.default_rng(0))
@@ -101,7 +101,7 @@ def main() -> int:
         return _child_cache_load()
     cache = tempfile.mkdtemp(prefix="gridshell-numba-")
     os.environ["NUMBA_CACHE_DIR"] = cache  # before numba is imported: the first call compiles
-    from engine.voronoi import RemeshSettings, remesh
+    from engine.remeshing.voronoi import RemeshSettings, remesh
 
     mesh = surface(args.triangles)
     field = field_on(mesh)

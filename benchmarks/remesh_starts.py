@@ -5,7 +5,7 @@ start, and ``[remesh] workers`` puts them on a process pool.
 
     .venv/bin/python benchmarks/remesh_starts.py [--cells 60,120] [--workers 2] [--repeat 2]
 
-Prints, per cell count, the seconds of ``engine.voronoi.remesh`` with the starts in turn (the
+Prints, per cell count, the seconds of ``engine.remeshing.voronoi.remesh`` with the starts in turn (the
 peer: the code path before, ``starts_map=None``) and with a pool of ``--workers`` processes
 (started before the clock, as the stage keeps its pool over all its remeshes), the ratio, and
 whether the two grids are the same node for node.
@@ -62,7 +62,7 @@ def main() -> int:
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 2)
     parser.add_argument("--repeat", type=int, default=2, help="runs of each (the fastest is printed)")
     args = parser.parse_args()
-    from engine.voronoi import remesh
+    from engine.remeshing.voronoi import remesh
 
     print(f"cores {os.cpu_count()}, workers {args.workers}, load average {os.getloadavg()[0]:.2f}")
     print(f"{'cells':>6} {'in turn s':>10} {'side by side s':>15} {'ratio':>6}  same grid")

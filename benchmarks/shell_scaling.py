@@ -22,12 +22,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from engine import shell  # noqa: E402
-from engine.loads import LoadCase  # noqa: E402
+from engine.geometry.parametric import grid_triangles  # noqa: E402
 from engine.mesh import TriMesh  # noqa: E402
-from engine.parametric import grid_triangles  # noqa: E402
-from engine.shell import ShellMaterial, shell_nodal_loads, shell_stiffness  # noqa: E402
-from engine.supports import Supports  # noqa: E402
+from engine.structure import shell  # noqa: E402
+from engine.structure.loads import LoadCase  # noqa: E402
+from engine.structure.shell import ShellMaterial, shell_nodal_loads, shell_stiffness  # noqa: E402
+from engine.structure.supports import Supports  # noqa: E402
 from tests.shell_models import SCORDELIS_LO_REFERENCE, scordelis_lo  # noqa: E402
 
 THICKNESS = 0.25

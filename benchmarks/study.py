@@ -58,8 +58,8 @@ PAIRS = ((1.0, 1.0), (2.0, 1.0), (1.0, 2.0), (3.0, 3.0))
 
 def height_field_roofs() -> list[Path]:
     """The shared roofs that are height fields over their plan (the lattices need one)."""
-    from engine.grids import is_height_field
     from engine.mesh import TriMesh
+    from engine.remeshing.grids import is_height_field
     from workflow.surface_io import read_surface
 
     if not REAL_SURFACES.is_dir():

@@ -6,9 +6,9 @@ Imports nothing from ``workflow`` or ``fabrication``; heavy optional libraries a
 import logging
 
 from .errors import ConvergenceError, GridshellError, InputError, MechanismError, MeshError, SelectionError
-from .loads import LimitState, LoadCase, LoadCombination
 from .mesh import PolyMesh, TriMesh
-from .supports import Supports
+from .structure.loads import LimitState, LoadCase, LoadCombination
+from .structure.supports import Supports
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())  # the CLI adds handlers (--verbose)
 

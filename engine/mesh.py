@@ -108,7 +108,7 @@ class TriMesh:
     """A triangulated surface in metres.
 
     vertices: (n_vertices, 3) float64; faces: (n_faces, 3) int64, consistently oriented
-    (normals up or outward after ``engine.surfaces.clean_mesh``); flagged: (n_vertices,)
+    (normals up or outward after ``engine.geometry.surfaces.clean_mesh``); flagged: (n_vertices,)
     bool, vertices marked as supports in the input file (red in a PLY), all False if none.
     """
 

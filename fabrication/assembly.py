@@ -5,7 +5,7 @@ Greedy, from the supports inward: the structure grows one cell at a time (a step
 missing beams of one cell). At each step the candidate cells are those sharing a node with
 what is built (at the start: with a support); a handful, ranked by how few beams they miss
 and how close they are (along the beams) to a support, are analysed as partial frames under
-their own weight (and the weight of the panels placed) with ``engine.frame.linear_static``,
+their own weight (and the weight of the panels placed) with ``engine.structure.frame.linear_static``,
 and the one needing fewest new props, then deflecting least, is built. A partial structure
 that is a mechanism gets a temporary prop (a fully restrained support) at its dangling end
 (the built node farthest, along the beams, from any support or prop); one deflecting more
@@ -149,8 +149,8 @@ def partial_frame_deflection(model: _Model, beams: np.ndarray, panels: np.ndarra
     held by the supports it touches (``support_flags``) and fully fixed ``props``; and the
     (n_nodes,) translation magnitude per grid-shell node (0 where not built). Beam weight is
     lumped half to each end. Raises ``engine.errors.MechanismError`` for a mechanism."""
-    from engine.frame import FrameModel, linear_static
-    from engine.supports import Supports
+    from engine.structure.frame import FrameModel, linear_static
+    from engine.structure.supports import Supports
 
     pm = model.polymesh
     beams = np.asarray(beams, dtype=np.int64)

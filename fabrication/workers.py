@@ -53,8 +53,8 @@ def exit_with_parent(parent: int) -> None:
 def start_worker(parent: int) -> None:
     """A pool's ``initializer`` (``initargs=(os.getpid(),)``): the worker ends with process
     ``parent`` and factors on one MKL thread, the pool's workers taking the cores between them
-    (engine.solvers.limit_threads)."""
-    from engine.solvers import limit_threads
+    (engine.structure.solvers.limit_threads)."""
+    from engine.structure.solvers import limit_threads
 
     exit_with_parent(parent)
     limit_threads(1)

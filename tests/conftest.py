@@ -23,7 +23,7 @@ def real_surfaces():
 @pytest.fixture
 def square_grid():
     """A flat 1 m x 1 m square split into 8 x 8 x 2 triangles: (vertices, faces)."""
-    from engine.parametric import grid_triangles
+    from engine.geometry.parametric import grid_triangles
 
     n = 8
     x, y = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1), indexing="ij")

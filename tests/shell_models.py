@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.loads import LoadCase
+from engine.geometry.parametric import grid_triangles
 from engine.mesh import TriMesh
-from engine.parametric import grid_triangles
-from engine.shell import ShellMaterial, analyse_shell, shell_nodal_loads
-from engine.supports import Supports
+from engine.structure.loads import LoadCase
+from engine.structure.shell import ShellMaterial, analyse_shell, shell_nodal_loads
+from engine.structure.supports import Supports
 
 #: MacNeal & Harder (1985): vertical deflection at the midside of the free edge.
 SCORDELIS_LO_REFERENCE = 0.3024

@@ -1,18 +1,18 @@
-"""The analysis's engineering in the engine: the verdicts and their findings (engine.verdicts), the
-choice of a combination (engine.loads.pick_combination) and the load test (engine.load_test)."""
+"""The analysis's engineering in the engine: the verdicts and their findings (engine.design.verdicts), the
+choice of a combination (engine.structure.loads.pick_combination) and the load test (engine.design.load_test)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from engine.design.load_test import load_test, permanent_and_variable
+from engine.design.verdicts import Verdict, VerdictFixes, design_verdicts, findings_of
 from engine.errors import InputError
-from engine.frame import FrameModel
-from engine.load_test import load_test, permanent_and_variable
-from engine.loads import LimitState, LoadCase, LoadCombination, pick_combination
-from engine.protocol import ImperfectionCase
-from engine.supports import Supports
-from engine.verdicts import Verdict, VerdictFixes, design_verdicts, findings_of
+from engine.structure.frame import FrameModel
+from engine.structure.loads import LimitState, LoadCase, LoadCombination, pick_combination
+from engine.structure.protocol import ImperfectionCase
+from engine.structure.supports import Supports
 
 FIXES = VerdictFixes(stiffer="stiffer", deflection="stiffer or a looser limit", buckling_not_solved="check supports")
 

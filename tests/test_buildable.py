@@ -8,7 +8,9 @@ import json
 import numpy as np
 import pytest
 
-from engine.collapse import (
+from engine.findings import Finding, findings_table
+from engine.mesh import PolyMesh
+from engine.remeshing.collapse import (
     MAX_VALENCE,
     collapse_beams,
     collapse_short_beams,
@@ -18,8 +20,6 @@ from engine.collapse import (
     remove_beams,
     remove_short_beams,
 )
-from engine.findings import Finding, findings_table
-from engine.mesh import PolyMesh
 from fabrication.joints import JointSettings, build_joint, joint_setback_mm
 from fabrication.limits import BuildLimits, node_smallest_angles, required_beam_lengths_m
 
@@ -427,7 +427,7 @@ def test_a_defect_made_by_a_flip_is_flipped_back_to_hexagons():
     """Issue 13: a T1 flip of a honeycomb's central beam leaves its two cells pentagons and the cells
     at its ends heptagons; flip_defects finds that beam (two heptagons, a pentagon at each end),
     flips it back and gives every cell its six sides and the honeycomb's own nodes again."""
-    from engine.collapse import flip_beams, flip_defects
+    from engine.remeshing.collapse import flip_beams, flip_defects
     from tests.test_panels import hex_polymesh
 
     honeycomb = hex_polymesh(rows=6, cols=6)
@@ -449,7 +449,7 @@ def test_a_flip_is_shortened_or_not_made_where_its_length_would_fold_the_cells()
     enters: it is given a shorter share of that length, and no cell crosses itself or turns over
     (their turns about +z, independently of the flip's own check); at 20 m no share fits and the
     grid is left as it was."""
-    from engine.projections import CellFans
+    from engine.geometry.projections import CellFans
 
     grid = _honeycomb()
     interior = np.flatnonzero(~grid.boundary[grid.edges].any(axis=1))
@@ -468,7 +468,7 @@ def test_a_defect_beside_the_boundary_is_flipped_back_counting_interior_cells_on
     """Issue 13: the same 5-7 defect made at a beam one of whose four cells is a boundary cell:
     only the interior cells' sides count, and they gain 3, so flip_defects flips it back to the
     honeycomb's cells (it had looked for four interior cells, and left it)."""
-    from engine.collapse import _cells_around, _cells_at_nodes, flip_beams, flip_defects
+    from engine.remeshing.collapse import _cells_around, _cells_at_nodes, flip_beams, flip_defects
     from tests.test_panels import hex_polymesh
 
     honeycomb = hex_polymesh(rows=6, cols=6)
@@ -493,7 +493,7 @@ def test_a_collapse_moves_its_node_where_no_cell_folds():
     arc) that triangle turns over, and so it does at the first end's place; at the second end's
     place it does not, so the merged node goes there. Judged independently by each cell's turns
     about +z."""
-    from engine.projections import CellFans
+    from engine.geometry.projections import CellFans
 
     arc = [np.radians(100), np.radians(90), np.radians(60)]
     nodes = np.array([[np.cos(t), np.sin(t), 0.0] for t in arc] + [[0.25, 0.925, 0.0], [0.0, 0.5, 0.0]])
@@ -524,10 +524,10 @@ def test_when_the_last_resorts_rounds_run_out_the_short_beams_are_removed_once_m
     from importlib import resources
     from types import SimpleNamespace
 
-    from engine.field import GuidingField
+    from engine.geometry.parametric import grid_triangles
     from engine.mesh import TriMesh
-    from engine.optimize import OptimizeResult
-    from engine.parametric import grid_triangles
+    from engine.remeshing.field import GuidingField
+    from engine.remeshing.optimize import OptimizeResult
     from workflow.config import load_project
     from workflow.stages import optimize as stage
     from workflow.stages.build_limits import build_limits_of

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.checks import buckling_reduction, member_checks
+from engine.design.checks import buckling_reduction, member_checks
+from engine.design.sections import material, section_from_spec
 from engine.errors import InputError
-from engine.sections import material, section_from_spec
 
 
 def test_circular_hollow_section_matches_the_tables():

@@ -47,7 +47,7 @@ def test_empty_selection(capsys, tmp_path):
 
 def test_flagged_without_red_vertices(capsys, tmp_path):
     path = tmp_path / "roof.obj"
-    from engine.parametric import hypar
+    from engine.geometry.parametric import hypar
 
     hypar(divisions=4).to_trimesh().export(path)
     code, out, err = _run(capsys, "run", "--surface", str(path), "--supports", "flagged",
@@ -80,7 +80,7 @@ def test_init_writes_a_valid_project(capsys, tmp_path):
 
 
 def test_quick_start_surface_stage(capsys, tmp_path):
-    from engine.parametric import vault
+    from engine.geometry.parametric import vault
 
     path = tmp_path / "vault.stl"
     vault(divisions=8).to_trimesh().export(path)
@@ -128,13 +128,14 @@ def test_verbose_logs_why_each_stage_runs_or_is_cached(tmp_path):
     quiet = _cli(*base, "--force")
     assert quiet.returncode == 0 and "workflow.runner" not in quiet.stderr and "engine." not in quiet.stderr
     steps = _cli("-vv", *base, "--force")
-    assert "stage shell: solving" in steps.stderr and "engine.solvers: factored" in steps.stderr
+    assert "stage shell: solving" in steps.stderr and "engine.structure.solvers: factored" in steps.stderr
 
 
 def test_the_library_logs_nothing_without_an_application_handler():
     """A warning from an engine module, with no logging configured, is swallowed by the package's
     NullHandler instead of Python's last-resort handler printing it."""
-    code = ("import logging, engine.solvers; logging.getLogger('engine.solvers').warning('should not print'); "
+    code = ("import logging, engine.structure.solvers; "
+            "logging.getLogger('engine.structure.solvers').warning('should not print'); "
             "import fabrication, workflow; logging.getLogger('workflow.runner').warning('nor this')")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert result.returncode == 0 and result.stderr == ""

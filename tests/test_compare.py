@@ -50,7 +50,7 @@ def optimised(tmp_path_factory):
 
 
 def test_a_grid_whose_protocol_raises_is_a_failed_row_and_the_others_are_computed(optimised, monkeypatch):
-    from engine import grids
+    from engine.remeshing import grids
     from workflow import compare
     from workflow.config import load_project
 
@@ -95,7 +95,7 @@ def test_compare_exits_0_with_the_table_when_a_grid_cannot_be_built(optimised, m
     computed, the table and the picture written, the triangles' row says why and what to do."""
     import pandas as pd
 
-    from engine import grids
+    from engine.remeshing import grids
     from workflow.cli import main
 
     def refuse(*_args, **_kwargs):

@@ -6,12 +6,12 @@ from pathlib import Path
 
 import pytest
 
-from engine.en1993 import ChecksMethod
+from engine.design.en1993 import ChecksMethod
 from engine.errors import InputError
-from engine.field import AnisotropyMap, FieldSettings, SizeMap
-from engine.optimize import OptimizeSettings
-from engine.protocol import TOLERABLE_DEFLECTION_RATIO, ImperfectionShape, ProtocolSettings
-from engine.voronoi import RemeshSettings
+from engine.remeshing.field import AnisotropyMap, FieldSettings, SizeMap
+from engine.remeshing.optimize import OptimizeSettings
+from engine.remeshing.voronoi import RemeshSettings
+from engine.structure.protocol import TOLERABLE_DEFLECTION_RATIO, ImperfectionShape, ProtocolSettings
 from fabrication.joints import JointKind, JointSettings
 from fabrication.limits import BuildLimits
 from fabrication.settings import BeamSettings, PanelSettings, SheetSettings

@@ -9,10 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from engine.catalogue import CATALOGUES, DATA, catalogue
-from engine.en1993 import EndForces, buckling_alpha, chs_checks, section_class, simplified_checks
+from engine.design.catalogue import CATALOGUES, DATA, catalogue
+from engine.design.en1993 import EndForces, buckling_alpha, chs_checks, section_class, simplified_checks
+from engine.design.sections import material
 from engine.errors import InputError
-from engine.sections import material
 
 S355 = material("steel_s355")
 

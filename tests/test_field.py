@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError
-from engine.field import (
+from engine.geometry.parametric import grid_triangles, mockup, vault
+from engine.mesh import TriMesh
+from engine.remeshing.field import (
     AnisotropyMap,
     FieldSettings,
     Orientation,
@@ -19,8 +21,6 @@ from engine.field import (
     smooth_scalar,
     symmetrise,
 )
-from engine.mesh import TriMesh
-from engine.parametric import grid_triangles, mockup, vault
 
 
 def _flat_square(n: int = 20) -> TriMesh:
@@ -110,10 +110,10 @@ def test_analytic_barrel_vault_direction_and_size():
 
 def test_barrel_vault_direction_runs_along_the_arch():
     """The shell under self-weight on its two springing lines: the larger force is the arch's."""
-    pytest.importorskip("engine.shell")
-    from engine.loads import LoadCase
-    from engine.shell import ShellMaterial, analyse_shell, shell_nodal_loads
-    from engine.supports import Supports
+    pytest.importorskip("engine.structure.shell")
+    from engine.structure.loads import LoadCase
+    from engine.structure.shell import ShellMaterial, analyse_shell, shell_nodal_loads
+    from engine.structure.supports import Supports
 
     mesh = vault(span=10.0, length=15.0, rise=3.0, divisions=16)
     y = mesh.vertices[:, 1]
@@ -330,7 +330,7 @@ def test_across_turns_the_direction_by_ninety_degrees_and_keeps_size_and_aspect(
 
 @pytest.mark.parametrize("orientation, long_axis", [("along", 0), ("across", 1)])
 def test_remeshed_cells_are_long_along_the_stress_or_across_it(orientation, long_axis):
-    from engine.voronoi import RemeshSettings, remesh
+    from engine.remeshing.voronoi import RemeshSettings, remesh
 
     mesh = _flat_square()
     field = guiding_field(mesh, _compression_along_x(mesh), FieldSettings(orientation=orientation))

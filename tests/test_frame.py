@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError, MechanismError
-from engine.frame import FrameModel, linear_buckling, linear_static, nonlinear_static
-from engine.solvers import pardiso_available
-from engine.supports import Supports
+from engine.structure.frame import FrameModel, linear_buckling, linear_static, nonlinear_static
+from engine.structure.solvers import pardiso_available
+from engine.structure.supports import Supports
 from workflow.solver_json import solve_frame_json
 
 E, G = 2.0e11, 8.0e10
@@ -21,7 +21,7 @@ FRAME_LIBRARIES = ["superlu"] + (["pardiso"] if pardiso_available() else [])
 
 def _factor_frames_with(library: str, monkeypatch) -> None:
     """Every frame factor of the test by ``library`` (S of any size)."""
-    import engine.solvers as solvers
+    import engine.structure.solvers as solvers
 
     monkeypatch.setattr(solvers, "PARDISO_FROM_DOFS", 0 if library == "pardiso" else 10**12)
 
@@ -437,7 +437,7 @@ def test_displacements_match_pyfe3d():
 
 @pytest.mark.parametrize("library", FRAME_LIBRARIES)
 def test_condensed_factor_solves_as_a_plain_lu_and_keeps_the_inertia(library):
-    """The beams' internal nodes condensed out of the factor (engine.condensed), S factored by
+    """The beams' internal nodes condensed out of the factor (engine.structure.condensed), S factored by
     either library: the same solution as SuperLU on the assembled matrix, and the same number of
     negative pivots on an indefinite K + sigma K_G (Sylvester's inertia, which the buckling shift
     and the path's pivot count use)."""
@@ -445,9 +445,9 @@ def test_condensed_factor_solves_as_a_plain_lu_and_keeps_the_inertia(library):
 
     import scipy.sparse.linalg as spla
 
-    from engine import beam_elements, frame
-    from engine.condensed import CondensedFactor
     from engine.linalg import congruent
+    from engine.structure import beam_elements, frame
+    from engine.structure.condensed import CondensedFactor
 
     model, supports, loads = _space_frame()
     for k in (1, 2, 4):
@@ -476,9 +476,9 @@ def test_a_kept_fill_ordering_gives_the_factor_of_a_fresh_one():
     that orders its matrix afresh, on a positive definite and an indefinite K + sigma K_G."""
     from dataclasses import replace
 
-    from engine import beam_elements, frame
-    from engine.condensed import CondensedFactor, FillOrdering
     from engine.linalg import congruent
+    from engine.structure import beam_elements, frame
+    from engine.structure.condensed import CondensedFactor, FillOrdering
 
     model, supports, loads = _space_frame()
     fine = replace(model, elements_per_beam=3)
@@ -504,7 +504,7 @@ def test_the_corotational_tangent_is_the_derivative_of_the_end_forces():
     of a frame with a released beam end."""
     from dataclasses import replace
 
-    from engine.corotational import _Corotational, _rotation_matrices
+    from engine.structure.corotational import _Corotational, _rotation_matrices
 
     model, supports, _ = _space_frame()
     releases = np.zeros((len(model.beams), 2, 6), bool)
@@ -546,8 +546,8 @@ def _against_the_dense_eigensolver() -> None:
 
     import scipy.linalg as sla
 
-    from engine import beam_elements, frame
     from engine.linalg import congruent
+    from engine.structure import beam_elements, frame
 
     model, supports, loads = _space_frame()
     model = replace(model, elements_per_beam=3)
@@ -568,7 +568,7 @@ def test_buckling_without_a_rough_estimate_still_finds_every_factor(monkeypatch)
     are those of the dense solver all the same."""
     import scipy.sparse.linalg as spla
 
-    from engine import frame
+    from engine.structure import frame
 
     eigsh, fallbacks = spla.eigsh, []
 
@@ -621,7 +621,7 @@ def test_nonlinear_solution_is_in_equilibrium():
     to 1e-6 of |lambda F| (path tolerance 1e-8)."""
     from dataclasses import replace
 
-    from engine import corotational
+    from engine.structure import corotational
 
     model, supports, loads = _space_frame()
     model = replace(model, elements_per_beam=1)              # every node's state is returned
@@ -840,7 +840,7 @@ def test_protocol_paths_side_by_side_give_the_paths_one_after_another():
     order, limit and path as when the paths run one after another in this process."""
     from concurrent.futures import ProcessPoolExecutor
 
-    from engine.protocol import ProtocolSettings, run_protocol
+    from engine.structure.protocol import ProtocolSettings, run_protocol
 
     model, supports, loaded = _lee_frame()
     loads = np.zeros((len(model.nodes), 6))
@@ -899,7 +899,7 @@ def test_a_reused_factor_finds_the_published_limit_with_no_more_factorisations(p
     reuse factors less often, on the shallow star dome about half as often. Where the reused factor
     does not contract (Lee's frame, the deep arch) the corrector is full Newton again, and the
     factor of its last iteration starts the next step."""
-    from engine.corotational import PathSettings
+    from engine.structure.corotational import PathSettings
 
     model, supports, loads, control, largest, published, rel = problem()
     runs = {reuse: nonlinear_static(model, supports, loads, control=control, settings=PathSettings(

@@ -184,7 +184,7 @@ def test_ply_round_trip(seed, tmp_path):
 @pytest.mark.parametrize("seed", [4, 9])
 def test_product_cleaning_changes_nothing(seed):
     """The product's mesh cleaning finds nothing to merge, drop or flip, and the loops of a courtyard roof."""
-    from engine.surfaces import clean_mesh
+    from engine.geometry.surfaces import clean_mesh
 
     s = _surface(seed)
     mesh, report = clean_mesh(s.vertices, s.faces, s.flagged)

@@ -10,10 +10,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from engine.field import GuidingField
-from engine.grids import field_angle, isotropic_field, quad45_grid, quad_grid, statics_quad_grid, triangular_grid
+from engine.geometry.parametric import cap, courtyard, grid_triangles
 from engine.mesh import TriMesh
-from engine.parametric import cap, courtyard, grid_triangles
+from engine.remeshing.field import GuidingField
+from engine.remeshing.grids import (
+    field_angle,
+    isotropic_field,
+    quad45_grid,
+    quad_grid,
+    statics_quad_grid,
+    triangular_grid,
+)
 
 
 def _rectangle(length: float = 8.0, width: float = 5.0, rise: float = 0.0, nx: int = 32, ny: int = 20) -> TriMesh:
@@ -78,8 +85,8 @@ def test_quad45_beams_run_at_45_degrees_to_the_quad_beams_on_a_rectangle():
 
 
 def test_the_isotropic_control_does_not_follow_the_field_and_the_voronoi_grid_does():
-    from engine.grid_quality import polymesh_quality
-    from engine.voronoi import RemeshSettings, remesh
+    from engine.remeshing.grid_quality import polymesh_quality
+    from engine.remeshing.voronoi import RemeshSettings, remesh
 
     mesh = _rectangle(rise=1.0, nx=40, ny=25)
     field = _graded_field(mesh, ratio=3.0)

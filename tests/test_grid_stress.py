@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError
-from engine.field import FieldSettings, guiding_field
-from engine.grid_stress import node_membrane_forces, node_tributary_areas, surface_membrane_forces
+from engine.geometry.parametric import grid_triangles
 from engine.mesh import PolyMesh, TriMesh
-from engine.parametric import grid_triangles
+from engine.remeshing.field import FieldSettings, guiding_field
+from engine.structure.grid_stress import node_membrane_forces, node_tributary_areas, surface_membrane_forces
 
 
 def _lattice(n: int, spacing: float, angle_deg: float = 0.0) -> PolyMesh:

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError
-from engine.grids import is_height_field, quad_grid, triangular_grid
+from engine.geometry.parametric import cap, courtyard, mockup
+from engine.geometry.proximity import closest_points
 from engine.mesh import TriMesh
-from engine.parametric import cap, courtyard, mockup
-from engine.proximity import closest_points
+from engine.remeshing.grids import is_height_field, quad_grid, triangular_grid
 
 
 @pytest.mark.parametrize("make", [triangular_grid, quad_grid])
@@ -52,8 +52,8 @@ def test_surfaces_that_fold_over_are_refused():
 
 def test_lattice_follows_the_principal_axes_of_a_turned_rectangle():
     """A flat 8 m x 3 m rectangle turned by 25 degrees: the squares' sides run at 25 / 115 degrees."""
-    from engine.grids import principal_angle
-    from engine.parametric import grid_triangles
+    from engine.geometry.parametric import grid_triangles
+    from engine.remeshing.grids import principal_angle
 
     x, y = np.meshgrid(np.linspace(0, 8, 17), np.linspace(0, 3, 7), indexing="ij")
     c, s = np.cos(np.radians(25)), np.sin(np.radians(25))
@@ -94,7 +94,7 @@ def test_real_surfaces_get_both_grids_within_one_percent():
 
 
 def _flat_square(side: float = 10.0, n: int = 10) -> TriMesh:
-    from engine.parametric import grid_triangles
+    from engine.geometry.parametric import grid_triangles
 
     x, y = np.meshgrid(np.linspace(0, side, n + 1), np.linspace(0, side, n + 1), indexing="ij")
     return TriMesh(vertices=np.c_[x.ravel(), y.ravel(), np.zeros(x.size)], faces=grid_triangles(n, n))
@@ -106,7 +106,7 @@ def test_a_lattice_line_2_mm_from_the_outline_is_merged_into_it(offset):
     one edge: the 2 mm beams between that line and the edge would make the frame singular. The
     grid must be the plain 10 x 10 lattice on the square instead: 11 lines of 10 m each way
     (220 m), no beam shorter than the spacing, the four corners kept."""
-    from engine.grids import lattice_grid
+    from engine.remeshing.grids import lattice_grid
 
     grid = lattice_grid(_flat_square(), "quad", 1.0, offset=(offset, 0.0))
     assert grid.beam_lengths.min() > 0.99

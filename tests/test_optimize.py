@@ -1,15 +1,13 @@
-"""Face optimisation (engine.optimize, engine.planarise, engine.boundary_splits): fixed points of
-the local steps, the derivatives of the end game, the splits of boundary cells, the planarity
-target (0.5 % of the mean beam length with every node within 0.5 % of the diagonal of the
-surface) on a dome and on the mock-up, constraints held exactly, the weights' effects, and the
-field's grading kept on a graded grid (its cell sizes known in closed form).
-
-Test grids are built here, independent of the remesher: a hexagonal honeycomb (Voronoi cells of a
-triangular lattice, scipy) clipped to the surface's plan outline (shapely), lifted onto the surface
-by linear interpolation over its own triangles (matplotlib), and jittered in plan. The outline's
-own vertices that clipping leaves inside a cell's border (boundary nodes of two beams that are
-not corners) are dropped, as the remesher has none: boundary nodes are where cells meet.
-"""
+"""Face optimisation (engine.remeshing.optimize, engine.remeshing.planarise,
+engine.remeshing.boundary_splits): fixed points of the local steps, the derivatives of the end game,
+the splits of boundary cells, the planarity target (0.5 % of the mean beam length with every node
+within 0.5 % of the diagonal of the surface) on a dome and on the mock-up, constraints held exactly,
+the weights' effects, and the field's grading kept on a graded grid (its cell sizes known in closed
+form). Test grids are built here, independent of the remesher: a hexagonal honeycomb (Voronoi cells
+of a triangular lattice, scipy) clipped to the surface's plan outline (shapely), lifted onto the
+surface by linear interpolation over its own triangles (matplotlib), and jittered in plan. The
+outline's own vertices that clipping leaves inside a cell's border (boundary nodes of two beams that
+are not corners) are dropped, as the remesher has none: boundary nodes are where cells meet."""
 
 from __future__ import annotations
 
@@ -22,16 +20,16 @@ from scipy.stats import spearmanr
 from shapely.geometry import Point, Polygon
 from shapely.geometry.polygon import orient
 
-import engine.optimize as optimize_module
-import engine.planarise as planarise_module
-from engine.boundary_splits import cut_boundary_triangles, split_boundary_cells
+import engine.remeshing.optimize as optimize_module
+import engine.remeshing.planarise as planarise_module
 from engine.errors import InputError
-from engine.field import GuidingField
+from engine.geometry.parametric import cap, grid_triangles, mockup
+from engine.geometry.proximity import closest_point_on_triangles
 from engine.mesh import PolyMesh, TriMesh
-from engine.optimize import OptimizeSettings, graded_areas, optimize, planar_targets, regular_targets
-from engine.parametric import cap, grid_triangles, mockup
-from engine.planarise import cell_planes, planarity_terms
-from engine.proximity import closest_point_on_triangles
+from engine.remeshing.boundary_splits import cut_boundary_triangles, split_boundary_cells
+from engine.remeshing.field import GuidingField
+from engine.remeshing.optimize import OptimizeSettings, graded_areas, optimize, planar_targets, regular_targets
+from engine.remeshing.planarise import cell_planes, planarity_terms
 
 # ----------------------------------------------------------------------------- test grids
 

@@ -1,4 +1,4 @@
-"""Planar convex panels of cells that are not (engine.panel_pieces): closed forms on a saddle, a
+"""Planar convex panels of cells that are not (engine.remeshing.panel_pieces): closed forms on a saddle, a
 flat cell kept whole, pieces that tile the cell exactly."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from engine.mesh import PolyMesh
-from engine.panel_pieces import panel_pieces, piece_flatness, planar_pieces
+from engine.remeshing.panel_pieces import panel_pieces, piece_flatness, planar_pieces
 
 
 def _hexagon(z):

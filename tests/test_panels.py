@@ -20,7 +20,7 @@ ezdxf = pytest.importorskip("ezdxf")
 def _mockup_heights():
     from scipy.interpolate import LinearNDInterpolator
 
-    from engine.parametric import mockup
+    from engine.geometry.parametric import mockup
 
     mesh = mockup(divisions=12).mesh
     return LinearNDInterpolator(mesh.vertices[:, :2], mesh.vertices[:, 2], fill_value=0.0)

@@ -8,8 +8,8 @@ import pytest
 matplotlib = pytest.importorskip("matplotlib")
 from matplotlib import image  # noqa: E402
 
-from engine.grids import quad_grid  # noqa: E402
-from engine.parametric import cap  # noqa: E402
+from engine.geometry.parametric import cap  # noqa: E402
+from engine.remeshing.grids import quad_grid  # noqa: E402
 from workflow.plots.analysis import plot_axial_forces, plot_buckling_modes, plot_response, plot_utilisation  # noqa: E402
 from workflow.plots.remesh import plot_gridshell  # noqa: E402
 
@@ -62,8 +62,8 @@ def test_a_flat_grid_is_framed_with_a_height_and_draws_cleanly(tmp_path):
     a curved one keeps its true height."""
     import warnings
 
+    from engine.geometry.parametric import grid_triangles
     from engine.mesh import TriMesh
-    from engine.parametric import grid_triangles
     from workflow.plots._common import frame_3d, pyplot
 
     plt = pyplot()

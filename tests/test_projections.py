@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.optimize import OptimizeSettings, optimize, regular_targets
-from engine.projections import CellFans, face_corners, lengthen_short_beams, open_narrow_corners, unfolded
+from engine.geometry.projections import CellFans, face_corners, lengthen_short_beams, open_narrow_corners, unfolded
+from engine.remeshing.optimize import OptimizeSettings, optimize, regular_targets
 from tests.test_optimize import _flat_square, _grid_on
 
 
@@ -65,7 +65,7 @@ def test_the_optimiser_holds_corners_and_beams_to_their_limits(regularity):
     """A jittered honeycomb (corners from 11 degrees, beams from 7 % of the median): with its
     limits the optimiser leaves no inner corner under 20 degrees and no inner beam under 60 % of the
     median; without them, at no regularity, nothing moves."""
-    from engine.projections import corner_angles
+    from engine.geometry.projections import corner_angles
 
     surface = _flat_square()
     grid = _grid_on(surface, 0.3, jitter=0.2, seed=4)
@@ -91,7 +91,7 @@ def test_the_optimiser_keeps_the_grading_of_a_graded_grid():
     optimiser that pulled nodes to their neighbours' mean lost 5.4 % and ranked at 0.955."""
     from scipy.stats import spearmanr
 
-    from engine.optimize import cell_areas
+    from engine.remeshing.optimize import cell_areas
 
     surface = _flat_square()
     grid = _grid_on(surface, 0.15, jitter=0.05, seed=2)
@@ -151,7 +151,7 @@ def test_the_optimiser_folds_no_cell_where_the_limits_ask_more_than_the_cells_ca
     cells over before the steps were guarded. Now no cell has a part turned over, the cells' areas,
     unsigned, add up to the square's (no two overlap), and the beams are still lengthened where they
     can be (the summed shortfall at least halves)."""
-    from engine.optimize import cell_areas
+    from engine.remeshing.optimize import cell_areas
 
     surface = _flat_square()
     grid = _grid_on(surface, 0.2, jitter=0.05, seed=3)
@@ -175,7 +175,7 @@ def test_the_grids_figures_count_the_cells_that_overlap_a_neighbour():
     pushed past its right neighbour (the two cells on that side cross themselves), and 1 when three
     of the four are turned over: the grid's side is the one most cells face, so the odd one is."""
     from engine.mesh import PolyMesh
-    from engine.optimize import optimize_quality
+    from engine.remeshing.optimize import optimize_quality
 
     x = np.array([[i - 1.0, j - 1.0, 0.0] for j in range(3) for i in range(3)])
     faces = (np.array([0, 1, 4, 3]), np.array([1, 2, 5, 4]), np.array([3, 4, 7, 6]), np.array([4, 5, 8, 7]))

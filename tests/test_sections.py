@@ -7,8 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 
+from engine.design.sections import MATERIALS, material, section_from_spec
 from engine.errors import InputError
-from engine.sections import MATERIALS, material, section_from_spec
 
 KNOWN = ["steel_s235", "steel_s355", "aluminium_6063", "aluminium_6061", "glulam_gl24h", "pla", "petg"]
 

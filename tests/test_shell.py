@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError, MechanismError
+from engine.geometry.parametric import cap, grid_triangles
 from engine.linalg import rigid_body_modes
-from engine.loads import LoadCase
 from engine.mesh import TriMesh
-from engine.parametric import cap, grid_triangles
-from engine.shell import (
+from engine.structure.loads import LoadCase
+from engine.structure.shell import (
     ShellMaterial,
     analyse_shell,
     shell_nodal_loads,
     shell_stiffness,
 )
-from engine.supports import Supports
+from engine.structure.supports import Supports
 from workflow.solver_json import solve_shell_json
 
 from .shell_models import (

@@ -1,5 +1,5 @@
 """Section sizing: the grouping against brute force, the iteration on responses with known
-answers, and a sized roof that passes a separate check run (engine.frame and engine.en1993
+answers, and a sized roof that passes a separate check run (engine.structure.frame and engine.design.en1993
 called here, not through the stage)."""
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from engine.catalogue import catalogue
-from engine.sizing import DesignState, group_by_demand, size_sections
+from engine.design.catalogue import catalogue
+from engine.design.sizing import DesignState, group_by_demand, size_sections
 
 
 def _brute_force(required, lengths, mass, groups):
@@ -120,12 +120,12 @@ def _sized_cap(tmp_path, *, nonlinear: bool, cells: int = 40, **analysis):
 
 def _separate_check(project, out):
     """Linear analysis and EN 1993-1-1 checks of the sections in members.csv, built here."""
-    from engine.catalogue import chs_properties
-    from engine.en1993 import EndForces, chs_checks
-    from engine.frame import FrameModel, linear_buckling, linear_static
-    from engine.loads import combine
-    from engine.structure import beam_up_vectors, gridshell_loads, node_normals, support_restraints
-    from engine.supports import Supports
+    from engine.design.catalogue import chs_properties
+    from engine.design.en1993 import EndForces, chs_checks
+    from engine.structure.frame import FrameModel, linear_buckling, linear_static
+    from engine.structure.grid_model import beam_up_vectors, gridshell_loads, node_normals, support_restraints
+    from engine.structure.loads import combine
+    from engine.structure.supports import Supports
     from workflow.stages.analysis import pick_combination
     from workflow.stages.polymesh_io import read_polymesh_obj
     from workflow.stages.surface import load as load_surface
@@ -149,7 +149,7 @@ def _separate_check(project, out):
              for state in ("ULS", "SLS")}
     uls = linear_static(model, supports, loads["ULS"])
     sls = linear_static(model, supports, loads["SLS"])
-    from engine.sections import material
+    from engine.design.sections import material
 
     checks = chs_checks(EndForces.of(uls.beam_end_forces), D, t, material("steel_s355"), alpha=0.21,
                         buckling_length=polymesh.beam_lengths)
@@ -262,8 +262,8 @@ def test_fabrication_builds_the_sized_tubes(tmp_path):
 def test_strain_energy_shares_follow_clapeyron():
     """Two bars in series under an axial force P, areas A and 3A, lengths 1 and 2 m: each stores
     P^2 L / (2 E A), so their shares are 1 / (1 + 2/3) and (2/3) / (1 + 2/3)."""
-    from engine.frame import FrameModel, linear_static
-    from engine.supports import Supports
+    from engine.structure.frame import FrameModel, linear_static
+    from engine.structure.supports import Supports
 
     nodes = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [3.0, 0.0, 0.0]])
     model = FrameModel(nodes=nodes, beams=np.array([[0, 1], [1, 2]]), E=np.full(2, 210e9), G=np.full(2, 81e9),
@@ -281,7 +281,7 @@ def test_strain_energy_shares_follow_clapeyron():
 def test_stiffening_raises_the_rayleigh_quotient_by_the_ratio_missed():
     """s_i = 1 + (f - 1) e_i / sum w e: sum w_i s_i = f (1.02 f with the margin); a beam without
     energy keeps its tube; without shares every beam takes f."""
-    from engine.sizing import _stiffening
+    from engine.design.sizing import _stiffening
 
     shares = np.array([0.5, 0.3, 0.2, 0.0])
     mass, lengths, tube = np.array([1.0, 2.0]), np.array([1.0, 2.0, 1.0, 1.0]), np.array([0, 1, 0, 0])

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from engine.solvers import PARDISO_FROM_DOFS, factor_symmetric, library_for, pardiso_available
+from engine.structure.solvers import PARDISO_FROM_DOFS, factor_symmetric, library_for, pardiso_available
 
 LIBRARIES = ["superlu"] + (["pardiso"] if pardiso_available() else [])
 
@@ -41,7 +41,7 @@ def test_solve_and_inertia_match_the_closed_form_spectrum(library, shift):
 def test_a_singular_matrix_is_seen(library):
     """A free 1D chain (zero row sums: one zero eigenvalue) is singular: an exactly zero pivot
     (SuperLU raises) or a near-zero one counted."""
-    from engine.solvers import SingularMatrix
+    from engine.structure.solvers import SingularMatrix
 
     A = sp.csr_matrix(sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(50, 50)).tolil())
     A = A.tolil()
@@ -66,7 +66,7 @@ def test_the_shell_solved_by_pardiso_is_the_shell_solved_by_superlu(monkeypatch)
     """The Scordelis-Lo roof with PARDISO forced (its size threshold set to 0): the same midside
     deflection as SuperLU's to 1e-9, within 15 % of the published 0.3024 at this coarse mesh
     (12.6 % off, docs/benchmarks.md), and the stage records which library solved it."""
-    import engine.solvers as solvers
+    import engine.structure.solvers as solvers
     from tests.shell_models import scordelis_lo
 
     superlu, _, _ = scordelis_lo(8)
@@ -80,12 +80,12 @@ def test_the_shell_solved_by_pardiso_is_the_shell_solved_by_superlu(monkeypatch)
 def test_a_loose_part_of_a_shell_is_a_mechanism_for_either_library(library, monkeypatch):
     """Two caps side by side, only the first supported: the supports hold every rigid motion of
     the whole, yet the second cap moves freely: the factor finds the singular stiffness."""
-    import engine.solvers as solvers
+    import engine.structure.solvers as solvers
     from engine.errors import MechanismError
+    from engine.geometry.parametric import cap
     from engine.mesh import TriMesh
-    from engine.parametric import cap
-    from engine.shell import ShellMaterial, analyse_shell
-    from engine.supports import Supports
+    from engine.structure.shell import ShellMaterial, analyse_shell
+    from engine.structure.supports import Supports
 
     monkeypatch.setattr(solvers, "PARDISO_FROM_DOFS", 0 if library == "pardiso" else 10**9)
     one = cap(span=4.0, span_to_rise=4.0, rings=3)
@@ -146,7 +146,7 @@ def test_the_workers_of_a_pool_factor_on_one_thread_each():
 
 
 def _mkl_threads(_: int = 0) -> int:
-    from engine.solvers import factor_symmetric as factor
+    from engine.structure.solvers import factor_symmetric as factor
 
     made = factor(_laplacian(3, 0.0), library="pardiso")
     return int(made._solver.libmkl.MKL_Get_Max_Threads())

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine import parametric
 from engine.errors import InputError, SelectionError
-from engine.loads import LimitState, LoadCase, LoadCombination, combine, lump_area_load
-from engine.supports import (
+from engine.geometry import parametric
+from engine.structure.loads import LimitState, LoadCase, LoadCombination, combine, lump_area_load
+from engine.structure.supports import (
     Supports,
     restraint_flags,
     select_boundary,

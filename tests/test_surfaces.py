@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from engine import parametric
 from engine.errors import InputError, MeshError
-from engine.form_finding import force_density
-from engine.surfaces import clean_mesh
+from engine.geometry import parametric
+from engine.geometry.form_finding import force_density
+from engine.geometry.surfaces import clean_mesh
 from workflow.surface_io import read_surface, write_surface_ply
 
 from .conftest import real_surfaces

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError
-from engine.field import Orientation
+from engine.remeshing.field import Orientation
 from workflow.cli import main
 from workflow.config import KEYS_LEFT_OUT_AT_DEFAULT, STAGE_SECTIONS, load_project
 from workflow.plots.sweep import pareto_front

@@ -1,6 +1,6 @@
 """Issue 13: [field] symmetry_planes give a grid symmetric within 1 % of the mean beam, after the
 remesh and after the optimiser; without planes nothing of it runs. Symmetry is measured here with
-a KD-tree of the nodes against their mirror images, not with engine.symmetry."""
+a KD-tree of the nodes against their mirror images, not with engine.geometry.symmetry."""
 
 from __future__ import annotations
 
@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from engine.field import GuidingField
+from engine.geometry.parametric import grid_triangles
 from engine.mesh import TriMesh
-from engine.optimize import OptimizeSettings, optimize
-from engine.parametric import grid_triangles
-from engine.voronoi import RemeshSettings, remesh
+from engine.remeshing.field import GuidingField
+from engine.remeshing.optimize import OptimizeSettings, optimize
+from engine.remeshing.voronoi import RemeshSettings, remesh
 from workflow.config import load_project
 from workflow.progress import Progress
 from workflow.runner import run_project
@@ -74,19 +74,20 @@ def test_grid_is_symmetric_after_remesh_and_optimize(tmp_path, template, n_cells
 
 def test_without_planes_no_symmetry_step_runs(tmp_path, monkeypatch):
     """No plane: the remesh and optimiser never call the symmetry steps, and the records are as before."""
-    import engine.symmetry as symmetry
+    import engine.geometry.symmetry as symmetry
 
     def refuse(*args, **kwargs):
         raise AssertionError("a symmetry step ran without planes")
 
     for name in ("mirror_partners", "symmetrise_points", "symmetrised_grid", "symmetry_record"):
         monkeypatch.setattr(symmetry, name, refuse)
-    import engine.optimize
-    import engine.voronoi
+    import engine.remeshing.optimize
+    import engine.remeshing.voronoi
     import workflow.stages.optimize
     import workflow.stages.remesh
 
-    for module in (engine.voronoi, engine.optimize, workflow.stages.remesh, workflow.stages.optimize):
+    for module in (engine.remeshing.voronoi, engine.remeshing.optimize, workflow.stages.remesh,
+                   workflow.stages.optimize):
         for name in ("mirror_partners", "symmetrise_points", "symmetrised_grid", "symmetry_record"):
             if hasattr(module, name):
                 monkeypatch.setattr(module, name, refuse)
@@ -152,7 +153,7 @@ def test_a_step_that_leaves_the_reals_ends_the_optimisation_at_the_last_finite_g
     """A symmetrisation that returns NaN (at the 3rd call, in the iterations; at the 25th, past
     them) does not reach the grid: the optimiser keeps the last finite nodes, the quality says it
     stopped, and the optimize stage's test for an unsettled symmetric run sees it."""
-    import engine.optimize as optimize_module
+    import engine.remeshing.optimize as optimize_module
     from workflow.stages.optimize import _unsettled
 
     mesh, field = _mirrored_height_field()

@@ -1,6 +1,6 @@
 """Equivalent plate stiffness of regular tilings: closed forms (METHOD.md section 6, thesis
 chapter 7) against the periodic homogenisation with the frame elements, and the homogenised
-membrane stiffness against a finite patch solved with engine.frame.linear_static."""
+membrane stiffness against a finite patch solved with engine.structure.frame.linear_static."""
 
 from __future__ import annotations
 
@@ -8,9 +8,7 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError
-from engine.frame import FrameModel, linear_static
-from engine.supports import Supports
-from engine.tilings import (
+from engine.remeshing.tilings import (
     TILINGS,
     PeriodicCell,
     closed_form_stiffness,
@@ -20,6 +18,8 @@ from engine.tilings import (
     periodic_cell,
     periodic_voronoi_cell,
 )
+from engine.structure.frame import FrameModel, linear_static
+from engine.structure.supports import Supports
 
 # the thesis's bar: solid steel 50 mm, E = 210 GPa, nu = 0.3 (METHOD.md section 6)
 EA, EI, GJ = 412_334e3, 64.427e3, 49.559e3

@@ -92,8 +92,8 @@ def _validate_and_run(capsys, tmp_path, project) -> str:
 
 
 def _mesh(path, scale: float = 1.0):
-    """A 10 m hypar (engine.parametric) written to ``path`` with its coordinates times ``scale``."""
-    from engine.parametric import hypar
+    """A 10 m hypar (engine.geometry.parametric) written to ``path`` with its coordinates times ``scale``."""
+    from engine.geometry.parametric import hypar
 
     mesh = hypar(divisions=4).to_trimesh()
     mesh.apply_scale(scale)
@@ -126,9 +126,9 @@ def test_a_wall_not_thinner_than_half_the_section_is_caught_before_the_engine(ca
 
 
 def test_the_wall_check_agrees_with_the_engine_section():
-    """Just thinner than the radius passes both this check and engine.sections; the radius fails both."""
+    """Just thinner than the radius passes both this check and engine.design.sections; the radius fails both."""
+    from engine.design.sections import section_from_spec
     from engine.errors import InputError
-    from engine.sections import section_from_spec
 
     ok = parse_project({"surface": {"template": "cap"}, "section": {"diameter": 0.05, "thickness": 0.02499}})
     section_from_spec("circular_hollow", **ok.section.dimensions())
@@ -332,7 +332,7 @@ def test_up_axis_turns_the_mesh_back_to_the_roof_it_was(capsys, tmp_path):
 def test_to_z_up_is_a_rotation_taking_the_axis_to_z(up):
     import numpy as np
 
-    from engine.surfaces import to_z_up
+    from engine.geometry.surfaces import to_z_up
 
     axis = {"x": [1, 0, 0], "y": [0, 1, 0], "z": [0, 0, 1]}[up[-1]]
     sign = -1.0 if up.startswith("-") else 1.0
@@ -437,8 +437,8 @@ def _frame():
     fixed feet, downward loads."""
     import numpy as np
 
-    from engine.frame import FrameModel
-    from engine.supports import Supports
+    from engine.structure.frame import FrameModel
+    from engine.structure.supports import Supports
 
     from .test_frame import space_frame_geometry
 
@@ -458,7 +458,7 @@ def _frame():
 def _modes(monkeypatch, seed: int, flip: bool):
     """Buckling modes with the eigensolver started from ``seed``; ``flip`` negates every vector it
     returns (an eigenvector is one only up to its sign)."""
-    from engine import frame
+    from engine.structure import frame
 
     eigsh = frame.spla.eigsh
 
@@ -494,7 +494,7 @@ def test_buckling_modes_have_the_same_sign_from_differently_seeded_starts(monkey
 def test_the_sign_rule_breaks_ties_by_the_lowest_index():
     import numpy as np
 
-    from engine.frame import _signed_modes
+    from engine.structure.frame import _signed_modes
 
     modes = np.zeros((3, 2, 6))
     modes[0, 0, 2], modes[0, 1, 0] = -1.0, 1.0              # a tie: node 0's uz wins, so it turns positive
@@ -510,12 +510,12 @@ def test_the_sign_rule_breaks_ties_by_the_lowest_index():
 def test_imperfection_names_follow_the_signed_mode():
     import numpy as np
 
-    from engine.protocol import ProtocolSettings, imperfection_shapes
+    from engine.structure.protocol import ProtocolSettings, imperfection_shapes
 
     modes = np.zeros((1, 3, 6))
     modes[0, 1, 2] = -1.0
     settings = ProtocolSettings(amplitude=0.01, shapes=("mode1",))
-    from engine.frame import _signed_modes
+    from engine.structure.frame import _signed_modes
 
     shapes = imperfection_shapes(settings, np.zeros((3, 6)), None, _signed_modes(modes))
     assert shapes["mode1+"][1, 2] == 0.01 and shapes["mode1-"][1, 2] == -0.01
@@ -583,7 +583,7 @@ def test_a_buckling_solve_that_fails_is_a_finding_and_the_analysis_completes(tmp
     buckling_not_solved finding (the non-linear paths run without mode-shaped imperfections)."""
     import json
 
-    import engine.frame as frame
+    import engine.structure.frame as frame
     from engine.errors import ConvergenceError
     from workflow.progress import Progress
     from workflow.runner import run_project

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from engine.errors import GridshellError, InputError
-from engine.field import GuidingField
-from engine.fine_mesh import surface_corners
+from engine.geometry.fine_mesh import surface_corners
+from engine.geometry.parametric import courtyard, grid_triangles
 from engine.mesh import TriMesh
-from engine.parametric import courtyard, grid_triangles
-from engine.voronoi import RemeshSettings, remesh
+from engine.remeshing.field import GuidingField
+from engine.remeshing.voronoi import RemeshSettings, remesh
 
 
 def _square(n: int = 20, side: float = 2.0) -> TriMesh:
@@ -141,7 +141,7 @@ def test_cell_count_target_met_within_one_percent(n_cells):
 
 
 def test_fine_surface_is_clustered_as_it_is_and_coarse_one_refined():
-    from engine.fine_mesh import VERTICES_PER_CELL, _refine
+    from engine.geometry.fine_mesh import VERTICES_PER_CELL, _refine
 
     mesh = _square(40)  # 1681 vertices
     field = _field(mesh)
@@ -183,8 +183,8 @@ def test_one_size_target_only():
 
 def _clustering_problem(seed: int = 3):
     """A curved patch with random positive weights, anisotropic metrics, 12 grown clusters."""
-    from engine.clustering import mesh_adjacency
-    from engine.fine_mesh import _edges_of, _refine
+    from engine.geometry.fine_mesh import _edges_of, _refine
+    from engine.remeshing.clustering import mesh_adjacency
 
     rng = np.random.default_rng(seed)
     mesh = _square(16)
@@ -195,7 +195,7 @@ def _clustering_problem(seed: int = 3):
     fine = _refine(mesh, field, n_cells=4)
     edges, _, _ = _edges_of(fine.faces, len(fine.vertices))
     seeds = rng.choice(len(fine.vertices), 12, replace=False)
-    from engine.voronoi import _grow_clusters
+    from engine.remeshing.voronoi import _grow_clusters
 
     labels = _grow_clusters(fine, seeds)
     weights = fine.areas * rng.uniform(0.5, 2.0, len(fine.vertices))
@@ -204,7 +204,7 @@ def _clustering_problem(seed: int = 3):
 
 def test_cluster_energy_closed_form_is_the_minimum_over_the_centroid():
     """S3 - S2^T S1^-1 S2 equals sum w (x - c)^T M (x - c) at c = S1^-1 S2, and no other c does better."""
-    from engine.clustering import _accumulate, centroids_of, cluster_energy, vertex_moments
+    from engine.remeshing.clustering import _accumulate, centroids_of, cluster_energy, vertex_moments
 
     fine, _, _, weights, labels = _clustering_problem()
     energy = cluster_energy(fine.vertices, fine.metric, weights, labels, 12)
@@ -228,7 +228,7 @@ def test_clustering_lowers_the_energy_keeps_clusters_connected_and_its_running_m
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
 
-    from engine.clustering import cluster_energy, cluster_vertices
+    from engine.remeshing.clustering import cluster_energy, cluster_vertices
 
     fine, edges, adjacency, weights, labels = _clustering_problem()
     before = cluster_energy(fine.vertices, fine.metric, weights, labels, 12).sum()
@@ -249,8 +249,8 @@ def test_clustering_lowers_the_energy_keeps_clusters_connected_and_its_running_m
 
 
 def test_vectorised_quality_figures_match_a_per_face_loop():
-    from engine.grid_quality import polymesh_quality
     from engine.mesh import best_fit_plane
+    from engine.remeshing.grid_quality import polymesh_quality
 
     mesh = _square(24, side=4.0)
     x = mesh.vertices[:, 0]
@@ -289,9 +289,9 @@ def test_cluster_adjacency_hexagon_share_is_the_grids():
     neighbouring clusters) equals the extracted grid's hexagon share of interior cells."""
     from dataclasses import replace
 
-    from engine.cell_extraction import _polygons
-    from engine.fine_mesh import _refine
-    from engine.voronoi import _cluster, _interior_hexagon_share
+    from engine.geometry.fine_mesh import _refine
+    from engine.remeshing.cell_extraction import _polygons
+    from engine.remeshing.voronoi import _cluster, _interior_hexagon_share
 
     mesh = _square(20, side=4.0)
     x = mesh.vertices[:, 0]
@@ -316,8 +316,8 @@ def wave_roof():
     path = next((p for p in SURFACE_FILES if p.stem == "Wave"), None)
     if path is None:
         pytest.skip("no Wave.ply in the surfaces folder")
-    from engine.field import guiding_field
-    from engine.shell import ShellMaterial, analyse_shell, shell_nodal_loads
+    from engine.remeshing.field import guiding_field
+    from engine.structure.shell import ShellMaterial, analyse_shell, shell_nodal_loads
     from workflow.config import project_from_surface
     from workflow.stages.shell import notional_thickness, shell_load_case
     from workflow.stages.surface import build_surface, resolve_loads, resolve_supports
@@ -373,7 +373,7 @@ def test_a_hole_smaller_than_the_cells_round_it_is_met_by_several_cells(seed, n_
 def test_candidates_are_compared_as_the_caller_will_build_them():
     """Where several candidate grids are made, the remesher ranks them by what ``buildable`` makes
     of each (collapses cost hexagons and three-beam nodes), and returns the winner as extracted."""
-    from engine.collapse import collapse_short_beams
+    from engine.remeshing.collapse import collapse_short_beams
 
     mesh = _square(24)
     field = _field(mesh, size=1.0 + mesh.vertices[:, 0] + 1.0)
@@ -409,7 +409,7 @@ def test_the_starts_side_by_side_in_worker_processes_give_the_grid_made_one_afte
     its own index, so the grid is the same, node for node, as from the starts in turn."""
     from concurrent.futures import ProcessPoolExecutor
 
-    from engine.voronoi import MAX_STARTS
+    from engine.remeshing.voronoi import MAX_STARTS
 
     mesh = _square(12)
     size = 0.6 + 0.4 * np.abs(mesh.vertices[:, 0])  # graded: the starts' candidates differ

@@ -5,7 +5,7 @@ optimize stage, run or reused from the project's output folder) sets L_tot; the 
 the same L_tot (within 1 %) are built on the same surface with the same supports, section and
 loads: triangular, quad (squares along the plan's principal axes), quad45 (at 45 degrees to
 them), "statics quad" (squares along the guiding field's dominant direction, lines graded by
-its size: engine.grids.statics_quad_grid) and "isotropic" (the same Voronoi remesher under a
+its size: engine.remeshing.grids.statics_quad_grid) and "isotropic" (the same Voronoi remesher under a
 uniform field, Voro(1,1): the control that differs only in statics-awareness). Each goes
 through the structural protocol (LS, LB, GNL with every imperfection). ``--grids`` picks the
 rows (default: all). The lattices and the isotropic grid are analysed as built, not optimised;
@@ -34,8 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from engine.errors import ConvergenceError, GridshellError, InputError
-from engine.field import GuidingField
 from engine.mesh import PolyMesh
+from engine.remeshing.field import GuidingField
 from fabrication.files import atomic_path, write_text_atomic
 
 from .config import Project, check_inputs, load_project
@@ -150,7 +150,7 @@ def compare_grids(project: Project, surface, voronoi: PolyMesh, *, field: Guidin
     (GRIDS, default all); statics quad and isotropic need the guiding ``field``. A grid that
     cannot be built is (None, failed row); one whose protocol raises a GridshellError is (grid,
     failed row with its size); any other exception is a bug and propagates."""
-    from engine import grids as lattices
+    from engine.remeshing import grids as lattices
 
     from .pools import process_pool
     from .stages.analysis import beam_properties
@@ -169,7 +169,7 @@ def compare_grids(project: Project, surface, voronoi: PolyMesh, *, field: Guidin
     name = _project_label(project)
 
     def isotropic(mesh, *, total_length, support_vertices):
-        from engine.voronoi import RemeshSettings, remesh
+        from engine.remeshing.voronoi import RemeshSettings, remesh
 
         settings = RemeshSettings(total_length=total_length, lloyd_iterations=project.remesh.lloyd_iterations,
                                   seed=project.remesh.seed)

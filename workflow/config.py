@@ -29,14 +29,14 @@ from typing import Annotated, Any, Literal, Union
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from engine.en1993 import ChecksMethod
+from engine.design.en1993 import ChecksMethod
 from engine.errors import GridshellError
-from engine.field import AnisotropyMap, FieldSettings, Orientation, SizeMap
-from engine.grids import GridKind
-from engine.optimize import OptimizeSettings
-from engine.protocol import TOLERABLE_DEFLECTION_RATIO, ImperfectionShape, ProtocolSettings
-from engine.supports import restraint_flags
-from engine.voronoi import RemeshSettings
+from engine.remeshing.field import AnisotropyMap, FieldSettings, Orientation, SizeMap
+from engine.remeshing.grids import GridKind
+from engine.remeshing.optimize import OptimizeSettings
+from engine.remeshing.voronoi import RemeshSettings
+from engine.structure.protocol import TOLERABLE_DEFLECTION_RATIO, ImperfectionShape, ProtocolSettings
+from engine.structure.supports import restraint_flags
 from fabrication.joints import JointKind, JointSettings
 from fabrication.limits import BuildLimits
 from fabrication.settings import BeamSettings, PanelSettings, SheetSettings
@@ -332,14 +332,14 @@ class RemeshConfig(_Section):
     (a grid_coarsened finding says so); false keeps the cells asked for, and the joints clash.
     statics_rounds: 1 remeshes under the shell's field; N > 1 then rebuilds the field N - 1 times from
     the grid's own beam forces (linear, ULS) and remeshes with the same size target.
-    grid: which grid the remesh builds (engine.grids.GridKind): "voronoi" (the statics-aware grid,
+    grid: which grid the remesh builds (engine.remeshing.grids.GridKind): "voronoi" (the statics-aware grid,
     the default), "isotropic" (the same remesher under a uniform field, Voro(1,1): the control, it
     is optimised like the Voronoi grid), or a lattice clipped to the plan and lifted, not optimised:
     "quad" (squares along the plan's principal axes), "quad45" (at 45 degrees to them),
     "triangular", "statics_quad" (squares along the field's dominant direction, lines graded by
     its size). A lattice meets total_length within 1 %; n_cells or mean_beam_length give it the
     length of a regular lattice of that many cells, or of that spacing, over the surface's area
-    (engine.grids.lattice_total_length); coarsen_for_joints does not apply to lattices.
+    (engine.remeshing.grids.lattice_total_length); coarsen_for_joints does not apply to lattices.
     workers: processes that cluster a small grid's starts side by side (default: one per core; the
     grid is the same with any count)."""
 
@@ -443,7 +443,7 @@ class AnalysisConfig(_Section):
 
 
 class DesignConfig(_Section):
-    """Section sizing (engine.sizing): with size_sections, the lightest tubes of ``catalogue`` (a
+    """Section sizing (engine.design.sizing): with size_sections, the lightest tubes of ``catalogue`` (a
     shipped one: "EN 10210-2 CHS", "EN 10219-2 CHS", "EN 755-8 aluminium tubes"; or a CSV file
     with diameter_mm and thickness_mm columns, relative to the project file), in at most
     ``groups`` distinct sections, that pass the member checks, the deflection limit and the
@@ -847,7 +847,7 @@ def parse_project(data: dict, *, source: str = "project", base_dir: Path | None 
         if not path.is_absolute():
             surface = project.surface.model_copy(update={"file": str((base_dir / path).resolve())})
             project = project.model_copy(update={"surface": surface})
-    from engine.catalogue import CATALOGUES
+    from engine.design.catalogue import CATALOGUES
 
     spec = project.design.catalogue
     if spec not in CATALOGUES and base_dir is not None and not Path(spec).is_absolute():
@@ -888,7 +888,7 @@ def project_from_surface(surface: str | Path, supports: str = "boundary", units:
                          up: str | None = None) -> Project:
     """The quick-start project: a mesh file in ``units`` (m, cm, mm, in, ft) with ``up`` as its up
     axis (None: z, checked), supports 'boundary' or 'flagged', defaults elsewhere."""
-    from engine.surfaces import UP_AXES
+    from engine.geometry.surfaces import UP_AXES
 
     if supports not in ("boundary", "flagged"):
         raise ConfigError(f"--supports {supports!r}: allowed are boundary, flagged")
@@ -921,7 +921,7 @@ have z at least 0.69 times the largest (a saddle on its corners), generated ones
 
 
 def _check_upright(vertices: np.ndarray, faces: np.ndarray, path: Path, quick_start: bool) -> None:
-    from engine.surfaces import normal_shares
+    from engine.geometry.surfaces import normal_shares
 
     if (vertices.ndim != 2 or vertices.shape[1:] != (3,) or faces.ndim != 2 or faces.shape[1:] != (3,)
             or not len(faces) or faces.min() < 0 or faces.max() >= len(vertices)):
@@ -953,7 +953,7 @@ def check_inputs(project: Project, *, quick_start: bool = False) -> float | None
     from .surface_io import read_surface
 
     if project.design.size_sections:
-        from engine.catalogue import catalogue
+        from engine.design.catalogue import catalogue
         from engine.errors import InputError
 
         try:

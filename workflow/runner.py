@@ -87,8 +87,8 @@ def made_from(depends: tuple[str, ...], entry_of: Callable[[str], dict | None]) 
 
 
 def solvers_describe() -> dict:
-    """Which library factors the stiffness matrices here (engine.solvers)."""
-    from engine.solvers import describe
+    """Which library factors the stiffness matrices here (engine.structure.solvers)."""
+    from engine.structure.solvers import describe
 
     return describe()
 

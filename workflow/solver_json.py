@@ -8,13 +8,13 @@ from typing import Any
 
 import numpy as np
 
-from engine.corotational import nonlinear_static
 from engine.errors import InputError
-from engine.frame import FrameModel, factor_stiffness, linear_buckling, linear_static
-from engine.loads import LoadCase
 from engine.mesh import TriMesh
-from engine.shell import ShellMaterial, analyse_shell, shell_nodal_loads
-from engine.supports import DOF_NAMES, Supports
+from engine.structure.corotational import nonlinear_static
+from engine.structure.frame import FrameModel, factor_stiffness, linear_buckling, linear_static
+from engine.structure.loads import LoadCase
+from engine.structure.shell import ShellMaterial, analyse_shell, shell_nodal_loads
+from engine.structure.supports import DOF_NAMES, Supports
 
 __all__ = ["require", "node_table", "model_from_json", "solve_frame_json", "solve_shell_json"]
 

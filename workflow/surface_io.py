@@ -1,6 +1,6 @@
 """Reading and writing surface meshes: OBJ, PLY, STL, OFF (trimesh) and Rhino .3dm (rhino3dm).
 
-Readers return raw arrays; ``engine.surfaces.clean_mesh`` does the cleaning and checking.
+Readers return raw arrays; ``engine.geometry.surfaces.clean_mesh`` does the cleaning and checking.
 The red vertices (255, 0, 0) of a PLY are returned as support flags.
 """
 

@@ -301,7 +301,7 @@ def run_task(task: Task, names: list[str], parent: dict | None = None) -> dict:
 
         if parent is not None:
             seed(task.home, Path(parent["home"]), names[:task.first], task.project)
-        from engine.solvers import limit_threads
+        from engine.structure.solvers import limit_threads
 
         previous = limit_threads(1)
         try:

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.field import GuidingField
 from engine.mesh import TriMesh
+from engine.remeshing.field import GuidingField
 
 from ._common import pyplot, save_png
 

@@ -5,8 +5,8 @@ Each stage module has ``run(<upstream results>, project, ctx) -> <its result>`` 
 the stages that made them (workflow.runner.Stage):
 
 - surface: () -> surface.SurfaceResult
-- shell: (surface) -> engine.shell.ShellResult
-- field: (surface, shell) -> engine.field.GuidingField
+- shell: (surface) -> engine.structure.shell.ShellResult
+- field: (surface, shell) -> engine.remeshing.field.GuidingField
 - remesh: (surface, field) -> remesh.RemeshedGrid (the grid, and the field of its statics rounds)
 - optimize: (surface, field, remesh) -> optimize.OptimizedGrid
 - analysis: (surface, optimize) -> analysis.AnalysisSummary

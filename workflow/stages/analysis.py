@@ -15,23 +15,29 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.checks import member_checks
-from engine.en1993 import CHECKED, NOT_CHECKED
+from engine.design.checks import member_checks
+from engine.design.en1993 import CHECKED, NOT_CHECKED
+from engine.design.load_test import load_test
+from engine.design.sections import Material, Section, section_from_spec
+from engine.design.sections import material as material_by_name
+from engine.design.sizing import size_sections
+from engine.design.verdicts import VerdictFixes, design_verdicts, findings_of
 from engine.errors import ConvergenceError, MechanismError
 from engine.findings import Finding
-from engine.frame import FrameModel, factor_stiffness, linear_buckling, linear_static
-from engine.load_test import load_test
-from engine.loads import LoadCombination, combine
-from engine.loads import pick_combination as choose_combination
 from engine.mesh import PolyMesh
 from engine.parts import beam_id, node_id
-from engine.protocol import run_protocol
-from engine.sections import Material, Section, section_from_spec
-from engine.sections import material as material_by_name
-from engine.sizing import size_sections
-from engine.structure import BeamProperties, beam_up_vectors, gridshell_loads, node_normals, support_restraints
-from engine.supports import Supports
-from engine.verdicts import VerdictFixes, design_verdicts, findings_of
+from engine.structure.frame import FrameModel, factor_stiffness, linear_buckling, linear_static
+from engine.structure.grid_model import (
+    BeamProperties,
+    beam_up_vectors,
+    gridshell_loads,
+    node_normals,
+    support_restraints,
+)
+from engine.structure.loads import LoadCombination, combine
+from engine.structure.loads import pick_combination as choose_combination
+from engine.structure.protocol import run_protocol
+from engine.structure.supports import Supports
 from fabrication.files import atomic_path, write_text_atomic
 
 from ..config import Project
@@ -80,7 +86,7 @@ def beam_properties(project: Project) -> tuple[BeamProperties, Section, Material
 
 
 def pick_combination(project: Project, surface: SurfaceResult, limit_state: str) -> LoadCombination:
-    """The combination of ``limit_state`` (engine.loads.pick_combination) with the name that
+    """The combination of ``limit_state`` (engine.structure.loads.pick_combination) with the name that
     ``[analysis] uls_combination`` or ``sls_combination`` asks for."""
     name = project.analysis.uls_combination if limit_state == "ULS" else project.analysis.sls_combination
     return choose_combination(surface.combinations, surface.load_cases, limit_state, name)
@@ -221,7 +227,7 @@ def _fixes(project: Project, sections: BeamSections | None) -> VerdictFixes:
 
 
 def _load_test(ctx, project: Project, surface, polymesh, model, supports, props, combination) -> dict:
-    """The mock-up's incremental load test (METHOD.md 7, engine.load_test) under the SLS
+    """The mock-up's incremental load test (METHOD.md 7, engine.design.load_test) under the SLS
     combination: loadtest.csv (the vertical deflection of each named control point's nearest node
     against the load factor), its picture and the record for analysis.json."""
     import pandas as pd
@@ -299,7 +305,7 @@ def linear_axial_forces(polymesh: PolyMesh, surface: SurfaceResult, project: Pro
 @dataclass(frozen=True, kw_only=True)
 class DesignRun:
     """The protocol's result on the final sections, with the sizing that chose them (None without
-    ``[design] size_sections``): sections, design (engine.sizing.Design), sizer, rounds (of the
+    ``[design] size_sections``): sections, design (engine.design.sizing.Design), sizer, rounds (of the
     non-linear limit), and the frame model, supports and beam properties it ran on."""
 
     result: object
@@ -370,11 +376,11 @@ def _checks_note(method: str, checks) -> dict:
 
 
 class _Sizer:
-    """The stage's use of engine.sizing: a design's linear response (ULS forces, SLS deflection,
+    """The stage's use of engine.design.sizing: a design's linear response (ULS forces, SLS deflection,
     lambda_LB) and what analysis.json says of the sizing."""
 
     def __init__(self, ctx, project: Project, polymesh, surface, material, method: str, cases, deflection_limit):
-        """``cases``: the ULS and SLS load cases (engine.loads.combine of the combinations)."""
+        """``cases``: the ULS and SLS load cases (engine.structure.loads.combine of the combinations)."""
         self.ctx, self.project, self.polymesh, self.surface = ctx, project, polymesh, surface
         self.material, self.method, self.deflection_limit = material, method, deflection_limit
         self.catalogue = project_catalogue(project)

@@ -20,12 +20,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from engine.design.sections import material
 from engine.findings import Finding
 from engine.mesh import PolyMesh
 from engine.parts import joint_id
-from engine.sections import material
-from engine.solvers import limited_threads
-from engine.structure import node_normals
+from engine.structure.grid_model import node_normals
+from engine.structure.solvers import limited_threads
 from fabrication.assembly import plan_assembly, write_assembly
 from fabrication.clearance import joint_clashes_parallel
 from fabrication.drawings import write_plan_drawings

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.field import GuidingField, guiding_field
-from engine.shell import ShellResult
+from engine.remeshing.field import GuidingField, guiding_field
+from engine.structure.shell import ShellResult
 from fabrication.files import atomic_path, write_text_atomic
 
 from ..config import Project

@@ -1,5 +1,5 @@
 """Lattice grids in the remesh and optimize stages (``[remesh] grid`` = quad, quad45, triangular or
-statics_quad): the reference grids of engine.grids built for the project, and passed through the
+statics_quad): the reference grids of engine.remeshing.grids built for the project, and passed through the
 optimiser unchanged, as ``gridshell compare`` analyses them (the optimiser's regularity and
 grading targets are a Voronoi grid's; a lattice is already regular and planar where flat).
 
@@ -14,9 +14,16 @@ import json
 
 import numpy as np
 
-from engine.field import GuidingField
-from engine.grids import GridKind, lattice_total_length, quad45_grid, quad_grid, statics_quad_grid, triangular_grid
 from engine.mesh import PolyMesh
+from engine.remeshing.field import GuidingField
+from engine.remeshing.grids import (
+    GridKind,
+    lattice_total_length,
+    quad45_grid,
+    quad_grid,
+    statics_quad_grid,
+    triangular_grid,
+)
 from fabrication.files import write_text_atomic
 
 from ..config import DEFAULT_CELLS, Project
@@ -65,7 +72,7 @@ def build_lattice(surface: SurfaceResult, field: GuidingField, project: Project,
 
 def run_remesh(surface: SurfaceResult, field: GuidingField, project: Project, ctx: StageContext) -> PolyMesh:
     """The remesh stage for a lattice: built, written and measured (against the field too)."""
-    from engine.grid_quality import polymesh_quality
+    from engine.remeshing.grid_quality import polymesh_quality
 
     from .polymesh_io import write_polymesh_obj
     from .remesh import grid_figures, short_share
@@ -92,7 +99,7 @@ def run_optimize(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, 
                  ctx: StageContext):
     """The optimize stage for a lattice: the grid goes through unchanged (optimize.json says so), with
     its panels (planar convex pieces of the cells that are not, as for any grid)."""
-    from engine.optimize import grid_quality
+    from engine.remeshing.optimize import grid_quality
 
     from .optimize import OptimizedGrid, _piece_tolerance, panel_pieces_of, write_panels_obj
     from .polymesh_io import write_polymesh_obj

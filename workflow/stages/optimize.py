@@ -16,16 +16,22 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
-from engine.collapse import collapse_beams, dissolve_kinks, flip_defects, open_narrow_joints, remove_short_beams
-from engine.field import GuidingField
 from engine.findings import Finding
-from engine.grids import LATTICES, GridKind, isotropic_field
-from engine.local_global import ClosestSurfacePoints
+from engine.geometry.projections import CellFans, folded_cells
+from engine.geometry.symmetry import symmetrised_grid, symmetry_record
 from engine.mesh import PolyMesh, neighbour_lists, node_adjacency
-from engine.optimize import OptimizeResult, OptimizeSettings, grid_quality, optimize
 from engine.parts import joint_id, panel_id
-from engine.projections import CellFans, folded_cells
-from engine.symmetry import symmetrised_grid, symmetry_record
+from engine.remeshing.collapse import (
+    collapse_beams,
+    dissolve_kinks,
+    flip_defects,
+    open_narrow_joints,
+    remove_short_beams,
+)
+from engine.remeshing.field import GuidingField
+from engine.remeshing.grids import LATTICES, GridKind, isotropic_field
+from engine.remeshing.local_global import ClosestSurfacePoints
+from engine.remeshing.optimize import OptimizeResult, OptimizeSettings, grid_quality, optimize
 from fabrication.files import write_text_atomic
 from fabrication.limits import required_beam_lengths_m
 
@@ -46,15 +52,15 @@ from .remesh import (
 )
 from .surface import SurfaceResult
 
-if TYPE_CHECKING:  # engine.panel_pieces imports shapely: loaded where panels are made or read
-    from engine.panel_pieces import PanelPiece
+if TYPE_CHECKING:  # engine.remeshing.panel_pieces imports shapely: loaded where panels are made or read
+    from engine.remeshing.panel_pieces import PanelPiece
 
 #: The end game keeps beams this much above the shortest buildable beam between 120-degree joints.
 MIN_LENGTH_MARGIN = 1.05
 #: A cell's regularity target is stretched at most this much beyond the field's aspect bound A.
 STRETCH_MARGIN = 1.5
 #: Above this share of beams left too short for their joints with the field's grading kept, the
-#: optimiser tries again with the sizes evened out (engine.optimize.OptimizeSettings.keep_grading).
+#: optimiser tries again with the sizes evened out (engine.remeshing.optimize.OptimizeSettings.keep_grading).
 GRADED_SHORT_SHARE = 0.02
 #: A grading slope lowered by more than this for the joints is a finding (grading_compressed).
 COMPRESSED_SLOPE = 0.05
@@ -264,7 +270,7 @@ def without_unbuildable_beams(result: OptimizeResult, project: Project, surface:
     """(result, removed): ``result`` with the beams still shorter than their joints and the shortest
     cut take removed where their two cells can become one, collapsed where the removals freed their
     end nodes, and one beam of each pair closer than the joint's smallest angle removed
-    (engine.collapse: remove_short_beams, collapse_beams, open_narrow_joints), a corner of the outline
+    (engine.remeshing.collapse: remove_short_beams, collapse_beams, open_narrow_joints), a corner of the outline
     with no inner beam merged into the next corner where the two lie closer than that, in rounds while that
     changes the grid (LAST_RESORT_ROUNDS at most, then the short beams removed once more); its "after"
     figures are measured again. ``removed`` counts the beams removed
@@ -371,7 +377,7 @@ def grading_finding(share: float, quality: dict) -> dict:
 
 
 def compressed_grading(quality: dict) -> bool:
-    """Whether the optimiser compressed the field's grading for the joints (engine.optimize.graded_areas)."""
+    """Whether the optimiser compressed the field's grading for the joints (engine.remeshing.optimize.graded_areas)."""
     grading = quality.get("grading") or {}
     given, target = grading.get("given_slope"), grading.get("target_slope")
     return given is not None and target is not None and target < given - COMPRESSED_SLOPE
@@ -402,7 +408,7 @@ def _piece_tolerance(polymesh: PolyMesh, project: Project) -> float:
 def panel_pieces_of(polymesh: PolyMesh, project: Project) -> list[PanelPiece]:
     """The panels of the grid: with ``[optimize] planar``, every cell planar and convex within the
     tolerance, else its planar convex pieces; without, the cells as they are."""
-    from engine.panel_pieces import PanelPiece, panel_pieces
+    from engine.remeshing.panel_pieces import PanelPiece, panel_pieces
 
     if not project.optimize.planar:
         return [PanelPiece(cell=c, piece=0, loop=np.asarray(f)) for c, f in enumerate(polymesh.faces)]
@@ -422,8 +428,8 @@ def write_panels_obj(polymesh: PolyMesh, pieces: list[PanelPiece], path: Path, *
 
 
 def read_panels_obj(path: Path) -> list[PanelPiece]:
-    """The pieces (engine.panel_pieces.PanelPiece) of a panels.obj written by :func:`write_panels_obj`."""
-    from engine.panel_pieces import PanelPiece
+    """The pieces (engine.remeshing.panel_pieces.PanelPiece) of a panels.obj written by :func:`write_panels_obj`."""
+    from engine.remeshing.panel_pieces import PanelPiece
 
     pieces, cell, piece = [], 0, 0
     for line in Path(path).read_text(encoding="ascii").splitlines():

@@ -18,16 +18,16 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.collapse import CollapseReport, collapse_short_beams
-from engine.field import GuidingField, guiding_field
 from engine.findings import Finding
-from engine.grid_quality import polymesh_quality
-from engine.grid_stress import surface_membrane_forces
-from engine.grids import LATTICES, GridKind, isotropic_field
+from engine.geometry.symmetry import symmetrised_grid, symmetry_record
 from engine.mesh import PolyMesh
-from engine.structure import node_normals
-from engine.symmetry import symmetrised_grid, symmetry_record
-from engine.voronoi import RemeshResult, RemeshSettings, StartsMap, remesh
+from engine.remeshing.collapse import CollapseReport, collapse_short_beams
+from engine.remeshing.field import GuidingField, guiding_field
+from engine.remeshing.grid_quality import polymesh_quality
+from engine.remeshing.grids import LATTICES, GridKind, isotropic_field
+from engine.remeshing.voronoi import RemeshResult, RemeshSettings, StartsMap, remesh
+from engine.structure.grid_model import node_normals
+from engine.structure.grid_stress import surface_membrane_forces
 from fabrication.files import write_text_atomic
 from fabrication.limits import node_smallest_angles, required_beam_lengths_m
 
@@ -130,7 +130,7 @@ def remeshed_from_beam_forces(result: RemeshResult, field: GuidingField, surface
                               ) -> tuple[RemeshResult, GuidingField, list[dict]]:
     """(result, field, rounds): with ``[remesh] statics_rounds`` N > 1, N - 1 times the field rebuilt
     from the last grid's beam forces (linear analysis under the ULS combination, as the analysis
-    stage builds it; engine.grid_stress) with the project's field settings, and the surface
+    stage builds it; engine.structure.grid_stress) with the project's field settings, and the surface
     remeshed under it with the same size target. rounds (JSON-ready, empty for N = 1): per round
     the grid's total length (m), cells and size rank correlation with the field it was made under
     (round 1: the shell's). The last round's field is written as field_round_N.npz and drawn as
@@ -233,7 +233,7 @@ def buildable_as_remeshed(project: Project) -> Callable[[PolyMesh], PolyMesh]:
 def buildable_grid(polymesh: PolyMesh, project: Project, share: float = 1.0) -> tuple[PolyMesh, dict]:
     """(grid, record): ``polymesh`` with every beam shorter than ``share`` times what its joints and
     the shortest cut take flipped or collapsed where a valid flip or collapse exists
-    (engine.collapse); the record (JSON-ready) has the limits, the collapses and flips, the
+    (engine.remeshing.collapse); the record (JSON-ready) has the limits, the collapses and flips, the
     shortest beam and the smallest angle between two beams at a node. When more than
     MAX_COLLAPSE_SHARE of the beams are short, nothing is changed and ``too_fine`` is set."""
     limits = build_limits_of(project)

@@ -1,6 +1,6 @@
 """Stage ``shell``: the surface as a continuous thin shell under its supports and loads.
 
-Artifacts (02-shell/): shell.npz (every field of ``engine.shell.ShellResult``),
+Artifacts (02-shell/): shell.npz (every field of ``engine.structure.shell.ShellResult``),
 shell.json (the load combination used, thickness, largest displacement, force ranges,
 equilibrium check) and stress.png (principal membrane force crosses).
 """
@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from engine.errors import MechanismError
-from engine.loads import LoadCase, LoadCombination, combine
-from engine.shell import ShellMaterial, ShellResult, analyse_shell, shell_nodal_loads
+from engine.structure.loads import LoadCase, LoadCombination, combine
+from engine.structure.shell import ShellMaterial, ShellResult, analyse_shell, shell_nodal_loads
 from fabrication.files import write_text_atomic
 
 from ..config import Project

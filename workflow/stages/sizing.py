@@ -1,5 +1,5 @@
 """The analysis stage's sections: one tube per beam, its member checks, and the sizing of
-``[design] size_sections`` (engine.sizing) on the project's catalogue."""
+``[design] size_sections`` (engine.design.sizing) on the project's catalogue."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from engine.catalogue import CATALOGUES, Catalogue, catalogue, chs_properties
-from engine.en1993 import ChecksMethod, EndForces, TubeChecks, buckling_alpha, chs_checks, simplified_checks
-from engine.sections import Material
-from engine.structure import BeamProperties
+from engine.design.catalogue import CATALOGUES, Catalogue, catalogue, chs_properties
+from engine.design.en1993 import ChecksMethod, EndForces, TubeChecks, buckling_alpha, chs_checks, simplified_checks
+from engine.design.sections import Material
+from engine.structure.grid_model import BeamProperties
 
 from ..config import Project
 
@@ -106,7 +106,7 @@ def tube_checks(method: ChecksMethod, forces: EndForces, diameter: np.ndarray, t
 def sized_checks(project: Project, method: ChecksMethod, sections: BeamSections, material: Material, result,
                  lengths: np.ndarray) -> TubeChecks:
     """The member checks of every beam's own tube under a protocol result's ULS forces
-    (engine.protocol.ProtocolResult), with the project's buckling lengths."""
+    (engine.structure.protocol.ProtocolResult), with the project's buckling lengths."""
     forces = result.uls_beam_end_forces
     return tube_checks(method, EndForces.of(forces), sections.diameter, sections.thickness, material,
                        process=sections.process,
@@ -132,9 +132,9 @@ def start_tubes(project: Project, cat: Catalogue, n_beams: int) -> np.ndarray:
 def make_analyse(method: ChecksMethod, cat: Catalogue, material: Material, lengths: np.ndarray,
                  solve: Callable[[BeamSections], tuple[np.ndarray, float, float | None, tuple]],
                  project: Project):
-    """analyse(tube indices) for engine.sizing: ``solve`` gives (ULS end forces, SLS deflection,
+    """analyse(tube indices) for engine.design.sizing: ``solve`` gives (ULS end forces, SLS deflection,
     lambda_LB, (SLS and buckling strain energy shares per beam)) of a design."""
-    from engine.sizing import DesignState
+    from engine.design.sizing import DesignState
 
     def analyse(tube: np.ndarray) -> DesignState:
         sections = BeamSections.of_catalogue(cat, tube)

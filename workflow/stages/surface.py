@@ -15,11 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from engine import parametric
 from engine.errors import GridshellError, InputError
-from engine.loads import LimitState, LoadCase, LoadCombination
+from engine.geometry import parametric
+from engine.geometry.surfaces import clean_mesh, to_z_up
 from engine.mesh import TriMesh
-from engine.supports import (
+from engine.structure.loads import LimitState, LoadCase, LoadCombination
+from engine.structure.supports import (
     Supports,
     restraint_flags,
     select_boundary,
@@ -30,7 +31,6 @@ from engine.supports import (
     select_nearest,
     select_plane,
 )
-from engine.surfaces import clean_mesh, to_z_up
 from fabrication.files import write_text_atomic
 
 from ..config import Project, SupportSpec

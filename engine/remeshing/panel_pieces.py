@@ -1,0 +1,127 @@
+"""Planar panels for cells that are not: a cell is glazed with convex planar pieces split along
+node-to-node diagonals, and adds no beam.
+
+On a doubly curved surface a hexagon whose nodes follow the surface is not planar, and on
+anticlastic regions a planar hexagon cannot be convex. The beam grid keeps the statics-aware cells;
+the glazing is a property of the panels. A cell within the planarity tolerance and convex in its
+best-fit plane is one panel; otherwise the diagonal whose two parts are flattest (largest node
+distance from their best-fit planes, then the most even split) cuts it, recursively; a diagonal
+that would cut off a sliver (a triangle of three nearly aligned nodes, no panel to glaze) is taken
+only where no other will do. A triangle is always planar and convex, so the split always ends.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from shapely.geometry import LineString, Polygon
+
+from ..mesh import PolyMesh, best_fit_plane
+
+__all__ = ["PanelPiece", "planar_pieces", "panel_pieces", "piece_flatness"]
+
+#: A triangle whose height over its longest side is under this is a sliver, not a panel.
+SLIVER = 0.05
+
+
+@dataclass(frozen=True)
+class PanelPiece:
+    """One panel: the cell it glazes, its index among that cell's pieces (0 for a whole cell) and
+    its node loop (ids of the grid's nodes)."""
+
+    cell: int
+    piece: int
+    loop: np.ndarray
+
+
+def _plane_coordinates(points: np.ndarray, plane: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """(k,2) coordinates of points in their best-fit plane (``plane``: that plane if known)."""
+    centroid, normal = best_fit_plane(points) if plane is None else plane
+    u = np.cross(normal, [1.0, 0.0, 0.0])
+    if np.linalg.norm(u) < 0.1:
+        u = np.cross(normal, [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    return np.c_[(points - centroid) @ u, (points - centroid) @ v]
+
+
+def _signed_area(local: np.ndarray) -> float:
+    return 0.5 * float(np.sum(local[:, 0] * np.roll(local[:, 1], -1) - np.roll(local[:, 0], -1) * local[:, 1]))
+
+
+def piece_flatness(points: np.ndarray) -> tuple[float, bool]:
+    """(largest node distance from the best-fit plane (m), convex in that plane) of a node loop."""
+    if len(points) == 3:
+        return 0.0, True
+    return _flatness(points)[:2]
+
+
+def _flatness(points: np.ndarray) -> tuple[float, bool, np.ndarray]:
+    """piece_flatness of a loop of 4 or more nodes, and the nodes' coordinates in that plane (k, 2)."""
+    plane = best_fit_plane(points)
+    centroid, normal = plane
+    distance = float(np.abs((points - centroid) @ normal).max())
+    local = _plane_coordinates(points, plane)
+    edge = np.roll(local, -1, axis=0) - local
+    turn = edge[:, 0] * np.roll(edge[:, 1], -1) - edge[:, 1] * np.roll(edge[:, 0], -1)
+    area = _signed_area(local)
+    scale = float(np.einsum("ij,ij->", edge, edge)) / len(points)
+    convex = bool(np.all(turn * np.sign(area) >= -1e-9 * scale))
+    return distance, convex, local
+
+
+def _sliver(points: np.ndarray) -> bool:
+    """Whether a node loop is a triangle whose height over its longest side is under SLIVER."""
+    if len(points) != 3:
+        return False
+    sides = np.roll(points, -1, axis=0) - points
+    longest = float(np.max(np.einsum("ij,ij->i", sides, sides)))
+    return bool(np.linalg.norm(np.cross(sides[0], sides[1])) < SLIVER * max(longest, 1e-300))
+
+
+def planar_pieces(nodes: np.ndarray, loop: np.ndarray, tolerance: float) -> list[np.ndarray]:
+    """Node loops (sub-loops of ``loop``) that are each planar within ``tolerance`` (m) and convex,
+    the fewest the recursive diagonal split finds; ``[loop]`` when the cell already is."""
+    loop = np.asarray(loop, dtype=np.int64)
+    if len(loop) == 3:
+        return [loop]
+    distance, convex, local = _flatness(nodes[loop])
+    if distance <= tolerance and convex:
+        return [loop]
+    k = len(loop)
+    best = None
+    cell = Polygon(local)
+    if not cell.is_valid:  # a self-intersecting outline in its plane: no diagonal is safe
+        cell = None
+    for i in range(k):
+        for j in range(i + 2, k):
+            if i == 0 and j == k - 1:
+                continue
+            parts = (loop[i:j + 1], np.r_[loop[j:], loop[:i + 1]])
+            # the diagonal runs inside the cell (in its best-fit plane)
+            if cell is None or not cell.contains(LineString([local[i], local[j]])):
+                continue
+            figures = [piece_flatness(nodes[p]) for p in parts]
+            bad = sum(1 for d, c in figures if not (d <= tolerance and c))
+            worst = max(d if c else np.inf for d, c in figures)
+            slivers = sum(_sliver(nodes[p]) for p in parts)
+            key = (slivers, bad, worst, abs(len(parts[0]) - len(parts[1])))
+            if best is None or key < best[0]:
+                best = (key, parts)
+    if best is None:  # no diagonal inside (a degenerate cell): a fan of triangles from its first node
+        return [np.array([loop[0], loop[i], loop[i + 1]]) for i in range(1, k - 1)]
+    out: list[np.ndarray] = []
+    for part in best[1]:
+        out += planar_pieces(nodes, part, tolerance)
+    return out
+
+
+def panel_pieces(polymesh: PolyMesh, tolerance: float) -> list[PanelPiece]:
+    """Every cell's panels, in cell order: the cell itself when planar within ``tolerance`` (m) and
+    convex, else its planar convex pieces."""
+    out: list[PanelPiece] = []
+    for cell, loop in enumerate(polymesh.faces):
+        pieces = planar_pieces(polymesh.nodes, loop, tolerance)
+        out += [PanelPiece(cell=cell, piece=0 if len(pieces) == 1 else k + 1, loop=p) for k, p in enumerate(pieces)]
+    return out

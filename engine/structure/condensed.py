@@ -1,0 +1,314 @@
+"""Sparse factorisation of a frame stiffness with the beams' internal nodes condensed out.
+
+A beam split into k elements has k - 1 internal nodes that touch only that beam. Per beam, with
+its two end nodes e and its internal DOFs i (g = 6 (k - 1) of them),
+
+    K_beam = [[K_ee, K_ei],
+              [K_ie, K_ii]],
+
+so K^-1 needs only the dense inverses of the K_ii (batched over the beams) and one sparse LU of
+the Schur complement S, assembled from the condensed beams C = K_ee - K_ei K_ii^-1 K_ie on the
+end nodes only (for straight Euler-Bernoulli beams C is the one-element beam stiffness). On the
+5000-node benchmark grid-shell with 4 elements per beam S has 29 k DOF instead of 162 k: faster
+to factor, and a solve (all DOFs, internal ones included: this is exact, not a reduced model)
+takes half the time of the full LU's (docs/decisions.md, "Frame finite elements").
+
+The inertia is kept: the pivots are those of an elimination of the K_ii without row exchanges
+followed by S's factor, which are the pivots of the whole matrix eliminated in that order
+(Haynsworth), so the negative-pivot count of the co-rotational path is unchanged.
+
+S is factored by ``engine.structure.solvers``' choice for its size: PARDISO's LDL^T (its inertia from the
+factor's counts) or SuperLU with diagonal pivots (the signs of U's diagonal). The element
+matrices need not be symmetric (the co-rotational tangent is not quite): PARDISO then factors
+S's symmetric part, its inertia is that part's, and each solve is refined towards S's own (a
+path then takes the steps and iterations it takes on SuperLU; docs/decisions.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..linalg import assemble_blocks
+from .solvers import factor_symmetric, library_for
+
+__all__ = ["CondensedFactor", "FillOrdering", "sparse_lu"]
+
+#: A pivot this small against the largest of its kind is taken for zero (a mechanism).
+TINY_PIVOT = 1e-12
+
+
+def sparse_lu(matrix: sp.spmatrix):
+    """SuperLU of a structurally symmetric matrix: minimum-degree ordering on A^T + A, diagonal
+    pivots (the inertia of a symmetric matrix is read from the signs of U's diagonal)."""
+    return spla.splu(sp.csc_matrix(matrix), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                     options={"SymmetricMode": True})
+
+
+class _PermutedLU:
+    """A SuperLU of P A P^T solving A x = b (the U of the permuted matrix, whose diagonal holds
+    the same pivots in the permuted order)."""
+
+    def __init__(self, lu, order: np.ndarray) -> None:
+        self._lu, self._order = lu, order
+
+    @property
+    def U(self):
+        return self._lu.U
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        out = np.empty_like(rhs, dtype=float)
+        out[self._order] = self._lu.solve(rhs[self._order])
+        return out
+
+
+class FillOrdering:
+    """A fill-reducing symmetric ordering found at the first factorisation (SuperLU's minimum
+    degree on A^T + A) and given to the next ones of the same size: the tangents along one
+    non-linear path share their pattern, and finding the ordering again was some 15 % of each
+    factorisation (Hall at 1500 cells, docs/benchmarks.md). The factors are those of the same
+    elimination order, so the solutions and the pivots' signs are those of ``sparse_lu``."""
+
+    def __init__(self) -> None:
+        self._order: np.ndarray | None = None
+
+    def factor(self, matrix: sp.spmatrix):
+        """SuperLU of ``matrix`` (as ``sparse_lu``) in the kept order, found now if there is none."""
+        matrix = sp.csc_matrix(matrix)
+        if self._order is None or len(self._order) != matrix.shape[0]:
+            lu = sparse_lu(matrix)
+            self._order = np.argsort(lu.perm_c)
+            return lu
+        order = self._order
+        lu = spla.splu(matrix[order][:, order].tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.0,
+                       options={"SymmetricMode": True})
+        return _PermutedLU(lu, order)
+
+
+class _SchurLU:
+    """S's SuperLU (kept ordering or not) with the inertia read from U's diagonal when asked for
+    (SuperLU builds all of U for it)."""
+
+    library = "superlu"
+    singular = False  # an exactly zero pivot raised already
+
+    def __init__(self, matrix: sp.spmatrix, ordering: FillOrdering | None) -> None:
+        self._lu = sparse_lu(matrix) if ordering is None else ordering.factor(matrix)
+        self._pivots: np.ndarray | None = None
+
+    def _diagonal(self) -> np.ndarray:
+        if self._pivots is None:
+            self._pivots = self._lu.U.diagonal()
+        return self._pivots
+
+    @property
+    def negative_pivots(self) -> int:
+        return int(np.sum(self._diagonal() < 0))
+
+    @property
+    def tiny_pivots(self) -> int:
+        return _tiny(self._diagonal())
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        return self._lu.solve(rhs)
+
+
+class _SchurLDLT:
+    """S's PARDISO factor (engine.structure.solvers): LDL^T of S's symmetric part, perturbed pivots standing
+    for the zero ones (which SuperLU refuses). ``skew``: S's skew-symmetric part, where S is not
+    symmetric (a co-rotational tangent): a solve is then refined towards S's own by
+    x <- x0 - (S_sym)^-1 (skew x), while that contracts, up to REFINEMENTS times."""
+
+    library = "pardiso"
+
+    def __init__(self, symmetric: sp.spmatrix, skew: sp.csr_matrix | None) -> None:
+        self._factor = factor_symmetric(symmetric, library="pardiso")
+        self._skew = skew
+        self.negative_pivots = self._factor.negative_pivots
+        self.tiny_pivots = self._factor.tiny_pivots
+        self.singular = self.tiny_pivots > 0
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        first = self._factor.solve(rhs)
+        if self._skew is None:
+            return first
+        x, change = first, np.inf
+        for _ in range(REFINEMENTS):
+            refined = first - self._factor.solve(self._skew @ x)
+            new_change = float(np.abs(refined - x).max())
+            if not new_change < 0.5 * change:       # not contracting: keep the last that did
+                break
+            x, change = refined, new_change
+            if change <= 1e-9 * float(np.abs(x).max()):
+                break
+        return x
+
+
+#: At most this many refinements of a solve on S's symmetric part towards S's own.
+REFINEMENTS = 3
+#: Blocks this close to symmetric (against their largest entry) are symmetric: a linear stiffness.
+SYMMETRIC = 1e-13
+
+
+def _factor_of_s(blocks: np.ndarray, pairs: np.ndarray, n_nodes: int, rows: np.ndarray,
+                 ordering: FillOrdering | None, library: str) -> _SchurLU | _SchurLDLT:
+    """The factor of S, the blocks (m, 12, 12) assembled on the node pairs (m, 2), on ``rows``."""
+    if library_for(len(rows), library) == "pardiso":
+        skew_blocks = 0.5 * (blocks - blocks.transpose(0, 2, 1))
+        symmetric = assemble_blocks(blocks - skew_blocks, pairs, n_nodes)[rows][:, rows]
+        skew = None
+        if len(blocks) and np.abs(skew_blocks).max() > SYMMETRIC * np.abs(blocks).max():
+            skew = sp.csr_matrix(assemble_blocks(skew_blocks, pairs, n_nodes)[rows][:, rows])
+        try:
+            return _SchurLDLT(symmetric, skew)
+        except (ImportError, OSError):  # installed, but MKL does not load here
+            if library == "pardiso":
+                raise
+    return _SchurLU(assemble_blocks(blocks, pairs, n_nodes)[rows][:, rows], ordering)
+
+
+def _tiny(pivots: np.ndarray) -> int:
+    scale = np.abs(pivots).max() if pivots.size else 1.0
+    return int(np.sum(np.abs(pivots) <= TINY_PIVOT * scale))
+
+
+def _block_pivots(blocks: np.ndarray) -> np.ndarray:
+    """(m, g) pivots of the Gaussian elimination of each block without row exchanges (as SuperLU
+    with diagonal pivots), vectorised over the blocks (block index last, for contiguous rows)."""
+    work = np.ascontiguousarray(np.transpose(blocks, (1, 2, 0)))
+    g = work.shape[0]
+    pivots = np.empty((g, work.shape[2]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k in range(g):
+            pivots[k] = work[k, k]
+            if k + 1 < g:
+                factor = work[k + 1:, k] / work[k, k]
+                work[k + 1:, k + 1:] -= factor[:, None, :] * work[k, None, k + 1:]
+    return pivots.T
+
+
+class CondensedFactor:
+    """Solver for K x = f on the free DOFs of a frame, K given by its element matrices.
+
+    element_matrices (b k, 12, 12) in global axes on ``connectivity`` (b k, 2) of ``n_nodes``
+    nodes, beam by beam, k elements per beam, the internal nodes of beam j numbered
+    n_original + j (k - 1) + t (as ``engine.structure.frame`` builds them); ``free``: the sorted free DOFs
+    (6 per node, node-major), every internal DOF among them. ``solve(f)`` takes (n_free,) or
+    (n_free, r). ``negative_pivots`` and ``tiny_pivots``: counts over the pivots of the
+    elimination (internal blocks, then S's factor), the inertia of a symmetric K and its zero
+    eigenvalues. Raises RuntimeError when K is exactly
+    singular (an internal block, or S for SuperLU); PARDISO's factor of a singular S is
+    ``singular`` instead, its zero pivots counted in ``tiny_pivots``. With k = 1, S is the
+    assembled matrix. ``ordering``: S's elimination order for SuperLU, kept from one factorisation
+    of a pattern to the next. ``library``: S's, as ``engine.structure.solvers.library_for``.
+    """
+
+    def __init__(self, element_matrices: np.ndarray, connectivity: np.ndarray, n_nodes: int, n_original: int,
+                 free: np.ndarray, elements_per_beam: int, *, ordering: FillOrdering | None = None,
+                 library: str = "auto") -> None:
+        k = int(elements_per_beam)
+        self.free = free
+        self.n_dofs = 6 * n_nodes
+        if k == 1:
+            self._lu = _factor_of_s(element_matrices, connectivity, n_nodes, free, ordering, library)
+            self._beams = None
+            self._block_pivots: np.ndarray | None = np.zeros(0)
+            self._K_ii: np.ndarray | None = None
+            return
+        m = len(connectivity) // k                      # beams
+        g = 6 * (k - 1)
+        # per beam: internal nodes 1..k-1 (K_ii), end nodes 0 and k (K_ee); element t joins nodes
+        # t and t + 1, so only the first and the last element touch the ends
+        elements = element_matrices.reshape(m, k, 12, 12)
+        first, last = elements[:, 0], elements[:, k - 1]
+        K_ii = np.zeros((m, g, g))
+        K_ii[:, :6, :6] += first[:, 6:, 6:]
+        for t in range(1, k - 1):
+            K_ii[:, 6 * (t - 1):6 * (t + 1), 6 * (t - 1):6 * (t + 1)] += elements[:, t]
+        K_ii[:, g - 6:, g - 6:] += last[:, :6, :6]
+        try:
+            inverse = np.linalg.inv(K_ii)
+        except np.linalg.LinAlgError as exc:
+            raise RuntimeError("Factor is exactly singular (the internal nodes of a beam)") from exc
+        if not np.all(np.isfinite(inverse)):
+            raise RuntimeError("Factor is exactly singular (the internal nodes of a beam)")
+        self._K_ii = K_ii
+        self._inverse = inverse
+        # W = K_ii^-1 K_ie and V = K_ei K_ii^-1 (K_ie: the first element's block on node 1 x
+        # node 0 and the last's on node k-1 x node k)
+        self._W = np.concatenate([np.matmul(inverse[:, :, :6], first[:, 6:, :6]),
+                                  np.matmul(inverse[:, :, g - 6:], last[:, :6, 6:])], axis=2)       # (m, g, 12)
+        self._V = np.concatenate([np.matmul(first[:, :6, 6:], inverse[:, :6, :]),
+                                  np.matmul(last[:, 6:, :6], inverse[:, g - 6:, :])], axis=1)       # (m, 12, g)
+        condensed = np.zeros((m, 12, 12))
+        condensed[:, :6, :6] = first[:, :6, :6]
+        condensed[:, 6:, 6:] = last[:, 6:, 6:]
+        condensed[:, :6] -= np.matmul(first[:, :6, 6:], self._W[:, :6, :])
+        condensed[:, 6:] -= np.matmul(last[:, 6:, :6], self._W[:, g - 6:, :])
+        beam_ends = np.stack([connectivity[::k, 0], connectivity[k - 1::k, 1]], axis=1)
+        self._n_boundary_dofs = 6 * n_original
+        self._boundary = free[free < 6 * n_original]
+        if len(free) - len(self._boundary) != m * g:
+            raise ValueError("every internal DOF of the beams must be free")
+        self._lu = _factor_of_s(condensed, beam_ends, n_original, self._boundary, ordering, library)
+        self._end_dofs = (6 * beam_ends[:, :, None] + np.arange(6)).reshape(m, 12)
+        # scatter of the (m, 12) end contributions onto the end-node DOFs
+        self._scatter = sp.csr_matrix((np.ones(12 * m), (self._end_dofs.ravel(), np.arange(12 * m))),
+                                      shape=(6 * n_original, 12 * m))
+        self._beams = (m, g)
+        self._block_pivots = None
+
+    @property
+    def library(self) -> str:
+        """The library that factored S: "superlu" or "pardiso"."""
+        return self._lu.library
+
+    @property
+    def singular(self) -> bool:
+        """Whether PARDISO perturbed a zero pivot of S (SuperLU raised instead)."""
+        return self._lu.singular
+
+    def _internal_pivots(self) -> np.ndarray:
+        """The pivots of the internal blocks' elimination without row exchanges."""
+        if self._block_pivots is None:
+            assert self._K_ii is not None  # beams of several elements: their internal blocks are kept
+            self._block_pivots = _block_pivots(self._K_ii).ravel()
+        return self._block_pivots
+
+    @property
+    def negative_pivots(self) -> int:
+        """Number of negative pivots (for a symmetric K: of negative eigenvalues)."""
+        return int(np.sum(self._internal_pivots() < 0)) + self._lu.negative_pivots
+
+    @property
+    def tiny_pivots(self) -> int:
+        """Number of pivots under TINY_PIVOT of the largest of the internal blocks', and of S's
+        (SuperLU's, or those PARDISO perturbed): zero eigenvalues, a mechanism."""
+        return _tiny(self._internal_pivots()) + self._lu.tiny_pivots
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """x with K x = rhs on the free DOFs, for rhs (n_free,) or (n_free, r)."""
+        rhs = np.asarray(rhs, dtype=float)
+        if self._beams is None:
+            return self._lu.solve(rhs)
+        m, g = self._beams
+        columns = rhs.shape[1:]
+        r = int(np.prod(columns)) if columns else 1
+        full = np.zeros((self.n_dofs, r))
+        full[self.free] = rhs.reshape(len(self.free), r)
+        nb = self._n_boundary_dofs
+        f_i = full[nb:].reshape(m, g, r)
+        end_forces = np.einsum("mij,mj->mi", self._V, f_i[:, :, 0])[:, :, None] if r == 1 else np.matmul(self._V, f_i)
+        f_b = full[:nb] - self._scatter @ end_forces.reshape(12 * m, r)
+        x_b = np.zeros((nb, r))
+        x_b[self._boundary] = self._lu.solve(f_b[self._boundary]).reshape(-1, r)
+        if r == 1:                                      # einsum is faster than matmul on vectors
+            x_i = (np.einsum("mij,mj->mi", self._inverse, f_i[:, :, 0])
+                   - np.einsum("mij,mj->mi", self._W, x_b[self._end_dofs][:, :, 0]))[:, :, None]
+        else:
+            x_i = np.matmul(self._inverse, f_i) - np.matmul(self._W, x_b[self._end_dofs])
+        full[:nb] = x_b
+        full[nb:] = x_i.reshape(m * g, r)
+        out = full[self.free]
+        return out.reshape(rhs.shape)
