@@ -36,7 +36,7 @@ import numpy as np
 
 from engine.errors import FabricationError
 
-from .workers import start_worker
+from .workers import exit_with_parent
 
 __all__ = ["joint_clashes", "joint_clashes_from_step", "joint_clashes_parallel", "bounding_boxes",
            "overlapping_pairs", "read_joint_step", "step_joint_names"]
@@ -297,7 +297,7 @@ def joint_clashes_parallel(folder: Path, names: list[str] | None = None, workers
         return joint_clashes_from_step(folder, names, min_volume_mm3=min_volume_mm3, stl_boxes=stl_boxes,
                                        boxes=boxes)
     pairs = _step_pairs(folder, names, stl_boxes, boxes)
-    with ProcessPoolExecutor(max_workers=workers, initializer=start_worker, initargs=(os.getpid(),)) as pool:
+    with ProcessPoolExecutor(max_workers=workers, initializer=exit_with_parent, initargs=(os.getpid(),)) as pool:
         if pairs is None:
             # contiguous chunks, a few per worker, so that a slow chunk does not hold the others up
             chunks = _split(names, math.ceil(len(names) / (4 * workers)))

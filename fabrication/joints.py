@@ -43,7 +43,7 @@ from engine.parts import joint_id
 from .files import atomic_path, compact_step_points, stamp_step
 from .settings import check_ranges
 from .step_assembly import StepAssemblyWriter, step_part, write_step_part
-from .workers import StepOutcome, run_steps, start_worker
+from .workers import StepOutcome, exit_with_parent, run_steps
 
 __all__ = ["JointKind", "JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "joint_hub_radius_mm",
            "joint_sleeve_mm", "smallest_angle", "build_joint", "build_joint_and_blank", "build_joints", "same_joints",
@@ -969,7 +969,7 @@ class JointsInBackground:
             self._groups = [tuple((self._jobs[k], shift) for k, shift in group) for group in groups]
             if self.workers > 1 and len(self._jobs) > 4:
                 self._pool = self._stack.enter_context(ProcessPoolExecutor(
-                    max_workers=self.workers, initializer=start_worker, initargs=(os.getpid(),)))
+                    max_workers=self.workers, initializer=exit_with_parent, initargs=(os.getpid(),)))
                 self._futures = [self._pool.submit(_build_and_write_group, group) for group in self._groups]
                 self._thread = threading.Thread(target=self._collect_all, name="joints", daemon=True)
                 self._thread.start()
@@ -1018,7 +1018,7 @@ class JointsInBackground:
         import multiprocessing
 
         with ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                 initializer=start_worker, initargs=(os.getpid(),)) as fresh:
+                                 initializer=exit_with_parent, initargs=(os.getpid(),)) as fresh:
             return run_steps(steps, fresh, lambda: self.workers - sum(not f.done() for f in self._futures),
                              starting=starting)
 

@@ -23,7 +23,7 @@ from collections.abc import Callable
 from concurrent.futures import Executor, Future, wait
 from typing import Any
 
-__all__ = ["exit_with_parent", "start_worker", "POLL_S", "run_steps", "StepOutcome"]
+__all__ = ["exit_with_parent", "POLL_S", "run_steps", "StepOutcome"]
 
 #: Seconds between two checks of the parent.
 POLL_S = 0.5
@@ -48,16 +48,6 @@ def exit_with_parent(parent: int) -> None:
     if os.getppid() != parent:  # the parent died before the watch started
         os._exit(1)
     threading.Thread(target=_watch, args=(parent,), name="parent-watch", daemon=True).start()
-
-
-def start_worker(parent: int) -> None:
-    """A pool's ``initializer`` (``initargs=(os.getpid(),)``): the worker ends with process
-    ``parent`` and factors on one MKL thread, the pool's workers taking the cores between them
-    (engine.structure.solvers.limit_threads)."""
-    from engine.structure.solvers import limit_threads
-
-    exit_with_parent(parent)
-    limit_threads(1)
 
 
 StepOutcome = tuple[Any, float, str]

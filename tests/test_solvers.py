@@ -133,20 +133,28 @@ def test_pardiso_takes_its_settings_a_small_pivot_is_not_a_zero_one_and_a_solve_
 
 
 @pytest.mark.skipif(not pardiso_available(), reason="pypardiso is not installed")
-def test_the_workers_of_a_pool_factor_on_one_thread_each():
-    """Two worker processes on two cores: MKL in each runs one thread (asked of MKL itself), and
-    the parent keeps its own count."""
+def test_pardiso_gives_the_same_bits_every_time_here_and_in_a_pool_worker():
+    """On two threads PARDISO's solutions of one matrix differed in the last bits from one
+    factorisation to the next, and the remesh turns that into another grid. On one thread, after
+    the eigensolver's threadpoolctl limit too (it leaves a thread-local count that a forked
+    worker inherits): the same bits in this process and in a pool's workers."""
+    from engine.linalg import single_threaded_blas
     from workflow.pools import process_pool
 
-    parent = _mkl_threads()
+    with single_threaded_blas():
+        pass
+    here = {_solution_bits(k) for k in range(4)}
     with process_pool(2) as pool:
         assert pool is not None
-        assert list(pool.map(_mkl_threads, range(2))) == [1, 1]
-    assert _mkl_threads() == parent
+        there = set(pool.map(_solution_bits, range(4)))
+    assert len(here) == 1 and here == there
+    assert next(iter(here))[0] == 1, "one MKL thread"
 
 
-def _mkl_threads(_: int = 0) -> int:
-    from engine.structure.solvers import factor_symmetric as factor
-
-    made = factor(_laplacian(3, 0.0), library="pardiso")
-    return int(made._solver.libmkl.MKL_Get_Max_Threads())
+def _solution_bits(_: int = 0) -> tuple[int, bytes]:
+    """MKL's thread count during a factorisation, and the solution's bytes, of a matrix with
+    enough rows (14 400) for PARDISO to share its work between threads."""
+    A = _laplacian(120, 0.3)
+    factor = factor_symmetric(A, library="pardiso")
+    threads = int(factor._solver.libmkl.MKL_Get_Max_Threads())
+    return threads, factor.solve(np.linspace(0.0, 1.0, A.shape[0])).tobytes()

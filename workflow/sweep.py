@@ -301,15 +301,9 @@ def run_task(task: Task, names: list[str], parent: dict | None = None) -> dict:
 
         if parent is not None:
             seed(task.home, Path(parent["home"]), names[:task.first], task.project)
-        from engine.structure.solvers import limit_threads
-
-        previous = limit_threads(1)
-        try:
-            with threadpool_limits(1):
-                summary = run_project(task.project, task.home, STAGES, until=names[task.last],
-                                      progress=Progress(enabled=False))
-        finally:
-            limit_threads(previous)
+        with threadpool_limits(1):
+            summary = run_project(task.project, task.home, STAGES, until=names[task.last],
+                                  progress=Progress(enabled=False))
         if summary.message:
             raise GridshellError(summary.message)
     except BaseException as exc:  # noqa: BLE001 - a failing point is a row, not the end of the sweep

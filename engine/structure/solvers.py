@@ -13,8 +13,8 @@ on our own matrices (docs/benchmarks.md, "Factorisations"):
   diagonal give the inertia. As fast below some thousand DOF (no library to load), and the
   fallback everywhere else.
 
-``factor_symmetric`` returns a :class:`SymmetricFactor` either way. ``limit_threads`` sets MKL's
-threads (the worker processes of a pool take one each).
+``factor_symmetric`` returns a :class:`SymmetricFactor` either way. PARDISO runs on one thread
+(PARDISO_THREADS), so that a factorisation gives the same bits every time.
 """
 
 from __future__ import annotations
@@ -23,15 +23,13 @@ import ctypes
 import logging
 import os
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 __all__ = ["SymmetricFactor", "factor_symmetric", "library_for", "pardiso_available", "pardiso_solver", "describe",
-           "limit_threads", "limited_threads", "PARDISO_FROM_DOFS", "SingularMatrix"]
+           "PARDISO_FROM_DOFS", "PARDISO_THREADS", "SingularMatrix"]
 
 log = logging.getLogger(__name__)
 
@@ -96,39 +94,11 @@ class _SuperLU(SymmetricFactor):
         return self._lu.solve(np.asarray(rhs, dtype=float))
 
 
-_threads: int | None = None
-_mkl = None                       # MKL's library, once a solver has loaded it
-_mkl_default_threads = 0
-
-
-def limit_threads(count: int | None) -> int | None:
-    """Run PARDISO on ``count`` threads in this process from now on (None: MKL's own choice), and
-    return the previous limit. A pool's worker processes take one each, so that two of them do
-    not share two cores four ways."""
-    global _threads
-    previous, _threads = _threads, count
-    if _mkl is not None:
-        _apply_threads()
-    return previous
-
-
-@contextmanager
-def limited_threads(count: int | None) -> Iterator[None]:
-    """limit_threads(count) for the time of a ``with`` block, the previous limit restored after."""
-    previous = limit_threads(count)
-    try:
-        yield
-    finally:
-        limit_threads(previous)
-
-
-def _apply_threads() -> None:
-    """Tell MKL: its process-wide count and this thread's, which threadpoolctl sets (and leaves
-    set after its context, so that a forked worker inherits it) and which overrides the other."""
-    assert _mkl is not None
-    count = _threads or _mkl_default_threads
-    _mkl.MKL_Set_Num_Threads(count)
-    _mkl.MKL_Set_Num_Threads_Local(count)
+#: PARDISO's threads. On two, the same matrix factored twice gave solutions that differ in the last
+#: bits (two distinct of six, measured), and the remesh turns such a difference into another grid
+#: (a principal direction's sign); on one, every factorisation is the same bits, in the stage's
+#: process and in a pool's workers alike. One thread costs 1.4 times two on a 29 000-DOF matrix.
+PARDISO_THREADS = 1
 
 
 def pardiso_solver(mtype: int):
@@ -138,15 +108,14 @@ def pardiso_solver(mtype: int):
     path found first is handed to the next ones through pypardiso's own PYPARDISO_MKL_RT."""
     import pypardiso
 
-    global _mkl, _mkl_default_threads
     solver = pypardiso.PyPardisoSolver(mtype=mtype)
-    if _mkl is None:
-        name = getattr(solver.libmkl, "_name", None)
-        if name and "PYPARDISO_MKL_RT" not in os.environ:
-            os.environ["PYPARDISO_MKL_RT"] = name
-        _mkl, _mkl_default_threads = solver.libmkl, int(solver.libmkl.MKL_Get_Max_Threads())
-        if _threads is not None:
-            _apply_threads()
+    name = getattr(solver.libmkl, "_name", None)
+    if name and "PYPARDISO_MKL_RT" not in os.environ:
+        os.environ["PYPARDISO_MKL_RT"] = name
+    # the process's count and this thread's: threadpoolctl (the eigensolver's BLAS limit) sets the
+    # latter, which overrides the former and which a forked worker inherits
+    solver.libmkl.MKL_Set_Num_Threads(PARDISO_THREADS)
+    solver.libmkl.MKL_Set_Num_Threads_Local(PARDISO_THREADS)
     return solver
 
 

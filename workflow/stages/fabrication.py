@@ -25,7 +25,6 @@ from engine.findings import Finding
 from engine.mesh import PolyMesh
 from engine.parts import joint_id
 from engine.structure.grid_model import node_normals
-from engine.structure.solvers import limited_threads
 from fabrication.assembly import plan_assembly, write_assembly
 from fabrication.clearance import joint_clashes_parallel
 from fabrication.drawings import write_plan_drawings
@@ -119,10 +118,9 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     findings: list[Finding] = []
     joint_settings = config.joints.to_settings()
     summary.update({"joints": 0, "joint_problems": []})
-    # the joints take both cores in worker processes; the other steps run here meanwhile, their
-    # factorisations (the assembly plan's partial frames) on one thread
+    # the joints take both cores in worker processes; the other steps run here meanwhile
     clock.start("joints: start")
-    with limited_threads(1), JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
+    with JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
                             workers=config.workers, combined_step=config.joints.combined_step) as joints:
         _beams_panels_drawings_assembly(project, ctx, clock, optimize, normals, joint_settings, limits, summary,
                                         findings, sections, share=joints.run_steps)
