@@ -4,11 +4,11 @@ Two libraries, chosen by the matrix's size from the figures of ``benchmarks/fact
 on our own matrices (docs/benchmarks.md, "Factorisations"):
 
 - PARDISO (Intel MKL, through pypardiso), symmetric indefinite LDL^T with Bunch-Kaufman pivots,
-  its inertia and its perturbed (near-zero) pivots from ``iparm``: 1.7 times faster than SuperLU
-  on a frame's 2 200-DOF matrix, 2.4-3.3 times at 29 000 DOF, 5.5 times on a 150 000-DOF shell,
-  and accurate on indefinite matrices where SuperLU's diagonal pivots are not (relative residual
-  1e-9 against 7e-4). Used from PARDISO_FROM_DOFS up when pypardiso imports (it needs MKL, which
-  has wheels for x86-64 Linux and Windows only).
+  its inertia and its perturbed (near-zero) pivots from ``iparm``. On one thread 1.6 times faster
+  than SuperLU on a frame's 2 200-DOF matrix and 2.4 times at 29 000 DOF; on two, 3-6 times on
+  a 150 000-DOF shell; more accurate on indefinite matrices, where SuperLU's diagonal pivots are
+  not (relative residual 9e-6 against 8e-4 there). Used from PARDISO_FROM_DOFS up when pypardiso
+  imports (it needs MKL, which has wheels for x86-64 Linux and Windows only).
 - SuperLU (scipy ``splu``): minimum degree on A^T + A and diagonal pivots, so the signs of U's
   diagonal give the inertia. As fast below some thousand DOF (no library to load), and the
   fallback everywhere else.
