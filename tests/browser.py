@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import time
 from pathlib import Path
 
 import pytest
@@ -73,7 +74,13 @@ def check_page(driver, page: Path, screenshot: Path) -> dict:
     """Open ``page``; return console errors, image states, canvas ink, the text as shown, the
     section headings, the figures' widths, and save a screenshot."""
     driver.get(page.resolve().as_uri())
+    # the viewer draws when its script runs; on a loaded machine the first read can come before
+    # that paint is readable: read again for up to 5 s (a viewer that never draws still fails)
+    deadline = time.monotonic() + 5.0
     width, height, ink = driver.execute_script(CANVAS_INK)
+    while ink == 0 and time.monotonic() < deadline:
+        time.sleep(0.25)
+        width, height, ink = driver.execute_script(CANVAS_INK)
     images = driver.execute_script(IMAGES)
     errors = [entry for entry in driver.get_log("browser") if entry.get("level") == "SEVERE"]
     screenshot.parent.mkdir(parents=True, exist_ok=True)
