@@ -31,7 +31,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..linalg import assemble_blocks
-from .solvers import factor_symmetric, library_for
+from .solvers import count_tiny, factor_symmetric, library_for
 
 __all__ = ["CondensedFactor", "FillOrdering", "sparse_lu"]
 
@@ -108,7 +108,7 @@ class _SchurLU:
 
     @property
     def tiny_pivots(self) -> int:
-        return _tiny(self._diagonal())
+        return count_tiny(self._diagonal(), TINY_PIVOT)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         return self._lu.solve(rhs)
@@ -166,11 +166,6 @@ def _factor_of_s(blocks: np.ndarray, pairs: np.ndarray, n_nodes: int, rows: np.n
             if library == "pardiso":
                 raise
     return _SchurLU(assemble_blocks(blocks, pairs, n_nodes)[rows][:, rows], ordering)
-
-
-def _tiny(pivots: np.ndarray) -> int:
-    scale = np.abs(pivots).max() if pivots.size else 1.0
-    return int(np.sum(np.abs(pivots) <= TINY_PIVOT * scale))
 
 
 def _block_pivots(blocks: np.ndarray) -> np.ndarray:
@@ -285,7 +280,7 @@ class CondensedFactor:
     def tiny_pivots(self) -> int:
         """Number of pivots under TINY_PIVOT of the largest of the internal blocks', and of S's
         (SuperLU's, or those PARDISO perturbed): zero eigenvalues, a mechanism."""
-        return _tiny(self._internal_pivots()) + self._lu.tiny_pivots
+        return count_tiny(self._internal_pivots(), TINY_PIVOT) + self._lu.tiny_pivots
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """x with K x = rhs on the free DOFs, for rhs (n_free,) or (n_free, r)."""

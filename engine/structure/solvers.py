@@ -28,8 +28,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["SymmetricFactor", "factor_symmetric", "library_for", "pardiso_available", "pardiso_solver", "describe",
-           "PARDISO_FROM_DOFS", "PARDISO_THREADS", "SingularMatrix"]
+__all__ = ["SymmetricFactor", "count_tiny", "factor_symmetric", "library_for", "pardiso_available", "pardiso_solver",
+           "describe", "PARDISO_FROM_DOFS", "PARDISO_THREADS", "SingularMatrix"]
 
 log = logging.getLogger(__name__)
 
@@ -42,6 +42,12 @@ TINY_PIVOT = 1e-11
 
 class SingularMatrix(RuntimeError):
     """The matrix is exactly singular (a zero pivot)."""
+
+
+def count_tiny(pivots: np.ndarray, relative: float) -> int:
+    """How many pivots are at most ``relative`` times the largest in magnitude (zero ones)."""
+    scale = np.abs(pivots).max() if pivots.size else 1.0
+    return int(np.sum(np.abs(pivots) <= relative * scale))
 
 
 def pardiso_available() -> bool:
@@ -86,9 +92,8 @@ class _SuperLU(SymmetricFactor):
         except RuntimeError as error:  # "Factor is exactly singular"
             raise SingularMatrix(str(error)) from error
         pivots = self._lu.U.diagonal()
-        scale = np.abs(pivots).max() if pivots.size else 1.0
         self.negative_pivots = int(np.sum(pivots < 0))
-        self.tiny_pivots = int(np.sum(np.abs(pivots) <= TINY_PIVOT * scale))
+        self.tiny_pivots = count_tiny(pivots, TINY_PIVOT)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         return self._lu.solve(np.asarray(rhs, dtype=float))
