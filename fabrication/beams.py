@@ -21,7 +21,7 @@ from .files import atomic_path, stamp_step, stamp_zip
 from .joints import JointSettings, joint_geometry, joint_setback_mm, smallest_angle
 from .settings import BeamSettings
 
-__all__ = ["BeamSettings", "cut_list", "write_cut_list", "write_beams_step", "roll_angles_deg"]
+__all__ = ["BeamSettings", "cut_list", "write_cut_list", "tube_solids", "write_beams_step", "roll_angles_deg"]
 
 
 def roll_angles_deg(polymesh: PolyMesh, normals: np.ndarray) -> np.ndarray:
@@ -46,6 +46,8 @@ def cut_list(polymesh: PolyMesh, normals: np.ndarray, settings: BeamSettings, jo
              profiles: list[str] | None = None, areas_m2: np.ndarray | None = None,
              outer_sizes_mm: np.ndarray | None = None) -> pd.DataFrame:
     """One row per beam: ids, profile, material, node and cut lengths, end angles, roll, mass, label.
+    Set-backs are rounded up and cut lengths down to 0.1 mm, so that a tube as cut, placed at its
+    set-back, never reaches into the joint at its far end.
     ``profiles``, ``areas_m2`` and ``outer_sizes_mm`` (b,) where the beams' sections differ (sized);
     a joint's set-back then follows the largest tube at it."""
     e = polymesh.edges
@@ -55,14 +57,16 @@ def cut_list(polymesh: PolyMesh, normals: np.ndarray, settings: BeamSettings, jo
     for geometry in joint_geometry(polymesh, normals, sizes):
         setback[geometry.node] = joint_setback_mm(joint_settings, geometry.beam_size_mm,
                                                   smallest_angle(geometry.directions))
-    # a beam shorter than its two joints take keeps a zero cut length; the caller reports it
-    cut = np.maximum(node_length - setback[e[:, 0]] - setback[e[:, 1]], 0.0)
+    # to the saw's 0.1 mm, never into a joint: set-backs rounded up, the cut length down; a beam
+    # shorter than its two joints take keeps a zero cut length (the caller reports it)
+    setback = np.ceil(np.round(10 * setback, 6)) / 10
+    cut = np.maximum(np.floor(np.round(10 * (node_length - setback[e[:, 0]] - setback[e[:, 1]]), 6)) / 10, 0.0)
     ids = [beam_id(i) for i in range(len(e))]
     return pd.DataFrame({
         "id": ids, "start_node": [node_id(a) for a in e[:, 0]], "end_node": [node_id(b) for b in e[:, 1]],
         "profile": settings.profile_name if profiles is None else list(profiles), "material": settings.material_name,
-        "node_length_mm": np.round(node_length, 1), "setback_start_mm": np.round(setback[e[:, 0]], 1),
-        "setback_end_mm": np.round(setback[e[:, 1]], 1), "cut_length_mm": np.round(cut, 1),
+        "node_length_mm": np.round(node_length, 1), "setback_start_mm": setback[e[:, 0]],
+        "setback_end_mm": setback[e[:, 1]], "cut_length_mm": cut,
         "end_angle_start_deg": 0.0, "end_angle_end_deg": 0.0,
         "roll_deg": np.round(roll_angles_deg(polymesh, normals), 2),
         "mass_kg": np.round(cut / 1000 * (settings.area_m2 if areas_m2 is None else np.asarray(areas_m2))
@@ -94,15 +98,15 @@ def write_cut_list(table: pd.DataFrame, folder: Path) -> tuple[Path, Path]:
     return folder / "cutlist.csv", folder / "cutlist.xlsx"
 
 
-def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, outer_size_mm: float | np.ndarray,
-                     wall_mm: float | np.ndarray | None = None, profile_per_tube: bool = True) -> Path:
-    """Every beam as a named solid of its cut length, placed between its joints (mm): a tube of
-    outer size and ``wall_mm`` (an annulus extruded, no boolean), or a rod where no wall is given;
-    a beam of zero cut length (shorter than its joints take, reported by the caller) has no solid.
-    ``profile_per_tube`` False extrudes every tube from one shared profile face (the scheme before,
-    kept for benchmarks/fabrication_speed.py: the same file, built in time growing as the square
-    of the tubes)."""
-    from build123d import Align, Circle, Compound, Cylinder, Location, Plane, Solid, Vector, export_step
+def tube_solids(polymesh: PolyMesh, table: pd.DataFrame, *, outer_size_mm: float | np.ndarray,
+                wall_mm: float | np.ndarray | None = None, profile_per_tube: bool = True) -> list:
+    """Every beam as a build123d solid of its cut length, placed between its joints and labelled by
+    its id (mm): a tube of outer size and ``wall_mm`` (an annulus extruded, no boolean), or a rod
+    where no wall is given; a beam of zero cut length (shorter than its joints take, reported by the
+    caller) has no solid. ``profile_per_tube`` False extrudes every tube from one shared profile face
+    (the scheme before, kept for benchmarks/fabrication_speed.py: the same file, built in time
+    growing as the square of the tubes)."""
+    from build123d import Align, Circle, Cylinder, Location, Plane, Solid, Vector
 
     e = polymesh.edges
     solids = []
@@ -128,6 +132,16 @@ def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, out
         solid = solid.moved(Location(Plane(origin=tuple(map(float, origin)), z_dir=tuple(map(float, direction)))))
         solid.label = row.id
         solids.append(solid)
+    return solids
+
+
+def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, outer_size_mm: float | np.ndarray,
+                     wall_mm: float | np.ndarray | None = None, profile_per_tube: bool = True) -> Path:
+    """beams.step: the assembly "beams" of every beam's ``tube_solids`` (one named solid per beam)."""
+    from build123d import Compound, export_step
+
+    solids = tube_solids(polymesh, table, outer_size_mm=outer_size_mm, wall_mm=wall_mm,
+                         profile_per_tube=profile_per_tube)
     compound = Compound(children=solids)
     compound.label = "beams"
     with atomic_path(path) as tmp:

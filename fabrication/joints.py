@@ -47,7 +47,7 @@ from .workers import StepOutcome, exit_with_parent, run_steps
 
 __all__ = ["JointKind", "JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "joint_hub_radius_mm",
            "joint_sleeve_mm", "smallest_angle", "build_joint", "build_joint_and_blank", "build_joints", "same_joints",
-           "JointsInBackground", "joint_name"]
+           "JointsInBackground", "joint_name", "copy_placements", "joint_hub_height_mm", "joint_reach_mm"]
 
 ENGRAVE_DEPTH_MM = 0.6
 #: The printed joint's STL: largest distance between a triangle and the surface (mm) and largest
@@ -154,6 +154,44 @@ def joint_setback_mm(settings: JointSettings, beam_size_mm: float,
         bore = 0.5 * beam_size_mm + settings.clearance_mm
         setback = np.maximum((2 * bore + settings.min_wall_mm) / (2 * half), 0.8 * hub)
     return float(setback) if setback.ndim == 0 else setback
+
+
+def joint_hub_height_mm(settings: JointSettings, beam_size_mm: float) -> float:
+    """Height of the joint's hub along its axis, mm: taller than a printed socket's sleeve (so that
+    the hub's top and the sleeves have no tangent faces), 2.5 beam sizes for a steel node."""
+    if settings.kind == "steel":
+        return 2.5 * beam_size_mm
+    return 2.0 * (0.5 * beam_size_mm + settings.clearance_mm + settings.wall_mm) + 1.0
+
+
+def _cylinder_reach(start: float, end: float, axis_along: float, radius: float) -> float:
+    """How far a cylinder reaches along a unit direction: its end centres at ``start`` and ``end``
+    along it, its axis at cosine ``axis_along`` to it."""
+    return max(start, end) + radius * math.sqrt(max(0.0, 1.0 - axis_along * axis_along))
+
+
+def joint_reach_mm(geometry: JointGeometry, settings: JointSettings, direction: np.ndarray) -> float:
+    """How far the joint's solid reaches from its node along the unit ``direction`` (mm): its hub and
+    its sleeves (printed sockets) or fin plates (steel), with the dimensions build_joint_and_blank
+    gives them. What a panel resting on the joint clears."""
+    n = np.asarray(direction, dtype=float)
+    size = geometry.beam_size_mm
+    hub_radius, height = joint_hub_radius_mm(settings, size), joint_hub_height_mm(settings, size)
+    along = float(geometry.axis @ n)
+    reach = _cylinder_reach(-0.5 * height * along, 0.5 * height * along, along, hub_radius)
+    setback = joint_setback_mm(settings, size, smallest_angle(geometry.directions))
+    for d, own in zip(geometry.directions, geometry.sizes_mm):
+        rise = float(d @ n)
+        if settings.kind == "steel":
+            side = _perpendicular(d, geometry.axis)
+            up = np.cross(d, side)
+            end = setback + joint_sleeve_mm(settings, size)
+            reach = max(reach, max(0.5 * hub_radius * rise, end * rise) + 0.4 * height * abs(float(up @ n))
+                        + settings.plate_thickness_mm * abs(float(side @ n)))  # either side of its plane
+        else:
+            outer = 0.5 * own + settings.clearance_mm + settings.wall_mm
+            reach = max(reach, _cylinder_reach(0.0, (setback + joint_sleeve_mm(settings, own)) * rise, rise, outer))
+    return float(reach)
 
 
 def joint_geometry(polymesh: PolyMesh, normals: np.ndarray, beam_size_mm: float | np.ndarray) -> list[JointGeometry]:
@@ -263,6 +301,30 @@ def same_joints(geometries: list[JointGeometry], tolerance_rad: float = 1e-3,
     mirror image is not the same part. The hub, set-back, bores and pin holes follow from these."""
     return [[joint_name(geometries[k].node) for k, _ in group]
             for group in _groups_of_same(geometries, tolerance_rad, tolerance_mm) if len(group) > 1]
+
+
+def copy_placements(geometries: list[JointGeometry], reports: list[dict]) -> dict[str, tuple[str, np.ndarray]]:
+    """joint id -> (the id of the joint whose solid it is a copy of, the 4 x 4 transform in mm taking
+    that joint's placed solid onto this one's) for every joint that the workers built as a turned
+    copy (``copy_of`` in its report); the rotation is ``turned_copy``'s, found again here."""
+    copies = {r["id"]: r["copy_of"] for r in reports if r.get("copy_of")}
+    by_name = {joint_name(g.node): g for g in geometries}
+    placements: dict[str, tuple[str, np.ndarray]] = {}
+    for group in _groups_of_same(geometries):
+        first = geometries[group[0][0]]
+        for k, shift in group[1:]:
+            name = joint_name(geometries[k].node)
+            if copies.get(name) != joint_name(first.node):
+                continue
+            turned = turned_copy(first, by_name[name], shift)
+            if turned is None:
+                continue
+            rotation = turned[1]
+            transform = np.eye(4)
+            transform[:3, :3] = rotation
+            transform[:3, 3] = np.asarray(geometries[k].position_mm) - rotation @ np.asarray(first.position_mm)
+            placements[name] = (joint_name(first.node), transform)
+    return placements
 
 
 def _azimuth_order(geometry: JointGeometry) -> np.ndarray:
@@ -621,7 +683,7 @@ def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings, *, b
               "smallest_angle_deg": float(np.degrees(angle))}
     if settings.kind == "steel":
         hub_radius = joint_hub_radius_mm(settings, size)
-        height = 2.5 * size
+        height = joint_hub_height_mm(settings, size)
         hub = _cylinder(-0.5 * height * axis, axis, hub_radius, height)
         plates, holes = [], []  # holes: those that could not be made with their plate
         plate_ends, bolt_holes = [], []  # the end face of each plate, the wall of each bolt hole
@@ -653,7 +715,7 @@ def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings, *, b
         report["min_wall_mm"] = float(settings.plate_thickness_mm)
     else:
         hub_radius = joint_hub_radius_mm(settings, size)
-        hub_height = 2.0 * outer + 1.0  # taller than a sleeve: no tangent faces between hub top and sleeves
+        hub_height = joint_hub_height_mm(settings, size)  # = 2 outer + 1
         hub = _cylinder(-0.5 * hub_height * axis, axis, hub_radius, hub_height)
         sleeves, tools, features = [], [], []
         # each socket fits its own tube; the hub and the set-back take the largest
@@ -813,7 +875,9 @@ def _build_and_write_group(jobs: tuple) -> list[dict]:
             copy = turned_copy(jobs[0][0][0], job[0], shift)
             if copy is not None:
                 report, _ = _build_and_write_one(job, turned=(copy[0], _turned_shape(first_blank, copy[1])))
-                if not report.get("ok"):
+                if report.get("ok"):
+                    report["copy_of"] = joint_name(jobs[0][0][0].node)  # its solid is the first's, turned
+                else:
                     report = None
         if report is None:
             report, blank = _build_and_write_one(job)

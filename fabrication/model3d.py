@@ -1,8 +1,10 @@
-"""The whole structure as one model: gridshell.step (a named, coloured cadquery Assembly of joints,
-beams and panels) and gridshell.3dm (rhino3dm, one layer per part kind). Millimetres."""
+"""The whole structure as one model: gridshell.step (a named, coloured cadquery Assembly of the
+joints, the beams as cut and the panels) and gridshell.3dm (rhino3dm, one layer per part kind).
+Millimetres."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -10,41 +12,111 @@ import numpy as np
 from engine.mesh import PolyMesh
 from engine.parts import beam_id, joint_id
 
-from .files import atomic_path, stamp_3dm, stamp_step, write_bytes_atomic
+from .files import atomic_path, compact_step_points, stamp_3dm, stamp_step, write_bytes_atomic
 
-__all__ = ["write_gridshell_step", "write_gridshell_3dm"]
+__all__ = ["JointSolids", "write_gridshell_step", "write_gridshell_3dm"]
 
 
-def write_gridshell_step(polymesh: PolyMesh, panels, beam_radius_mm: float | np.ndarray, joint_radius_mm: float,
-                         path: Path) -> Path:
-    """Joints as spheres J0001... (one sphere shape, instanced at every node), beams as cylinders
-    B0001... (one radius, or one per beam), panels as 3 mm plates P0001... ."""
+@dataclass(frozen=True)
+class JointSolids:
+    """Where gridshell.step takes each joint's solid from: ``files`` joint id -> its own STEP file
+    (the solid placed at its node), ``copies`` joint id -> (the id of the joint whose solid it is,
+    the 4 x 4 transform in mm onto this one; fabrication.joints.copy_placements). A joint in
+    neither is drawn as a sphere (one not built)."""
+
+    files: dict[str, Path] = field(default_factory=dict)
+    copies: dict[str, tuple[str, np.ndarray]] = field(default_factory=dict)
+
+    @property
+    def distinct_bytes(self) -> int:
+        """The bytes of the STEP files the model reads: what the joints add to gridshell.step."""
+        return sum(Path(f).stat().st_size for f in self.files.values())
+
+
+def _read_step_shape(path: Path):
+    from OCP.IFSelect import IFSelect_RetDone
+    from OCP.STEPControl import STEPControl_Reader
+
+    reader = STEPControl_Reader()
+    if reader.ReadFile(str(path)) != IFSelect_RetDone or reader.TransferRoots() == 0:
+        raise OSError(f"could not read the joint's STEP file {path}")
+    return reader.OneShape()
+
+
+def write_gridshell_step(polymesh: PolyMesh, panels, path: Path, *, tubes: list | None = None,
+                         beam_radius_mm: float | np.ndarray = 10.0, joints: JointSolids | None = None,
+                         joint_radius_mm: float = 20.0, seats: tuple[np.ndarray, np.ndarray] | None = None,
+                         panel_thickness_mm: float = 3.0) -> Path:
+    """gridshell.step: the assembly "gridshell" of the joints J0001..., beams B0001... and panels
+    P0001..., each a named component, joints grey, beams blue, panels glass.
+
+    ``seats``: (up, shift_mm) of each panel (fabrication.panels.panel_seats): the plate is moved by
+    ``shift_mm`` from its nodes' plane and is ``panel_thickness_mm`` thick towards ``up``; without
+    them it lies in that plane.
+
+    ``joints``: the joints' own solids; a joint's solid that repeats (a copy, turned) is one part
+    placed at each of its joints, not copied. Joints not given are spheres of ``joint_radius_mm``
+    (one shape, placed at every such node). ``tubes``: the beams as cut (fabrication.beams.tube_solids,
+    labelled by id); without them, each beam is a cylinder of ``beam_radius_mm`` from node to node."""
     import cadquery as cq
 
     nodes = 1000 * polymesh.nodes
     assembly = cq.Assembly(name="gridshell")
     grey, blue, glass = cq.Color(0.6, 0.6, 0.6), cq.Color(0.27, 0.51, 0.71), cq.Color(0.7, 0.85, 0.95, 0.5)
-    sphere = cq.Workplane().sphere(joint_radius_mm)  # one shape, placed at every node (instances)
+    joints = joints or JointSolids()
+    sphere = None
+    read: dict[str, cq.Shape] = {}
     for i, p in enumerate(nodes):
-        assembly.add(sphere, name=joint_id(i), loc=cq.Location(cq.Vector(*p)), color=grey)
-    radii = np.broadcast_to(np.asarray(beam_radius_mm, dtype=float), (len(polymesh.edges),))
-    for k, (a, b) in enumerate(polymesh.edges):
-        direction = nodes[b] - nodes[a]
-        length = float(np.linalg.norm(direction))
-        solid = cq.Solid.makeCylinder(float(radii[k]), length, cq.Vector(*nodes[a]), cq.Vector(*(direction / length)))
-        assembly.add(solid, name=beam_id(k), color=blue)
-    for panel in panels:
+        name = joint_id(i)
+        source, transform = name, None
+        if name in joints.copies and joints.copies[name][0] in joints.files:
+            source, transform = joints.copies[name]
+        if source in joints.files:
+            if source not in read:  # one shape per distinct joint: cadquery writes it once, placed at each
+                read[source] = cq.Shape.cast(_read_step_shape(joints.files[source]))
+            loc = cq.Location() if transform is None else _location(transform)
+            assembly.add(read[source], name=name, loc=loc, color=grey)
+        else:
+            sphere = sphere if sphere is not None else cq.Workplane().sphere(joint_radius_mm)
+            assembly.add(sphere, name=name, loc=cq.Location(cq.Vector(*p)), color=grey)
+    if tubes is not None:
+        for tube in tubes:
+            assembly.add(cq.Shape.cast(tube.wrapped), name=tube.label, color=blue)
+    else:
+        radii = np.broadcast_to(np.asarray(beam_radius_mm, dtype=float), (len(polymesh.edges),))
+        for k, (a, b) in enumerate(polymesh.edges):
+            direction = nodes[b] - nodes[a]
+            length = float(np.linalg.norm(direction))
+            solid = cq.Solid.makeCylinder(float(radii[k]), length, cq.Vector(*nodes[a]),
+                                          cq.Vector(*(direction / length)))
+            assembly.add(solid, name=beam_id(k), color=blue)
+    for k, panel in enumerate(panels):
         outline = 1000 * np.asarray(panel.outline_3d_m)
         normal = np.cross(panel.axes[0], panel.axes[1])
+        if seats is not None:
+            normal = seats[0][k]
+            outline = outline + seats[1][k]
         wire = cq.Wire.makePolygon([cq.Vector(*p) for p in outline], close=True)
         face = cq.Face.makeFromWires(wire)
-        solid = cq.Solid.extrudeLinear(face, cq.Vector(*(3.0 * normal)))
+        solid = cq.Solid.extrudeLinear(face, cq.Vector(*(panel_thickness_mm * normal)))
         assembly.add(solid, name=panel.id, color=glass)
     with atomic_path(path) as tmp:
         # no p-curves (2D copies of the edges on their faces, which readers rebuild): a third of the bytes
         assembly.export(str(tmp), "STEP", write_pcurves=False)
         stamp_step(tmp)
+        compact_step_points(tmp)  # points to 1e-8 mm, as the joints' own files
     return Path(path)
+
+
+def _location(transform: np.ndarray):
+    """A cadquery Location of a rigid 4 x 4 transform (mm)."""
+    import cadquery as cq
+    from OCP.gp import gp_Trsf
+
+    trsf = gp_Trsf()
+    t = np.asarray(transform, dtype=float)
+    trsf.SetValues(*map(float, t[0]), *map(float, t[1]), *map(float, t[2]))
+    return cq.Location(trsf)
 
 
 def _stable_id(name: str):

@@ -38,7 +38,7 @@ from fabrication.settings import PanelSettings
 if TYPE_CHECKING:  # pragma: no cover
     from fabrication.nesting_sheets import SheetNesting
 
-__all__ = ["PanelSettings", "Panel", "flatten_panels", "write_panel_dxfs", "write_panels_csv",
+__all__ = ["PanelSettings", "Panel", "flatten_panels", "panel_seats", "write_panel_dxfs", "write_panels_csv",
            "add_panel", "panel_label",
            "SheetSettings", "SheetNesting", "nest_sheets", "write_sheet_dxfs", "write_sheets_picture"]
 
@@ -187,6 +187,49 @@ def _make_panel(panel_id: str, face: int, loop_m: np.ndarray, settings: PanelSet
                  area_mm2=float(cut.area), perimeter_mm=float(cut.length),
                  outline_3d_m=centroid + 1e-3 * outline @ axes,
                  nonplanar=planarity_mm > settings.planarity_tolerance_mm)
+
+
+def panel_seats(panels: list[Panel], loops: list, geometries: dict, joint_settings, beam_radii_mm: dict,
+                cells: list[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(up (n, 3), shift_mm (n, 3)): where each panel rests. ``up`` is its plane's normal on the side
+    of its joints' axes (the outside); ``shift_mm`` moves it from its nodes' best-fit plane to where
+    its underside clears the joints at its corners (fabrication.joints.joint_reach_mm) and the
+    tubes along its edges. ``loops``: each panel's node loop by its ``face``; ``geometries``: node ->
+    JointGeometry; ``beam_radii_mm``: (node, node) sorted -> the tube's outer radius (pairs that are
+    no beam, a split cell's diagonals, have none); ``cells``: each panel's cell. The pieces of a split
+    cell move together, along their mean normal, so that they still meet on their diagonals as
+    they are cut (each moved along its own normal, the pieces of a sharp fold ran into each other)."""
+    from .joints import joint_reach_mm
+
+    up = np.zeros((len(panels), 3))
+    lift = np.zeros(len(panels))
+    for k, panel in enumerate(panels):
+        loop = [int(i) for i in loops[panel.face]]
+        normal = np.cross(panel.axes[0], panel.axes[1])
+        joints = [geometries[i] for i in loop if i in geometries]
+        if joints and sum(float(g.axis @ normal) for g in joints) < 0:
+            normal = -normal
+        base = 1e3 * np.asarray(panel.origin_m) @ normal
+        reach = [float(g.position_mm @ normal) - base + joint_reach_mm(g, joint_settings, normal) for g in joints]
+        for a, b in zip(loop, loop[1:] + loop[:1]):
+            radius = beam_radii_mm.get((min(a, b), max(a, b)))
+            if radius is None or a not in geometries or b not in geometries:
+                continue
+            pa, pb = geometries[a].position_mm, geometries[b].position_mm
+            along = float((pb - pa) @ normal / np.linalg.norm(pb - pa))
+            reach.append(max(float(pa @ normal), float(pb @ normal)) - base
+                         + radius * math.sqrt(max(0.0, 1.0 - along * along)))
+        up[k], lift[k] = normal, max(reach, default=0.0)
+    shift = lift[:, None] * up
+    cell = np.arange(len(panels)) if cells is None else np.asarray(cells)
+    for c in np.unique(cell):
+        members = np.flatnonzero(cell == c)
+        if len(members) > 1:
+            mean = up[members].sum(axis=0)
+            mean /= np.linalg.norm(mean)
+            # far enough along the mean normal for each piece to clear what is under it
+            shift[members] = max(lift[m] / max(float(up[m] @ mean), 1e-3) for m in members) * mean
+    return up, shift
 
 
 def flatten_panels(polymesh: PolyMesh, settings: PanelSettings | None = None, *,

@@ -34,7 +34,9 @@ from fabrication.joints import (
     JOINTS_STEP_LIMIT_BYTES,
     JointSettings,
     JointsInBackground,
+    copy_placements,
     joint_geometry,
+    joint_hub_height_mm,
     joint_hub_radius_mm,
     joint_setback_mm,
     joint_sleeve_mm,
@@ -42,7 +44,7 @@ from fabrication.joints import (
     smallest_angle,
 )
 from fabrication.limits import BuildLimits, default_min_cut_length_mm
-from fabrication.model3d import write_gridshell_3dm, write_gridshell_step
+from fabrication.model3d import JointSolids, write_gridshell_3dm, write_gridshell_step
 from fabrication.nesting_bars import nest_bars
 from fabrication.workers import run_steps
 
@@ -120,12 +122,15 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     summary.update({"joints": 0, "joint_problems": []})
     # the joints take both cores in worker processes; the other steps run here meanwhile
     clock.start("joints: start")
+    model: dict[str, Callable] = {}
     with JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
                             workers=config.workers, combined_step=config.joints.combined_step) as joints:
         _beams_panels_drawings_assembly(project, ctx, clock, optimize, normals, joint_settings, limits, summary,
-                                        findings, sections, share=joints.run_steps)
+                                        findings, sections, share=joints.run_steps, model=model)
         clock.start("joints: waiting")
         joints.wait(ctx.step)
+    clock.start("model: gridshell.step")
+    summary["gridshell_step"] = model["gridshell.step"](_joint_solids(joints, folder / "joints"))
     clock.stop()
     clock.seconds["joints (alongside the other steps)"] = round(joints.seconds, 3)
     joint_reports = joints.reports
@@ -163,6 +168,55 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     ctx.timings.update(clock.seconds)
     write_text_atomic(folder / "fabrication.json", json.dumps(summary, indent=1, default=_jsonable))
     return FabricationResult.of_summary(summary)
+
+
+#: gridshell.step takes the joints' own solids while the distinct ones' STEP files come under this
+#: (the mock-up's 55 distinct printed sockets: 6 MB); over it, each joint is a sphere.
+GRIDSHELL_STEP_JOINT_BYTES = 30_000_000
+
+
+def _joint_solids(joints: JointsInBackground, folder: Path) -> JointSolids:
+    """The joints' solids for gridshell.step: the built joints' own STEP files, and the turned copies
+    placed from the joint they copy (fabrication.joints.copy_placements)."""
+    copies = copy_placements(joints.geometries, joints.reports)
+    files = {r["id"]: folder / f"{r['id']}.step" for r in joints.reports
+             if r.get("built", True) and r["id"] not in copies and (folder / f"{r['id']}.step").is_file()}
+    return JointSolids(files=files, copies={k: v for k, v in copies.items() if v[0] in files})
+
+
+def _seats(polymesh: PolyMesh, normals: np.ndarray, sizes_mm: np.ndarray, panels: list, pieces: list,
+           joint_settings: JointSettings) -> tuple[np.ndarray, np.ndarray]:
+    """Where each panel rests on the joints and tubes (fabrication.panels.panel_seats), from the
+    joints' geometry as their solids are built from it."""
+    from fabrication.panels import panel_seats
+
+    geometries = {g.node: g for g in joint_geometry(polymesh, normals, sizes_mm)}
+    radii = {(min(a, b), max(a, b)): 0.5 * float(s) for (a, b), s in zip(polymesh.edges, sizes_mm)}
+    return panel_seats(panels, [p.loop for p in pieces], geometries, joint_settings, radii,
+                       [pieces[panel.face].cell for panel in panels])
+
+
+def _write_model_step(polymesh: PolyMesh, panels: list, seats: tuple[np.ndarray, np.ndarray], table,
+                      sizes_mm: np.ndarray, walls_mm: np.ndarray | None, panel_settings: PanelSettings,
+                      joint_radius_mm: float, path: Path, joints: JointSolids) -> dict:
+    """gridshell.step with the beams as cut, the joints' own solids (spheres where there are none,
+    or where the distinct joints' STEP files exceed GRIDSHELL_STEP_JOINT_BYTES) and the panels
+    resting on them (fabrication.panels.panel_seats); returns fabrication.json's record of what it
+    holds."""
+    from fabrication.beams import tube_solids
+
+    distinct = joints.distinct_bytes
+    real = distinct <= GRIDSHELL_STEP_JOINT_BYTES
+    tubes = tube_solids(polymesh, table, outer_size_mm=sizes_mm, wall_mm=walls_mm)
+    write_gridshell_step(polymesh, panels, path, tubes=tubes, joints=joints if real else None,
+                         joint_radius_mm=joint_radius_mm, seats=seats, panel_thickness_mm=panel_settings.thickness_mm)
+    n_nodes = polymesh.n_nodes
+    n_solids = len(joints.files) + len(joints.copies) if real else 0
+    return {"joints": "solids" if real else "spheres",
+            "joint_solids": n_solids, "joint_parts": len(joints.files) if real else 0,
+            "joint_spheres": n_nodes - n_solids,
+            "distinct_joint_bytes": distinct, "limit_bytes": GRIDSHELL_STEP_JOINT_BYTES,
+            "beams": len(tubes), "panels": len(panels)}
 
 
 def output_sizes_mb(folder: Path) -> dict[str, float]:
@@ -260,11 +314,13 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
                                     normals: np.ndarray, joint_settings: JointSettings, limits: BuildLimits,
                                     summary: dict, findings: list[Finding],
                                     sections: BeamSections | None = None,
-                                    share: Callable[..., dict] = run_steps) -> None:
+                                    share: Callable[..., dict] = run_steps, model: dict | None = None) -> None:
     """Every step but the joints (they run meanwhile); fills ``summary`` and ``findings``.
     ``sections``: the analysis's per-beam tubes where it sized them (workflow.stages.sizing);
     ``share`` runs independent steps (fabrication.workers.run_steps, on the joints' workers as they
-    fall idle)."""
+    fall idle); ``model`` receives, as "gridshell.step", the writer of the model that needs the
+    joints' solids (a function of ``JointSolids``)."""
+    model = {} if model is None else model
     polymesh = grid.polymesh
     config = project.fabrication
     folder: Path = ctx.folder
@@ -357,8 +413,10 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     steps["drawings"] = partial(write_plan_drawings, polymesh, folder / "drawings",
                                 project_name=project.project.name, support_nodes=np.flatnonzero(polymesh.supports))
     joint_radius_mm = getattr(joint_settings, "hub_radius_mm", None) or 1.5 * float(sizes_mm.max())
-    steps["model: gridshell.step"] = partial(write_gridshell_step, polymesh, panels, sizes_mm / 2, joint_radius_mm,
-                                             folder / "gridshell.step")
+    # gridshell.step takes the joints' own solids: written once they are built (see run)
+    seats = _seats(polymesh, normals, sizes_mm, panels, pieces, joint_settings)
+    model["gridshell.step"] = partial(_write_model_step, polymesh, panels, seats, table, sizes_mm, walls_mm,
+                                      panel_settings, joint_radius_mm, folder / "gridshell.step")
     steps["beams: beams.step"] = partial(write_beams_step, polymesh, table, folder / "beams" / "beams.step",
                                          outer_size_mm=sizes_mm, wall_mm=walls_mm)
     steps["model: gridshell.3dm"] = partial(write_gridshell_3dm, polymesh, panels, sizes_mm / 2, joint_radius_mm,
@@ -394,7 +452,7 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     summary["assembly"] = written
     if tubes is not None:  # while the joints build: it needs their geometry only
         clock.start("model: gridshell.ifc")
-        _write_ifc(project, folder, polymesh, normals, table, panels, sizes_mm, walls_mm, joint_settings)
+        _write_ifc(project, folder, polymesh, normals, table, panels, sizes_mm, walls_mm, joint_settings, seats)
         summary["ifc"] = "gridshell.ifc"
 
 
@@ -440,9 +498,11 @@ def _assembly_files(polymesh: PolyMesh, beam: dict, deflection_limit_m: float | 
 
 
 def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, normals: np.ndarray, table, panels: list,
-               sizes: np.ndarray, walls: np.ndarray, joint_settings: JointSettings) -> None:
-    """gridshell.ifc (fabrication.ifc) from the stage's cut list, panels, panels.csv, sequence.csv
-    and the joints' geometry as the joint solids are built from it."""
+               sizes: np.ndarray, walls: np.ndarray, joint_settings: JointSettings,
+               seats: tuple[np.ndarray, np.ndarray]) -> None:
+    """gridshell.ifc (fabrication.ifc) from the stage's cut list, panels (resting where ``seats``
+    puts them, as in gridshell.step), panels.csv, sequence.csv and the joints' geometry as the
+    joint solids are built from it."""
     import pandas as pd
 
     from fabrication.nc1 import grade_name
@@ -471,10 +531,15 @@ def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, normals: np.n
         sheets = dict(zip(frame["id"], frame["sheet"].astype("string").fillna("")))
         masses = dict(zip(frame["id"], frame["mass_kg"]))
     glazing = project.fabrication.panels.to_settings()
-    plates = [IfcPanel(id=panel.id, outline_mm=MM * np.asarray(panel.outline_3d_m), axes=np.asarray(panel.axes),
-                       thickness_mm=glazing.thickness_mm, material=glazing.material_name,
-                       mass_kg=float(masses.get(panel.id, 0.0)),
-                       sheet=str(sheets.get(panel.id, "")), step=step_of.get(panel.id)) for panel in panels]
+    plates = []
+    for panel, up, shift in zip(panels, *seats):
+        axes = np.asarray(panel.axes)
+        if float(np.cross(axes[0], axes[1]) @ up) < 0:  # the plate's thickness towards up, off its seat
+            axes = axes[::-1]
+        plates.append(IfcPanel(id=panel.id, outline_mm=MM * np.asarray(panel.outline_3d_m) + shift, axes=axes,
+                               thickness_mm=glazing.thickness_mm, material=glazing.material_name,
+                               mass_kg=float(masses.get(panel.id, 0.0)),
+                               sheet=str(sheets.get(panel.id, "")), step=step_of.get(panel.id)))
     joints = []
     settings = joint_settings
     for g in joint_geometry(polymesh, normals, sizes):
@@ -486,8 +551,7 @@ def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, normals: np.n
         steel = settings.kind == "steel"
         joints.append(IfcJoint(id=joint_id(g.node), position_mm=g.position_mm, axis=g.axis, directions=g.directions,
                                hub_radius_mm=joint_hub_radius_mm(settings, size),
-                               hub_height_mm=2.5 * size if steel else 2.0 * (0.5 * size + settings.clearance_mm
-                                                                             + settings.wall_mm) + 1.0,
+                               hub_height_mm=joint_hub_height_mm(settings, size),
                                setback_mm=setback, reach_mm=reach, outer_mm=bore + settings.wall_mm, bore_mm=bore,
                                plate_mm=(settings.plate_thickness_mm, 0.8 * 2.5 * size) if steel else None,
                                part_file=f"joints/{joint_id(g.node)}.step"))
