@@ -9,6 +9,7 @@ to the plane of the beam and the mean of its end nodes' axes (surface normals). 
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -18,10 +19,11 @@ from engine.mesh import PolyMesh
 from engine.parts import beam_id, node_id
 
 from .files import atomic_path, stamp_step, stamp_zip
-from .joints import JointSettings, joint_geometry, joint_setback_mm, smallest_angle
+from .joints import EndSlots, JointSettings, joint_geometry, joint_setback_mm, smallest_angle
 from .settings import BeamSettings
 
-__all__ = ["BeamSettings", "cut_list", "write_cut_list", "tube_solids", "write_beams_step", "roll_angles_deg"]
+__all__ = ["BeamSettings", "cut_list", "write_cut_list", "TubeAsCut", "tube_solids", "write_beams_step",
+           "roll_angles_deg"]
 
 
 def roll_angles_deg(polymesh: PolyMesh, normals: np.ndarray) -> np.ndarray:
@@ -98,53 +100,117 @@ def write_cut_list(table: pd.DataFrame, folder: Path) -> tuple[Path, Path]:
     return folder / "cutlist.csv", folder / "cutlist.xlsx"
 
 
+def _slotted_end(size: float, wall: float | None, width: float, length: float):
+    """A tube's end of ``length`` (mm) with a slot ``width`` wide through both walls, along local z
+    from the origin, the slot across local x: the annulus (or disc) prism less the slot, once per
+    size (the tubes place it again)."""
+    from build123d import Align, Box, Circle, Cylinder, Solid, Vector
+
+    if wall is None:
+        prism = Cylinder(0.5 * size, length, align=(Align.CENTER, Align.CENTER, Align.MIN))
+    else:
+        prism = Solid.extrude((Circle(0.5 * size) - Circle(0.5 * size - wall)).faces()[0], Vector(0, 0, length))
+    slot = Box(width, 2 * size, 2 * length, align=(Align.CENTER, Align.CENTER, Align.CENTER))
+    return prism - slot
+
+
+@dataclass(frozen=True)
+class TubeAsCut:
+    """One beam as cut (mm): ``body``, its prism placed between its joints (build123d), and its
+    slotted ``ends`` for steel fin plates as (name, shape, location): one shape per tube size and
+    slot, shared by every end that has it, so that a STEP file writes it once and places it."""
+
+    id: str
+    body: object
+    ends: tuple = ()
+
+    def add_to(self, assembly, color=None) -> None:
+        """Add the beam to a cadquery Assembly: one named part, or where it has slotted ends a named
+        sub-assembly of its prism and its ends (the ends placed copies of their shared shape)."""
+        import cadquery as cq
+
+        body = cq.Shape.cast(self.body.wrapped)
+        if not self.ends:
+            assembly.add(body, name=self.id, color=color)
+            return
+        beam = cq.Assembly(name=self.id, color=color)
+        beam.add(body, name=f"{self.id} tube", color=color)
+        for name, shape, location in self.ends:
+            beam.add(shape, name=f"{self.id} {name}", loc=cq.Location(location.wrapped), color=color)
+        assembly.add(beam)
+
+
 def tube_solids(polymesh: PolyMesh, table: pd.DataFrame, *, outer_size_mm: float | np.ndarray,
-                wall_mm: float | np.ndarray | None = None, profile_per_tube: bool = True) -> list:
-    """Every beam as a build123d solid of its cut length, placed between its joints and labelled by
-    its id (mm): a tube of outer size and ``wall_mm`` (an annulus extruded, no boolean), or a rod
-    where no wall is given; a beam of zero cut length (shorter than its joints take, reported by the
-    caller) has no solid. ``profile_per_tube`` False extrudes every tube from one shared profile face
+                wall_mm: float | np.ndarray | None = None, profile_per_tube: bool = True,
+                slots: EndSlots | None = None) -> list[TubeAsCut]:
+    """Every beam as cut (mm): a tube of outer size and ``wall_mm`` (an annulus extruded, no
+    boolean), or a rod where no wall is given, of its cut length, placed between its joints; a beam
+    of zero cut length (shorter than its joints take, reported by the caller) has none.
+    ``slots``: steel fin plates' end slots (fabrication.joints.fin_plate_slots): such a beam is its
+    middle prism and its two slotted ends, each a placed copy of one slotted end per size (no
+    boolean per tube). ``profile_per_tube`` False extrudes every tube from one shared profile face
     (the scheme before, kept for benchmarks/fabrication_speed.py: the same file, built in time
     growing as the square of the tubes)."""
     from build123d import Align, Circle, Cylinder, Location, Plane, Solid, Vector
 
     e = polymesh.edges
-    solids = []
+    tubes = []
     sizes = np.broadcast_to(np.asarray(outer_size_mm, dtype=float), (len(e),))
     walls = None if wall_mm is None else np.broadcast_to(np.asarray(wall_mm, dtype=float), (len(e),))
     annuli: dict[tuple[float, float], object] = {}
+    shared: dict[tuple, object] = {}
     for k, (row, (a, b), size) in enumerate(zip(table.itertuples(index=False), e, sizes)):
         if row.cut_length_mm <= 0:
             continue
         start, end = 1000 * polymesh.nodes[a], 1000 * polymesh.nodes[b]
         direction = (end - start) / np.linalg.norm(end - start)
         origin = start + direction * row.setback_start_mm
-        if walls is None or not 0 < walls[k] < 0.5 * size:
-            solid = Cylinder(0.5 * size, row.cut_length_mm, align=(Align.CENTER, Align.CENTER, Align.MIN))
+        wall = None if walls is None or not 0 < walls[k] < 0.5 * size else float(walls[k])
+        slotted = slots is not None and float(slots.lengths[k].sum()) < row.cut_length_mm
+        ends_mm = slots.lengths[k] if slots is not None and slotted else np.zeros(2)
+        length = float(row.cut_length_mm - ends_mm.sum())
+        if wall is None:
+            solid = Cylinder(0.5 * size, length, align=(Align.CENTER, Align.CENTER, Align.MIN))
         else:
-            key = (float(size), float(walls[k]))
+            key = (float(size), wall)
             if key not in annuli:
-                annuli[key] = (Circle(0.5 * size) - Circle(0.5 * size - walls[k])).faces()[0]
+                annuli[key] = (Circle(0.5 * size) - Circle(0.5 * size - wall)).faces()[0]
             # a copy of the profile per tube: prisms of one shared face made the build and the
             # STEP export grow as the square of the tubes (4500 tubes: 75 s, with copies 12 s)
             profile = copy.deepcopy(annuli[key]) if profile_per_tube else annuli[key]
-            solid = Solid.extrude(profile, Vector(0, 0, float(row.cut_length_mm)))
-        solid = solid.moved(Location(Plane(origin=tuple(map(float, origin)), z_dir=tuple(map(float, direction)))))
+            solid = Solid.extrude(profile, Vector(0, 0, length))
+        solid = solid.moved(Location(Plane(origin=tuple(map(float, origin + ends_mm[0] * direction)),
+                                           z_dir=tuple(map(float, direction)))))
         solid.label = row.id
-        solids.append(solid)
-    return solids
+        ends = []
+        if slots is not None and slotted:
+            import cadquery as cq
+
+            for i, (at, inward) in enumerate(((origin, direction),
+                                              (origin + row.cut_length_mm * direction, -direction))):
+                key2 = (float(size), wall, float(slots.width), float(slots.lengths[k, i]))
+                if key2 not in shared:
+                    shared[key2] = cq.Shape.cast(_slotted_end(*key2).wrapped)
+                place = Plane(origin=tuple(map(float, at)), x_dir=tuple(map(float, slots.sides[k, i])),
+                              z_dir=tuple(map(float, inward)))
+                ends.append(("start slot" if i == 0 else "end slot", shared[key2], Location(place)))
+        tubes.append(TubeAsCut(id=row.id, body=solid, ends=tuple(ends)))
+    return tubes
 
 
 def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, outer_size_mm: float | np.ndarray,
-                     wall_mm: float | np.ndarray | None = None, profile_per_tube: bool = True) -> Path:
-    """beams.step: the assembly "beams" of every beam's ``tube_solids`` (one named solid per beam)."""
-    from build123d import Compound, export_step
+                     wall_mm: float | np.ndarray | None = None, profile_per_tube: bool = True,
+                     slots: EndSlots | None = None) -> Path:
+    """beams.step: the assembly "beams" of every beam as cut (``tube_solids``): one named part per
+    beam, or a named sub-assembly of its prism and its slotted ends (steel fin plates)."""
+    import cadquery as cq
 
-    solids = tube_solids(polymesh, table, outer_size_mm=outer_size_mm, wall_mm=wall_mm,
-                         profile_per_tube=profile_per_tube)
-    compound = Compound(children=solids)
-    compound.label = "beams"
+    tubes = tube_solids(polymesh, table, outer_size_mm=outer_size_mm, wall_mm=wall_mm,
+                        profile_per_tube=profile_per_tube, slots=slots)
+    assembly = cq.Assembly(name="beams")
+    for tube in tubes:
+        tube.add_to(assembly)
     with atomic_path(path) as tmp:
-        export_step(compound, str(tmp))
+        assembly.export(str(tmp), "STEP", write_pcurves=False)
         stamp_step(tmp)
     return Path(path)

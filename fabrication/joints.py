@@ -47,7 +47,8 @@ from .workers import StepOutcome, exit_with_parent, run_steps
 
 __all__ = ["JointKind", "JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "joint_hub_radius_mm",
            "joint_sleeve_mm", "smallest_angle", "build_joint", "build_joint_and_blank", "build_joints", "same_joints",
-           "JointsInBackground", "joint_name", "copy_placements", "joint_hub_height_mm", "joint_reach_mm"]
+           "JointsInBackground", "joint_name", "copy_placements", "joint_hub_height_mm", "joint_reach_mm",
+           "EndSlots", "fin_plate_slots"]
 
 ENGRAVE_DEPTH_MM = 0.6
 #: The printed joint's STL: largest distance between a triangle and the surface (mm) and largest
@@ -192,6 +193,35 @@ def joint_reach_mm(geometry: JointGeometry, settings: JointSettings, direction: 
             outer = 0.5 * own + settings.clearance_mm + settings.wall_mm
             reach = max(reach, _cylinder_reach(0.0, (setback + joint_sleeve_mm(settings, own)) * rise, rise, outer))
     return float(reach)
+
+
+@dataclass(frozen=True)
+class EndSlots:
+    """The slots a steel node's fin plates need at each end of each beam (mm): ``sides`` (b, 2, 3)
+    the unit direction across each slot (the plate's normal), ``lengths`` (b, 2) how far each runs
+    into the tube from its end, ``width`` across it; ends [start node, end node] as the beam's."""
+
+    sides: np.ndarray
+    lengths: np.ndarray
+    width: float
+
+
+def fin_plate_slots(polymesh: PolyMesh, geometries: list[JointGeometry], settings: JointSettings) -> EndSlots:
+    """The end slots of every beam at steel nodes, as build_joint_and_blank places the fin plates:
+    each plate runs along its beam, across the node's axis, and reaches its sleeve length into the
+    tube; the slot is the plate's thickness and a clearance each side wide, and a clearance longer."""
+    by_node = {g.node: g for g in geometries}
+    e = polymesh.edges
+    sides = np.zeros((len(e), 2, 3))
+    lengths = np.zeros((len(e), 2))
+    for k, (a, b) in enumerate(e):
+        for end, (here, there) in enumerate(((a, b), (b, a))):
+            g = by_node[int(here)]
+            d = polymesh.nodes[there] - polymesh.nodes[here]
+            d = d / np.linalg.norm(d)
+            sides[k, end] = _perpendicular(d, g.axis)
+            lengths[k, end] = joint_sleeve_mm(settings, g.beam_size_mm) + settings.clearance_mm
+    return EndSlots(sides=sides, lengths=lengths, width=settings.plate_thickness_mm + 2 * settings.clearance_mm)
 
 
 def joint_geometry(polymesh: PolyMesh, normals: np.ndarray, beam_size_mm: float | np.ndarray) -> list[JointGeometry]:

@@ -56,8 +56,9 @@ def write_gridshell_step(polymesh: PolyMesh, panels, path: Path, *, tubes: list 
 
     ``joints``: the joints' own solids; a joint's solid that repeats (a copy, turned) is one part
     placed at each of its joints, not copied. Joints not given are spheres of ``joint_radius_mm``
-    (one shape, placed at every such node). ``tubes``: the beams as cut (fabrication.beams.tube_solids,
-    labelled by id); without them, each beam is a cylinder of ``beam_radius_mm`` from node to node."""
+    (one shape, placed at every such node). ``tubes``: the beams as cut
+    (fabrication.beams.tube_solids); without them, each beam is a cylinder of ``beam_radius_mm``
+    from node to node."""
     import cadquery as cq
 
     nodes = 1000 * polymesh.nodes
@@ -81,7 +82,7 @@ def write_gridshell_step(polymesh: PolyMesh, panels, path: Path, *, tubes: list 
             assembly.add(sphere, name=name, loc=cq.Location(cq.Vector(*p)), color=grey)
     if tubes is not None:
         for tube in tubes:
-            assembly.add(cq.Shape.cast(tube.wrapped), name=tube.label, color=blue)
+            tube.add_to(assembly, color=blue)
     else:
         radii = np.broadcast_to(np.asarray(beam_radius_mm, dtype=float), (len(polymesh.edges),))
         for k, (a, b) in enumerate(polymesh.edges):

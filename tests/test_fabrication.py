@@ -982,3 +982,76 @@ def test_same_joints_groups_as_comparing_every_pair():
     every_pair = [[f"J{k + 1:04d}" for k in g] for g in groups if len(g) > 1]
     assert len(every_pair) > 20
     assert same_joints(joints) == every_pair
+
+
+def test_steel_tubes_are_slotted_where_the_fin_plates_enter_and_clear_them():
+    """A steel node's fin plates enter their tubes through end slots. The slotted tube's volume is
+    the tube's less the slots (the annulus's area within a strip, in closed form, times the slot's
+    length); each tube clears the plates of the joints at its ends (OCCT's common volume), where
+    the same tube without slots runs through them."""
+    import pandas as pd
+    from build123d import Location
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Common
+
+    from fabrication.beams import tube_solids
+    from fabrication.joints import (
+        JointSettings,
+        build_joint,
+        fin_plate_slots,
+        joint_geometry,
+        joint_setback_mm,
+        smallest_angle,
+    )
+    from tests.test_panels import hex_polymesh
+
+    grid = hex_polymesh(1, 2, radius=0.6, lift=False)  # flat: the node axes (z) square to the beams
+    normals = np.tile([0.0, 0.0, 1.0], (grid.n_nodes, 1))
+    size, wall = 48.3, 3.2
+    settings = JointSettings(kind="steel")
+    geometries = joint_geometry(grid, normals, size)
+    setback = {g.node: joint_setback_mm(settings, size, smallest_angle(g.directions)) for g in geometries}
+    e = grid.edges
+    node_length = 1000 * grid.beam_lengths
+    starts = np.array([setback[a] for a in e[:, 0]])
+    cut = node_length - starts - np.array([setback[b] for b in e[:, 1]])
+    table = pd.DataFrame({"id": [f"B{k + 1:04d}" for k in range(len(e))], "cut_length_mm": cut,
+                          "setback_start_mm": starts})
+    slots = fin_plate_slots(grid, geometries, settings)
+    slotted = {t.id: t for t in tube_solids(grid, table, outer_size_mm=size, wall_mm=wall, slots=slots)}
+    plain = {t.id: t for t in tube_solids(grid, table, outer_size_mm=size, wall_mm=wall)}
+
+    def strip(radius: float, width: float) -> float:  # area of a disc within |x| <= width / 2
+        h = 0.5 * width
+        return 2 * (h * np.sqrt(radius**2 - h**2) + radius**2 * np.arcsin(h / radius))
+
+    annulus = np.pi * (size**2 - (size - 2 * wall) ** 2) / 4
+    removed = strip(0.5 * size, slots.width) - strip(0.5 * size - wall, slots.width)
+
+    def ends_volume(tube) -> float:
+        import cadquery as cq
+
+        return sum(_volume(shape.moved(cq.Location(location.wrapped)).wrapped) for _, shape, location in tube.ends)
+
+    for k, beam in enumerate(table["id"]):
+        tube = slotted[beam]
+        assert len(tube.ends) == 2
+        total = _volume(tube.body.wrapped) + ends_volume(tube)
+        expected = annulus * cut[k] - removed * slots.lengths[k].sum()
+        assert total == pytest.approx(expected, rel=1e-6), beam
+    node = max(geometries, key=lambda g: len(g.directions))
+    joint, _ = build_joint(node, settings)
+    placed = joint.moved(Location(tuple(map(float, node.position_mm))))
+    incident = [k for k, (a, b) in enumerate(e) if node.node in (a, b)]
+    assert len(incident) == 3
+
+    def common(shape_a, shape_b) -> float:
+        return _volume(BRepAlgoAPI_Common(shape_a, shape_b).Shape())
+
+    import cadquery as cq
+
+    for k in incident:
+        tube = slotted[table["id"][k]]
+        pieces = [tube.body.wrapped] + [shape.moved(cq.Location(location.wrapped)).wrapped
+                                        for _, shape, location in tube.ends]
+        assert sum(common(placed.wrapped, piece) for piece in pieces) < 1.0
+        assert common(placed.wrapped, plain[table["id"][k]].body.wrapped) > 1000.0

@@ -32,9 +32,11 @@ from fabrication.files import atomic_path, write_text_atomic
 from fabrication.ifc import IfcBeam, IfcJoint, IfcPanel, write_gridshell_ifc
 from fabrication.joints import (
     JOINTS_STEP_LIMIT_BYTES,
+    EndSlots,
     JointSettings,
     JointsInBackground,
     copy_placements,
+    fin_plate_slots,
     joint_geometry,
     joint_hub_height_mm,
     joint_hub_radius_mm,
@@ -198,7 +200,7 @@ def _seats(polymesh: PolyMesh, normals: np.ndarray, sizes_mm: np.ndarray, panels
 
 def _write_model_step(polymesh: PolyMesh, panels: list, seats: tuple[np.ndarray, np.ndarray], table,
                       sizes_mm: np.ndarray, walls_mm: np.ndarray | None, panel_settings: PanelSettings,
-                      joint_radius_mm: float, path: Path, joints: JointSolids) -> dict:
+                      joint_radius_mm: float, path: Path, slots: EndSlots | None, joints: JointSolids) -> dict:
     """gridshell.step with the beams as cut, the joints' own solids (spheres where there are none,
     or where the distinct joints' STEP files exceed GRIDSHELL_STEP_JOINT_BYTES) and the panels
     resting on them (fabrication.panels.panel_seats); returns fabrication.json's record of what it
@@ -207,7 +209,7 @@ def _write_model_step(polymesh: PolyMesh, panels: list, seats: tuple[np.ndarray,
 
     distinct = joints.distinct_bytes
     real = distinct <= GRIDSHELL_STEP_JOINT_BYTES
-    tubes = tube_solids(polymesh, table, outer_size_mm=sizes_mm, wall_mm=walls_mm)
+    tubes = tube_solids(polymesh, table, outer_size_mm=sizes_mm, wall_mm=walls_mm, slots=slots)
     write_gridshell_step(polymesh, panels, path, tubes=tubes, joints=joints if real else None,
                          joint_radius_mm=joint_radius_mm, seats=seats, panel_thickness_mm=panel_settings.thickness_mm)
     n_nodes = polymesh.n_nodes
@@ -415,10 +417,13 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     joint_radius_mm = getattr(joint_settings, "hub_radius_mm", None) or 1.5 * float(sizes_mm.max())
     # gridshell.step takes the joints' own solids: written once they are built (see run)
     seats = _seats(polymesh, normals, sizes_mm, panels, pieces, joint_settings)
+    # steel nodes' fin plates enter their tubes through end slots
+    slots = (fin_plate_slots(polymesh, joint_geometry(polymesh, normals, sizes_mm), joint_settings)
+             if joint_settings.kind == "steel" else None)
     model["gridshell.step"] = partial(_write_model_step, polymesh, panels, seats, table, sizes_mm, walls_mm,
-                                      panel_settings, joint_radius_mm, folder / "gridshell.step")
+                                      panel_settings, joint_radius_mm, folder / "gridshell.step", slots)
     steps["beams: beams.step"] = partial(write_beams_step, polymesh, table, folder / "beams" / "beams.step",
-                                         outer_size_mm=sizes_mm, wall_mm=walls_mm)
+                                         outer_size_mm=sizes_mm, wall_mm=walls_mm, slots=slots)
     steps["model: gridshell.3dm"] = partial(write_gridshell_3dm, polymesh, panels, sizes_mm / 2, joint_radius_mm,
                                             folder / "gridshell.3dm")
     # independent steps, longest first: here one after another, and on the joints' workers as they run
