@@ -18,6 +18,8 @@ import zlib
 from collections.abc import Iterator
 from pathlib import Path
 
+from engine.errors import FabricationError
+
 __all__ = ["atomic_path", "atomic_folder", "write_text_atomic", "write_bytes_atomic", "save_dxf", "file_date",
            "stamp_step", "compact_step_points", "stamp_zip", "stamp_3dm"]
 
@@ -198,7 +200,7 @@ def canonical_step_styles(data: bytes) -> bytes:
             missing = [r for r in inner[top] if r not in keys]
             if missing:
                 if len(stack) > len(tail):
-                    raise ValueError("a cycle in the STEP presentation")
+                    raise FabricationError("a cycle in the STEP presentation")
                 stack.extend(missing)
                 continue
             keys[top] = _STEP_REFERENCE.sub(

@@ -9,8 +9,8 @@ ear clipping (each triangle of three nodes is exactly planar), ids ``P0001a``, `
 Files (lengths in mm, DXF R2010, ``$INSUNITS`` = 4): one DXF per panel with the cut
 outline on CUT, the panel id on ENGRAVE (single-stroke text style), hole centres on DRILL
 and a note (thickness, material, planarity) on NOTES; a CSV schedule of all panels.
-The sheet nesting lives in ``fabrication.nesting_sheets``; its public names are re-exported
-here for callers that take the whole panel workflow from one module.
+The sheet nesting lives in ``fabrication.nesting_sheets``, which draws its sheets with this
+module's ``add_panel`` (the imports go that way only).
 """
 
 from __future__ import annotations
@@ -39,8 +39,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from fabrication.nesting_sheets import SheetNesting
 
 __all__ = ["PanelSettings", "Panel", "flatten_panels", "panel_seats", "write_panel_dxfs", "write_panels_csv",
-           "add_panel", "panel_label",
-           "SheetSettings", "SheetNesting", "nest_sheets", "write_sheet_dxfs", "write_sheets_picture"]
+           "add_panel", "panel_label"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -349,7 +348,3 @@ def write_panels_csv(panels: list[Panel], nesting: "SheetNesting | None", settin
                          f"{panel.planarity_mm:.3f}", f"{settings.thickness_mm:g}", f"{mass:.4f}",
                          sheet_of.get(i, "")] + (list(cells.get(panel.id, ("", ""))) if cells is not None else []))
     return write_text_atomic(path, buffer.getvalue())
-
-
-# re-exported so the whole panel workflow can be taken from this module
-from fabrication.nesting_sheets import SheetNesting, SheetSettings, nest_sheets, write_sheet_dxfs, write_sheets_picture  # noqa: E402
