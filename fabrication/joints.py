@@ -1072,6 +1072,11 @@ class JointsInBackground:
             raise
         return self
 
+    @property
+    def distinct(self) -> int:
+        """How many distinct joints there are to build (groups of equal joints count once)."""
+        return len(self._groups)
+
     def _collect(self, report: dict) -> None:
         part = report.pop("_part")
         if part is False or self._writer is None:  # not built, or no joints.step: nothing to add

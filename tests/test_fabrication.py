@@ -1055,3 +1055,31 @@ def test_steel_tubes_are_slotted_where_the_fin_plates_enter_and_clear_them():
                                         for _, shape, location in tube.ends]
         assert sum(common(placed.wrapped, piece) for piece in pieces) < 1.0
         assert common(placed.wrapped, plain[table["id"][k]].body.wrapped) > 1000.0
+
+
+@slow
+def test_with_too_many_distinct_joints_gridshell_step_draws_spheres_alongside_and_says_why(small_run, tmp_path,
+                                                                                            monkeypatch):
+    """Where the distinct joints are too many for their solids to fit the size limit, the model is
+    written alongside the joints with a sphere per joint, and fabrication.json says so and why.
+    Here the limit is lowered so that the small mock-up's joints are too many."""
+    import shutil
+
+    from workflow.progress import Progress
+    from workflow.runner import run_project
+    from workflow.stages import STAGES
+    from workflow.stages import fabrication as stage
+
+    project, out = small_run
+    copy = tmp_path / "out"
+    shutil.copytree(out, copy)
+    monkeypatch.setattr(stage, "JOINT_STEP_BYTES_AT_LEAST", stage.GRIDSHELL_STEP_JOINT_BYTES)  # over 1 joint
+    summary = run_project(project, copy, STAGES, only="fabrication", force=True, progress=Progress(enabled=False))
+    assert summary.message is None, summary.message
+    record = json.loads((copy / "07-fabrication" / "fabrication.json").read_text())["gridshell_step"]
+    assert record["joints"] == "spheres" and "distinct joints" in record["reason"]
+    assert record["joint_solids"] == 0 and record["joint_spheres"] == _polymesh(out).n_nodes
+    _, parts = _read_assembly(copy / "07-fabrication" / "gridshell.step")
+    names = {name for name, _ in parts}
+    assert {f"J{i + 1:04d}" for i in range(_polymesh(out).n_nodes)} <= names
+    assert sum(name.startswith("B") for name in names) == record["beams"] > 0

@@ -127,12 +127,19 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     model: dict[str, Callable] = {}
     with JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
                             workers=config.workers, combined_step=config.joints.combined_step) as joints:
+        # with very many distinct joints their solids would pass GRIDSHELL_STEP_JOINT_BYTES: the model
+        # then draws spheres and is written alongside the joints rather than after them
+        model["spheres"] = joints.distinct > GRIDSHELL_STEP_JOINT_BYTES // JOINT_STEP_BYTES_AT_LEAST
         _beams_panels_drawings_assembly(project, ctx, clock, optimize, normals, joint_settings, limits, summary,
                                         findings, sections, share=joints.run_steps, model=model)
         clock.start("joints: waiting")
         joints.wait(ctx.step)
-    clock.start("model: gridshell.step")
-    summary["gridshell_step"] = model["gridshell.step"](_joint_solids(joints, folder / "joints"))
+    if "gridshell.step" in model:
+        clock.start("model: gridshell.step")
+        summary["gridshell_step"] = model["gridshell.step"](_joint_solids(joints, folder / "joints"))
+    elif "gridshell_step" in summary:
+        summary["gridshell_step"]["reason"] = (f"{joints.distinct} distinct joints: over "
+                                               f"{GRIDSHELL_STEP_JOINT_BYTES // JOINT_STEP_BYTES_AT_LEAST}")
     clock.stop()
     clock.seconds["joints (alongside the other steps)"] = round(joints.seconds, 3)
     joint_reports = joints.reports
@@ -175,6 +182,9 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
 #: gridshell.step takes the joints' own solids while the distinct ones' STEP files come under this
 #: (the mock-up's 55 distinct printed sockets: 6 MB); over it, each joint is a sphere.
 GRIDSHELL_STEP_JOINT_BYTES = 30_000_000
+#: Fewer bytes than any joint's STEP file takes (the cap's steel nodes: 32 kB each, printed sockets
+#: some 110 kB): more distinct joints than the limit over this are spheres, known before they are built.
+JOINT_STEP_BYTES_AT_LEAST = 20_000
 
 
 def _joint_solids(joints: JointsInBackground, folder: Path) -> JointSolids:
@@ -208,13 +218,15 @@ def _write_model_step(polymesh: PolyMesh, panels: list, seats: tuple[np.ndarray,
     from fabrication.beams import tube_solids
 
     distinct = joints.distinct_bytes
-    real = distinct <= GRIDSHELL_STEP_JOINT_BYTES
+    real = bool(joints.files) and distinct <= GRIDSHELL_STEP_JOINT_BYTES
     tubes = tube_solids(polymesh, table, outer_size_mm=sizes_mm, wall_mm=walls_mm, slots=slots)
     write_gridshell_step(polymesh, panels, path, tubes=tubes, joints=joints if real else None,
                          joint_radius_mm=joint_radius_mm, seats=seats, panel_thickness_mm=panel_settings.thickness_mm)
     n_nodes = polymesh.n_nodes
     n_solids = len(joints.files) + len(joints.copies) if real else 0
-    return {"joints": "solids" if real else "spheres",
+    reason = None if real else (f"the distinct joints' STEP files take {distinct} bytes" if joints.files
+                                else "no joint solids")
+    return {"joints": "solids" if real else "spheres", "reason": reason,
             "joint_solids": n_solids, "joint_parts": len(joints.files) if real else 0,
             "joint_spheres": n_nodes - n_solids,
             "distinct_joint_bytes": distinct, "limit_bytes": GRIDSHELL_STEP_JOINT_BYTES,
@@ -420,8 +432,12 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     # steel nodes' fin plates enter their tubes through end slots
     slots = (fin_plate_slots(polymesh, joint_geometry(polymesh, normals, sizes_mm), joint_settings)
              if joint_settings.kind == "steel" else None)
-    model["gridshell.step"] = partial(_write_model_step, polymesh, panels, seats, table, sizes_mm, walls_mm,
-                                      panel_settings, joint_radius_mm, folder / "gridshell.step", slots)
+    write_model = partial(_write_model_step, polymesh, panels, seats, table, sizes_mm, walls_mm,
+                          panel_settings, joint_radius_mm, folder / "gridshell.step", slots)
+    if model.get("spheres"):
+        steps["model: gridshell.step"] = partial(write_model, JointSolids())
+    else:
+        model["gridshell.step"] = write_model
     steps["beams: beams.step"] = partial(write_beams_step, polymesh, table, folder / "beams" / "beams.step",
                                          outer_size_mm=sizes_mm, wall_mm=walls_mm, slots=slots)
     steps["model: gridshell.3dm"] = partial(write_gridshell_3dm, polymesh, panels, sizes_mm / 2, joint_radius_mm,
@@ -435,6 +451,8 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
         on = " (on a worker)" if where == "worker" else ""
         parts = result.seconds if isinstance(result, _PanelFiles) else {name: seconds}
         clock.seconds.update({part: round(s, 3) for part, s in ((k + on, v) for k, v in parts.items())})
+    if "model: gridshell.step" in done:
+        summary["gridshell_step"] = done["model: gridshell.step"][0]
     if "panels" in done:
         files: _PanelFiles = done["panels"][0]
         stock_nesting = files.nesting
