@@ -188,9 +188,13 @@ def _inscribed_radius(hull: np.ndarray) -> float:
     return float(np.min(np.abs(np.einsum("ki,ki->k", centre - hull, normal))))
 
 
-def _angles(outline: np.ndarray, rotations: bool, sides: bool = False) -> list[float]:
+def _angles(outline: np.ndarray, rotations: bool, sides: bool = False, grain_deg: float | None = None
+            ) -> list[float]:
     """The rotations tried (degrees): the quarter turns and the minimum-area rectangle's two, and
-    with ``sides`` each side of the hull laid along x, below the part and above it."""
+    with ``sides`` each side of the hull laid along x, below the part and above it. With a
+    ``grain_deg`` (Panel.grain_deg), that turn and the half turn from it only."""
+    if grain_deg is not None:
+        return [grain_deg % 360.0, (grain_deg + 180.0) % 360.0] if rotations else [grain_deg % 360.0]
     if not rotations:
         return [0.0]
     angles = [0.0, 90.0, 180.0, 270.0]
@@ -212,10 +216,11 @@ def _angles(outline: np.ndarray, rotations: bool, sides: bool = False) -> list[f
     return angles
 
 
-def _orientations(outline: np.ndarray, rotations: bool, sides: bool = False) -> list[_Orientation]:
+def _orientations(outline: np.ndarray, rotations: bool, sides: bool = False,
+                  grain_deg: float | None = None) -> list[_Orientation]:
     hull = np.asarray(MultiPoint(outline).convex_hull.exterior.coords)[:-1]
     result = []
-    for angle in _angles(outline, rotations, sides):
+    for angle in _angles(outline, rotations, sides, grain_deg):
         R = rotation(angle)
         rotated = outline @ R.T
         lo, hi = rotated.min(axis=0), rotated.max(axis=0)
@@ -372,7 +377,8 @@ def _closest_fit(options: list[_Orientation], settings: SheetSettings) -> tuple[
 
 def fits_sheet(panel: "Panel", settings: SheetSettings) -> bool:
     """Whether the panel's cut outline fits the sheet less its margins in one of its rotations."""
-    return _closest_fit(_orientations(np.asarray(panel.outline_mm, float), settings.rotations), settings)[0]
+    return _closest_fit(_orientations(np.asarray(panel.outline_mm, float), settings.rotations,
+                                      grain_deg=getattr(panel, "grain_deg", None)), settings)[0]
 
 
 def sheet_overshoot(panel: "Panel", stocks: list[SheetSettings]) -> tuple[float, float, float]:
@@ -380,7 +386,8 @@ def sheet_overshoot(panel: "Panel", stocks: list[SheetSettings]) -> tuple[float,
     sheets, and how many times that sheet's usable size it needs (over 1: it fits none)."""
     best = None
     for stock in stocks:
-        _, over, o = _closest_fit(_orientations(np.asarray(panel.outline_mm, float), stock.rotations), stock)
+        _, over, o = _closest_fit(_orientations(np.asarray(panel.outline_mm, float), stock.rotations,
+                                                grain_deg=getattr(panel, "grain_deg", None)), stock)
         if best is None or over < best[2]:
             best = (o.width, o.height, over)
     return float(best[0]), float(best[1]), float(best[2])
@@ -462,8 +469,8 @@ def nest_sheets(panels: list["Panel"], settings: SheetSettings | None = None) ->
 
 def _nest(panels: list["Panel"], settings: SheetSettings, tight: bool) -> SheetNesting:
     n = len(panels)
-    orientations = [_orientations(np.asarray(p.outline_mm, float), settings.rotations, sides=tight)
-                    for p in panels]
+    orientations = [_orientations(np.asarray(p.outline_mm, float), settings.rotations, sides=tight,
+                                  grain_deg=getattr(p, "grain_deg", None)) for p in panels]
     for p, options in zip(panels, orientations):
         fits, _, o = _closest_fit(options, settings)
         if not fits:
@@ -510,6 +517,11 @@ def _nest(panels: list["Panel"], settings: SheetSettings, tight: bool) -> SheetN
                         sheet_utilisation=per_sheet, settings=settings, sheet_of=sheet_of)
 
 
+def _with_grain(panels: list, members: list[int]) -> bool:
+    """Whether any of the panels ``members`` on a sheet keeps a grain (Panel.grain_deg)."""
+    return any(getattr(panels[i], "grain_deg", None) is not None for i in members)
+
+
 def write_sheet_dxfs(nesting: SheetNesting, panels: list["Panel"], folder: str | os.PathLike,
                      settings: "PanelSettings | None" = None, *, first_number: int = 1) -> list[Path]:
     """Write ``folder/SHEET01.dxf``... : sheet outline on NOTES, parts on CUT, panel ids on
@@ -528,8 +540,9 @@ def write_sheet_dxfs(nesting: SheetNesting, panels: list["Panel"], folder: str |
         msp.add_lwpolyline([(0, 0), (sheet.width_mm, 0), (sheet.width_mm, sheet.height_mm), (0, sheet.height_mm)],
                            close=True, dxfattribs={"layer": "NOTES"})
         name = sheet_id(first_number - 1 + k)
+        grain = "  grain along x" if _with_grain(panels, members) else ""
         msp.add_text(f"{name}  {sheet.width_mm:g} x {sheet.height_mm:g} mm  {len(members)} parts  "
-                     f"utilisation {100 * nesting.sheet_utilisation[k]:.1f} %",
+                     f"utilisation {100 * nesting.sheet_utilisation[k]:.1f} %{grain}",
                      height=5.0, dxfattribs={"layer": "NOTES", "insert": (0.0, -10.0)})
         for i in members:
             p = nesting.placements[i]
@@ -578,8 +591,10 @@ def write_contact_sheet(groups: list[tuple[SheetNesting, list["Panel"], int]], p
         ax.set_xlim(-10, s.width_mm + 10)
         ax.set_ylim(-10, s.height_mm + 10)
         ax.set_aspect("equal")
+        grain = ", grain \u2192" if _with_grain(panels, nesting.sheets[k]) else ""
         ax.set_title(f"{sheet_id(number - 1)} ({s.width_mm:g} x {s.height_mm:g} mm): {len(nesting.sheets[k])} parts, "
-                     f"{100 * nesting.sheet_utilisation[k]:.0f} % used", fontsize=max(5.0, min(9.0, 30.0 / cols)))
+                     f"{100 * nesting.sheet_utilisation[k]:.0f} % used{grain}",
+                     fontsize=max(5.0, min(9.0, 30.0 / cols)))
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110)

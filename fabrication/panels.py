@@ -38,8 +38,8 @@ from fabrication.settings import PanelSettings
 if TYPE_CHECKING:  # pragma: no cover
     from fabrication.nesting_sheets import SheetNesting
 
-__all__ = ["PanelSettings", "Panel", "flatten_panels", "panel_seats", "write_panel_dxfs", "write_panels_csv",
-           "add_panel", "panel_label"]
+__all__ = ["PanelSettings", "Panel", "flatten_panels", "grain_angle_deg", "panel_seats", "write_panel_dxfs",
+           "write_panels_csv", "add_panel", "panel_label"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -50,7 +50,9 @@ class Panel:
     face_outline_mm (j, 2): the cell outline before inset; origin_m (3,) and axes (2, 3):
     the plane (point in m, orthonormal in-plane basis) so that a 2D point p (mm) sits at
     origin_m + 1e-3 * p @ axes; planarity_mm: largest distance of the cell's nodes to the
-    plane; holes_mm (h, 2): drill centres; outline_3d_m (k, 3): the cut outline in 3D.
+    plane; holes_mm (h, 2): drill centres; outline_3d_m (k, 3): the cut outline in 3D;
+    grain_deg: the counter-clockwise turn (degrees) that lays the panel's grain direction
+    (PanelSettings.grain) along x, the sheets' grain; None: no grain asked for.
     """
 
     id: str
@@ -65,6 +67,7 @@ class Panel:
     perimeter_mm: float
     outline_3d_m: np.ndarray
     nonplanar: bool
+    grain_deg: float | None = None
 
     @property
     def vertex_count(self) -> int:
@@ -185,7 +188,24 @@ def _make_panel(panel_id: str, face: int, loop_m: np.ndarray, settings: PanelSet
                  origin_m=centroid, axes=axes, planarity_mm=planarity_mm, holes_mm=holes,
                  area_mm2=float(cut.area), perimeter_mm=float(cut.length),
                  outline_3d_m=centroid + 1e-3 * outline @ axes,
-                 nonplanar=planarity_mm > settings.planarity_tolerance_mm)
+                 nonplanar=planarity_mm > settings.planarity_tolerance_mm,
+                 grain_deg=grain_angle_deg(axes, normal, settings.grain))
+
+
+def grain_angle_deg(axes: np.ndarray, normal: np.ndarray, grain: str) -> float | None:
+    """The counter-clockwise turn (degrees) of a panel's 2D frame (in-plane ``axes`` (2, 3), unit
+    ``normal``) that lays its ``grain`` direction along x (PanelSettings.grain): the plan axis "x"
+    or "y", or "slope", the fall line (-z in the plane). Where that direction stands square to the
+    panel (a flat panel's slope, say), the panel's first axis, its longest side. None for "none"."""
+    if grain == "none":
+        return None
+    direction = {"x": np.array([1.0, 0.0, 0.0]), "y": np.array([0.0, 1.0, 0.0]),
+                 "slope": np.array([0.0, 0.0, -1.0])}[grain]
+    in_plane = direction - (direction @ normal) * normal
+    u, v = float(in_plane @ axes[0]), float(in_plane @ axes[1])
+    if math.hypot(u, v) < 1e-6:
+        return 0.0
+    return -math.degrees(math.atan2(v, u))
 
 
 def panel_seats(panels: list[Panel], loops: list, geometries: dict, joint_settings, beam_radii_mm: dict,

@@ -48,7 +48,10 @@ class BeamSettings:
 
 @dataclass(frozen=True, kw_only=True)
 class PanelSettings:
-    """Panel material and cutting settings (lengths in mm, density in kg/m^3)."""
+    """Panel material and cutting settings (lengths in mm, density in kg/m^3). ``grain``: the
+    direction of each panel laid along the sheets' grain, their length (x): "none" (the nesting
+    turns panels freely), "x" or "y" (that plan axis, projected onto the panel) or "slope" (the
+    panel's fall line); a panel is then turned only by a half turn from there."""
 
     thickness_mm: float = 3.0
     material_name: str = "acrylic"
@@ -58,10 +61,16 @@ class PanelSettings:
     hole_inset_mm: float = 10.0
     planarity_tolerance_mm: float = 2.0
     split_nonplanar: bool = False
+    grain: str = "none"
+
+    GRAINS = ("none", "x", "y", "slope")
 
     def __post_init__(self) -> None:
         check_ranges(self, "panel", positive=("thickness_mm", "density"),
                      zero_or_positive=("clearance_mm", "hole_diameter_mm", "hole_inset_mm", "planarity_tolerance_mm"))
+        if self.grain not in self.GRAINS:
+            raise InputError(f"panel setting grain = {self.grain!r} must be one of {', '.join(self.GRAINS)}",
+                             hint=f"set grain to one of {', '.join(self.GRAINS)}")
 
 
 @dataclass(frozen=True, kw_only=True)

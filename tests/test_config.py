@@ -238,6 +238,7 @@ _REFUSED = [
      {"hole_inset_mm": -1.0}),
     ("fabrication.panels", {"planarity_tolerance": "-1 mm"}, "fabrication.panels.planarity_tolerance", PanelSettings,
      {"planarity_tolerance_mm": -1.0}),
+    ("fabrication.panels", {"grain": "diagonal"}, "fabrication.panels.grain", PanelSettings, {"grain": "diagonal"}),
     ("fabrication.joints", {"clearance": "-0.1 mm"}, "fabrication.joints.clearance", JointSettings,
      {"clearance_mm": -0.1}),
     ("fabrication.joints", {"wall": 0.0}, "fabrication.joints.wall", JointSettings, {"wall_mm": 0.0}),

@@ -266,3 +266,40 @@ def test_the_default_jobs_panels_fill_at_least_seventy_percent_of_their_sheets()
     check_nesting(nesting, panels, settings)
     assert nesting.utilisation >= 0.70
     assert ns._nest(panels, settings, tight=False).n_sheets > nesting.n_sheets
+
+
+@pytest.mark.parametrize("grain", ["x", "y", "slope"])
+def test_panels_with_a_grain_lie_along_the_sheets_grain(grain):
+    """With [fabrication.panels] grain, every placed panel's grain direction (the plan axis, or the
+    fall line, projected onto the panel, computed here from its 3D outline alone) runs along the
+    sheet's x, and no two placed panels come closer than the spacing (shapely)."""
+    import shapely.geometry as geometry
+
+    from tests.test_panels import hex_polymesh
+
+    settings = PanelSettings(grain=grain)
+    panels = flatten_panels(hex_polymesh(3, 3), settings)
+    sheet = SheetSettings(width_mm=1200.0, height_mm=600.0)
+    nesting = nest_sheets(panels, sheet)
+    direction = {"x": [1.0, 0.0, 0.0], "y": [0.0, 1.0, 0.0], "slope": [0.0, 0.0, -1.0]}[grain]
+    for i, panel in enumerate(panels):
+        outline_3d = 1000 * np.asarray(panel.outline_3d_m)
+        normal = np.linalg.svd(outline_3d - outline_3d.mean(axis=0))[2][-1]
+        along = np.asarray(direction) - (np.asarray(direction) @ normal) * normal
+        if np.linalg.norm(along) < 1e-3:   # square to the panel: no grain direction to keep
+            continue
+        # two points of the panel a grain step apart, found by least squares in its own outline
+        placed = nesting.placed_outline(i, panel.outline_mm)
+        # the affine map from the 3D outline to the placed 2D outline (a rotation and a shift)
+        A = np.c_[outline_3d, np.ones(len(outline_3d))]
+        coefficients, *_ = np.linalg.lstsq(A, placed, rcond=None)
+        on_sheet = along @ coefficients[:3]
+        assert abs(on_sheet[1]) <= 1e-6 * np.linalg.norm(on_sheet), panel.id
+    shapes = {}
+    for k, members in enumerate(nesting.sheets):
+        for i in members:
+            shapes[i] = geometry.Polygon(nesting.placed_outline(i, panels[i].outline_mm))
+        for a in members:
+            for b in members:
+                if a < b:
+                    assert shapes[a].distance(shapes[b]) >= sheet.spacing_mm - 1e-6

@@ -539,13 +539,15 @@ class PanelsConfig(_Section):
     hole_inset: Length = _default_of(PanelSettings, "hole_inset_mm", per=MM, ge=0.0)
     planarity_tolerance: Length = _default_of(PanelSettings, "planarity_tolerance_mm", per=MM, ge=0.0)
     split_nonplanar: bool = _default_of(PanelSettings, "split_nonplanar")
+    #: the panel direction laid along the sheets' grain, their length: none, x, y (plan axes) or slope
+    grain: Literal["none", "x", "y", "slope"] = "none"
 
     def to_settings(self) -> PanelSettings:
         """Fabrication's panel settings (mm), once the Project has resolved thickness, material and density."""
         return PanelSettings(thickness_mm=MM * self.thickness, material_name=self.material, density=self.density,
                              clearance_mm=MM * self.clearance, hole_diameter_mm=MM * self.hole_diameter,
                              hole_inset_mm=MM * self.hole_inset, planarity_tolerance_mm=MM * self.planarity_tolerance,
-                             split_nonplanar=self.split_nonplanar)
+                             split_nonplanar=self.split_nonplanar, grain=self.grain)
 
 
 class SheetsConfig(_Section):

@@ -462,8 +462,12 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
                 kind="sheet_size", parts=[panels[i].id], measure=over, limit=1.0, unit="x sheet",
                 stage="fabrication",
                 message=(f"panel {panels[i].id} ({w:.0f} x {h:.0f} mm) fits no stock sheet "
-                         f"(largest {largest.width_mm:g} x {largest.height_mm:g} mm); its DXF is written"),
-                fix="add a larger size to [fabrication.sheets] sizes, or more cells ([remesh] n_cells)"))
+                         f"(largest {largest.width_mm:g} x {largest.height_mm:g} mm"
+                         + (", its grain along the sheet's length" if panels[i].grain_deg is not None else "")
+                         + "); its DXF is written"),
+                fix="add a larger size to [fabrication.sheets] sizes, or more cells ([remesh] n_cells)"
+                    + (f"; or [fabrication.panels] grain = \"none\" (now \"{panel_settings.grain}\")"
+                       if panels[i].grain_deg is not None else "")))
         summary.update({"panels": len(panels), "sheets": int(stock_nesting.n_sheets),
                         "sheet_sizes_mm": [[s.width_mm, s.height_mm, n.n_sheets] for s, _, n in stock_nesting.groups],
                         "sheet_utilisation": float(stock_nesting.utilisation),
