@@ -25,7 +25,9 @@ __all__ = ["IfcBeam", "IfcPanel", "IfcJoint", "write_gridshell_ifc"]
 
 @dataclass(frozen=True, kw_only=True)
 class IfcBeam:
-    """A beam between its joints: start point and unit direction (mm), cut length, tube (mm)."""
+    """A beam between its joints: start point and unit direction (mm), cut length, tube (mm).
+    ``slots``: (unit direction across the slot, its length in mm) at the start and at the end, where
+    steel fin plates enter (fabrication.joints.fin_plate_slots), ``slot_width_mm`` wide."""
 
     id: str
     start_mm: np.ndarray
@@ -36,6 +38,8 @@ class IfcBeam:
     profile: str
     mass_kg: float
     step: int | None = None
+    slots: tuple = ()
+    slot_width_mm: float = 0.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -157,7 +161,26 @@ def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: l
         representation = geometry.add_profile_representation(model, context=body, profile=profiles[beam.profile],
                                                               depth=beam.cut_length_mm / 1000.0)
         geometry.assign_representation(model, product=member, representation=representation)
-        place(member, _frame(beam.start_mm, beam.direction))
+        frame = _frame(beam.start_mm, beam.direction)
+        place(member, frame)
+        for end, (side, length) in enumerate(beam.slots):
+            # the end slot as an opening that voids the member, in the member's own axes (mm)
+            across = frame[:3, :3].T @ np.asarray(side, float)
+            at, inward = (np.zeros(3), np.array([0.0, 0.0, 1.0])) if end == 0 else (
+                np.array([0.0, 0.0, beam.cut_length_mm]), np.array([0.0, 0.0, -1.0]))
+            opening = root.create_entity(model, ifc_class="IfcOpeningElement", name=f"{beam.id} slot {end + 1}")
+            strip = model.create_entity("IfcRectangleProfileDef", ProfileType="AREA", XDim=float(beam.slot_width_mm),
+                                        YDim=float(2 * beam.diameter_mm))
+            up = model.create_entity("IfcDirection", DirectionRatios=(0.0, 0.0, 1.0))
+            solid = model.create_entity("IfcExtrudedAreaSolid", SweptArea=strip, ExtrudedDirection=up,
+                                        Position=axes(_frame(at, inward, across)), Depth=float(length))
+            geometry.assign_representation(model, product=opening, representation=model.create_entity(
+                "IfcShapeRepresentation", ContextOfItems=body, RepresentationIdentifier="Body",
+                RepresentationType="SweptSolid", Items=[solid]))
+            opening.ObjectPlacement = model.create_entity(
+                "IfcLocalPlacement", PlacementRelTo=member.ObjectPlacement, RelativePlacement=axes(np.eye(4)))
+            model.create_entity("IfcRelVoidsElement", GlobalId=ifcopenshell.guid.new(), RelatingBuildingElement=member,
+                                RelatedOpeningElement=opening)
         properties(member, {"Profile": beam.profile, "Material": beam_material, "CutLength_mm": beam.cut_length_mm,
                             "Mass_kg": beam.mass_kg, "AssemblyStep": beam.step})
         members.append(member)

@@ -479,7 +479,7 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     summary["assembly"] = written
     if tubes is not None:  # while the joints build: it needs their geometry only
         clock.start("model: gridshell.ifc")
-        _write_ifc(project, folder, polymesh, normals, table, panels, sizes_mm, walls_mm, joint_settings, seats)
+        _write_ifc(project, folder, polymesh, normals, table, panels, sizes_mm, walls_mm, joint_settings, seats, slots)
         summary["ifc"] = "gridshell.ifc"
 
 
@@ -526,7 +526,7 @@ def _assembly_files(polymesh: PolyMesh, beam: dict, deflection_limit_m: float | 
 
 def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, normals: np.ndarray, table, panels: list,
                sizes: np.ndarray, walls: np.ndarray, joint_settings: JointSettings,
-               seats: tuple[np.ndarray, np.ndarray]) -> None:
+               seats: tuple[np.ndarray, np.ndarray], slots: EndSlots | None) -> None:
     """gridshell.ifc (fabrication.ifc) from the stage's cut list, panels (resting where ``seats``
     puts them, as in gridshell.step), panels.csv, sequence.csv and the joints' geometry as the
     joint solids are built from it."""
@@ -547,10 +547,14 @@ def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, normals: np.n
         a, b = polymesh.edges[k]
         start, end = MM * polymesh.nodes[a], MM * polymesh.nodes[b]
         direction = (end - start) / np.linalg.norm(end - start)
+        # the end slots of steel fin plates, as tube_solids cuts them
+        ends = (tuple(zip(slots.sides[k], slots.lengths[k]))
+                if slots is not None and float(slots.lengths[k].sum()) < row.cut_length_mm else ())
         beams.append(IfcBeam(id=row.id, start_mm=start + direction * row.setback_start_mm, direction=direction,
                              cut_length_mm=float(row.cut_length_mm), diameter_mm=float(sizes[k]),
                              wall_mm=float(walls[k]), profile=str(row.profile), mass_kg=float(row.mass_kg),
-                             step=step_of.get(row.id)))
+                             step=step_of.get(row.id), slots=ends,
+                             slot_width_mm=slots.width if slots is not None else 0.0))
     sheets, masses = {}, {}
     panels_csv = folder / "panels" / "panels.csv"
     if panels_csv.is_file():
