@@ -22,15 +22,28 @@ class JointSolids:
     """Where gridshell.step takes each joint's solid from: ``files`` joint id -> its own STEP file
     (the solid placed at its node), ``copies`` joint id -> (the id of the joint whose solid it is,
     the 4 x 4 transform in mm onto this one; fabrication.joints.copy_placements). A joint in
-    neither is drawn as a sphere (one not built)."""
+    neither is drawn as a sphere (one not built). ``breps``: the same solids in OCCT's own
+    format, read instead of the STEP files where given (the same shape, 30 times faster)."""
 
     files: dict[str, Path] = field(default_factory=dict)
     copies: dict[str, tuple[str, np.ndarray]] = field(default_factory=dict)
+    breps: dict[str, Path] = field(default_factory=dict)
 
     @property
     def distinct_bytes(self) -> int:
         """The bytes of the STEP files the model reads: what the joints add to gridshell.step."""
         return sum(Path(f).stat().st_size for f in self.files.values())
+
+
+def _read_brep_shape(path: Path):
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepTools import BRepTools
+    from OCP.TopoDS import TopoDS_Shape
+
+    shape = TopoDS_Shape()
+    if not BRepTools.Read_s(shape, str(path), BRep_Builder()):
+        raise OSError(f"could not read the joint's solid {path}")
+    return shape
 
 
 def _read_step_shape(path: Path):
@@ -74,7 +87,9 @@ def write_gridshell_step(polymesh: PolyMesh, panels, path: Path, *, tubes: list 
             source, transform = joints.copies[name]
         if source in joints.files:
             if source not in read:  # one shape per distinct joint: cadquery writes it once, placed at each
-                read[source] = cq.Shape.cast(_read_step_shape(joints.files[source]))
+                brep = joints.breps.get(source)
+                read[source] = cq.Shape.cast(_read_brep_shape(brep) if brep is not None and Path(brep).is_file()
+                                             else _read_step_shape(joints.files[source]))
             loc = cq.Location() if transform is None else _location(transform)
             assembly.add(read[source], name=name, loc=loc, color=grey)
         else:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -125,8 +126,13 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     # the joints take both cores in worker processes; the other steps run here meanwhile
     clock.start("joints: start")
     model: dict[str, Callable] = {}
+    # the joints' solids in OCCT's own format for gridshell.step, outside the stage's folder (removed
+    # below, or by the object's finaliser if the stage fails before)
+    scratch = tempfile.TemporaryDirectory(prefix="gridshell-joints-")
+    breps = Path(scratch.name)
     with JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
-                            workers=config.workers, combined_step=config.joints.combined_step) as joints:
+                            workers=config.workers, combined_step=config.joints.combined_step,
+                            breps=breps) as joints:
         # with very many distinct joints their solids would pass GRIDSHELL_STEP_JOINT_BYTES: the model
         # then draws spheres and is written alongside the joints rather than after them
         model["spheres"] = joints.distinct > GRIDSHELL_STEP_JOINT_BYTES // JOINT_STEP_BYTES_AT_LEAST
@@ -136,10 +142,11 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
         joints.wait(ctx.step)
     if "gridshell.step" in model:
         clock.start("model: gridshell.step")
-        summary["gridshell_step"] = model["gridshell.step"](_joint_solids(joints, folder / "joints"))
+        summary["gridshell_step"] = model["gridshell.step"](_joint_solids(joints, folder / "joints", breps))
     elif "gridshell_step" in summary:
         summary["gridshell_step"]["reason"] = (f"{joints.distinct} distinct joints: over "
                                                f"{GRIDSHELL_STEP_JOINT_BYTES // JOINT_STEP_BYTES_AT_LEAST}")
+    scratch.cleanup()
     clock.stop()
     clock.seconds["joints (alongside the other steps)"] = round(joints.seconds, 3)
     joint_reports = joints.reports
@@ -187,13 +194,15 @@ GRIDSHELL_STEP_JOINT_BYTES = 30_000_000
 JOINT_STEP_BYTES_AT_LEAST = 20_000
 
 
-def _joint_solids(joints: JointsInBackground, folder: Path) -> JointSolids:
-    """The joints' solids for gridshell.step: the built joints' own STEP files, and the turned copies
-    placed from the joint they copy (fabrication.joints.copy_placements)."""
+def _joint_solids(joints: JointsInBackground, folder: Path, breps: Path) -> JointSolids:
+    """The joints' solids for gridshell.step: the built joints' own STEP files (and their .brep
+    copies in ``breps``), and the turned copies placed from the joint they copy
+    (fabrication.joints.copy_placements)."""
     copies = copy_placements(joints.geometries, joints.reports)
     files = {r["id"]: folder / f"{r['id']}.step" for r in joints.reports
              if r.get("built", True) and r["id"] not in copies and (folder / f"{r['id']}.step").is_file()}
-    return JointSolids(files=files, copies={k: v for k, v in copies.items() if v[0] in files})
+    return JointSolids(files=files, copies={k: v for k, v in copies.items() if v[0] in files},
+                       breps={k: breps / f"{k}.brep" for k in files})
 
 
 def _seats(polymesh: PolyMesh, normals: np.ndarray, sizes_mm: np.ndarray, panels: list, pieces: list,
