@@ -125,7 +125,6 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     summary.update({"joints": 0, "joint_problems": []})
     # the joints take both cores in worker processes; the other steps run here meanwhile
     clock.start("joints: start")
-    model: dict[str, Callable] = {}
     # the joints' solids in OCCT's own format for gridshell.step, outside the stage's folder (removed
     # below, or by the object's finaliser if the stage fails before)
     scratch = tempfile.TemporaryDirectory(prefix="gridshell-joints-")
@@ -135,14 +134,15 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
                             breps=breps) as joints:
         # with very many distinct joints their solids would pass GRIDSHELL_STEP_JOINT_BYTES: the model
         # then draws spheres and is written alongside the joints rather than after them
-        model["spheres"] = joints.distinct > GRIDSHELL_STEP_JOINT_BYTES // JOINT_STEP_BYTES_AT_LEAST
-        _beams_panels_drawings_assembly(project, ctx, clock, optimize, normals, joint_settings, limits, summary,
-                                        findings, sections, share=joints.run_steps, model=model)
+        spheres = joints.distinct > GRIDSHELL_STEP_JOINT_BYTES // JOINT_STEP_BYTES_AT_LEAST
+        write_model = _beams_panels_drawings_assembly(project, ctx, clock, optimize, normals, joint_settings,
+                                                      limits, summary, findings, sections, share=joints.run_steps,
+                                                      spheres=spheres)
         clock.start("joints: waiting")
         joints.wait(ctx.step)
-    if "gridshell.step" in model:
+    if write_model is not None:
         clock.start("model: gridshell.step")
-        summary["gridshell_step"] = model["gridshell.step"](_joint_solids(joints, folder / "joints", breps))
+        summary["gridshell_step"] = write_model(_joint_solids(joints, folder / "joints", breps))
     elif "gridshell_step" in summary:
         summary["gridshell_step"]["reason"] = (f"{joints.distinct} distinct joints: over "
                                                f"{GRIDSHELL_STEP_JOINT_BYTES // JOINT_STEP_BYTES_AT_LEAST}")
@@ -337,13 +337,14 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
                                     normals: np.ndarray, joint_settings: JointSettings, limits: BuildLimits,
                                     summary: dict, findings: list[Finding],
                                     sections: BeamSections | None = None,
-                                    share: Callable[..., dict] = run_steps, model: dict | None = None) -> None:
+                                    share: Callable[..., dict] = run_steps,
+                                    spheres: bool = False) -> Callable[[JointSolids], dict] | None:
     """Every step but the joints (they run meanwhile); fills ``summary`` and ``findings``.
     ``sections``: the analysis's per-beam tubes where it sized them (workflow.stages.sizing);
     ``share`` runs independent steps (fabrication.workers.run_steps, on the joints' workers as they
-    fall idle); ``model`` receives, as "gridshell.step", the writer of the model that needs the
-    joints' solids (a function of ``JointSolids``)."""
-    model = {} if model is None else model
+    fall idle). Returns the writer of gridshell.step, a function of the joints' solids to call
+    once they are built; None where ``spheres`` had it written here, alongside the joints, with a
+    sphere per joint."""
     polymesh = grid.polymesh
     config = project.fabrication
     folder: Path = ctx.folder
@@ -443,10 +444,8 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
              if joint_settings.kind == "steel" else None)
     write_model = partial(_write_model_step, polymesh, panels, seats, table, sizes_mm, walls_mm,
                           panel_settings, joint_radius_mm, folder / "gridshell.step", slots)
-    if model.get("spheres"):
+    if spheres:
         steps["model: gridshell.step"] = partial(write_model, JointSolids())
-    else:
-        model["gridshell.step"] = write_model
     steps["beams: beams.step"] = partial(write_beams_step, polymesh, table, folder / "beams" / "beams.step",
                                          outer_size_mm=sizes_mm, wall_mm=walls_mm, slots=slots)
     steps["model: gridshell.3dm"] = partial(write_gridshell_3dm, polymesh, panels, sizes_mm / 2, joint_radius_mm,
@@ -490,6 +489,7 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
         clock.start("model: gridshell.ifc")
         _write_ifc(project, folder, polymesh, normals, table, panels, sizes_mm, walls_mm, joint_settings, seats, slots)
         summary["ifc"] = "gridshell.ifc"
+    return None if spheres else write_model
 
 
 @dataclass(frozen=True)
