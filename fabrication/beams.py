@@ -159,6 +159,8 @@ def tube_solids(polymesh: PolyMesh, table: pd.DataFrame, *, outer_size_mm: float
     walls = None if wall_mm is None else np.broadcast_to(np.asarray(wall_mm, dtype=float), (len(e),))
     annuli: dict[tuple[float, float], object] = {}
     shared: dict[tuple, object] = {}
+    if slots is not None:
+        import cadquery as cq
     for k, (row, (a, b), size) in enumerate(zip(table.itertuples(index=False), e, sizes)):
         if row.cut_length_mm <= 0:
             continue
@@ -166,7 +168,7 @@ def tube_solids(polymesh: PolyMesh, table: pd.DataFrame, *, outer_size_mm: float
         direction = (end - start) / np.linalg.norm(end - start)
         origin = start + direction * row.setback_start_mm
         wall = None if walls is None or not 0 < walls[k] < 0.5 * size else float(walls[k])
-        slotted = slots is not None and float(slots.lengths[k].sum()) < row.cut_length_mm
+        slotted = slots is not None and slots.fit(k, row.cut_length_mm)
         ends_mm = slots.lengths[k] if slots is not None and slotted else np.zeros(2)
         length = float(row.cut_length_mm - ends_mm.sum())
         if wall is None:
@@ -184,8 +186,6 @@ def tube_solids(polymesh: PolyMesh, table: pd.DataFrame, *, outer_size_mm: float
         solid.label = row.id
         ends = []
         if slots is not None and slotted:
-            import cadquery as cq
-
             for i, (at, inward) in enumerate(((origin, direction),
                                               (origin + row.cut_length_mm * direction, -direction))):
                 key2 = (float(size), wall, float(slots.width), float(slots.lengths[k, i]))

@@ -48,7 +48,7 @@ from .workers import StepOutcome, exit_with_parent, run_steps
 __all__ = ["JointKind", "JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "joint_hub_radius_mm",
            "joint_sleeve_mm", "smallest_angle", "build_joint", "build_joint_and_blank", "build_joints", "same_joints",
            "JointsInBackground", "joint_name", "copy_placements", "joint_hub_height_mm", "joint_reach_mm",
-           "EndSlots", "fin_plate_slots"]
+           "cylinder_reach_mm", "EndSlots", "fin_plate_slots"]
 
 ENGRAVE_DEPTH_MM = 0.6
 #: The printed joint's STL: largest distance between a triangle and the surface (mm) and largest
@@ -165,7 +165,7 @@ def joint_hub_height_mm(settings: JointSettings, beam_size_mm: float) -> float:
     return 2.0 * (0.5 * beam_size_mm + settings.clearance_mm + settings.wall_mm) + 1.0
 
 
-def _cylinder_reach(start: float, end: float, axis_along: float, radius: float) -> float:
+def cylinder_reach_mm(start: float, end: float, axis_along: float, radius: float) -> float:
     """How far a cylinder reaches along a unit direction: its end centres at ``start`` and ``end``
     along it, its axis at cosine ``axis_along`` to it."""
     return max(start, end) + radius * math.sqrt(max(0.0, 1.0 - axis_along * axis_along))
@@ -179,7 +179,7 @@ def joint_reach_mm(geometry: JointGeometry, settings: JointSettings, direction: 
     size = geometry.beam_size_mm
     hub_radius, height = joint_hub_radius_mm(settings, size), joint_hub_height_mm(settings, size)
     along = float(geometry.axis @ n)
-    reach = _cylinder_reach(-0.5 * height * along, 0.5 * height * along, along, hub_radius)
+    reach = cylinder_reach_mm(-0.5 * height * along, 0.5 * height * along, along, hub_radius)
     setback = joint_setback_mm(settings, size, smallest_angle(geometry.directions))
     for d, own in zip(geometry.directions, geometry.sizes_mm):
         rise = float(d @ n)
@@ -191,7 +191,7 @@ def joint_reach_mm(geometry: JointGeometry, settings: JointSettings, direction: 
                         + settings.plate_thickness_mm * abs(float(side @ n)))  # either side of its plane
         else:
             outer = 0.5 * own + settings.clearance_mm + settings.wall_mm
-            reach = max(reach, _cylinder_reach(0.0, (setback + joint_sleeve_mm(settings, own)) * rise, rise, outer))
+            reach = max(reach, cylinder_reach_mm(0.0, (setback + joint_sleeve_mm(settings, own)) * rise, rise, outer))
     return float(reach)
 
 
@@ -204,6 +204,10 @@ class EndSlots:
     sides: np.ndarray
     lengths: np.ndarray
     width: float
+
+    def fit(self, beam: int, cut_length_mm: float) -> bool:
+        """Whether beam ``beam``'s two slots fit within its cut length (else it is left square-cut)."""
+        return float(self.lengths[beam].sum()) < cut_length_mm
 
 
 def fin_plate_slots(polymesh: PolyMesh, geometries: list[JointGeometry], settings: JointSettings) -> EndSlots:

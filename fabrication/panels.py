@@ -33,7 +33,7 @@ from engine.mesh import PolyMesh
 from engine.parts import panel_id, sheet_id
 from fabrication.dxf import ENGRAVE_STYLE, cutting_layers, new_document, save_dxf
 from fabrication.files import write_text_atomic
-from fabrication.settings import PanelSettings
+from fabrication.settings import GRAIN_DIRECTIONS, PanelSettings
 
 if TYPE_CHECKING:  # pragma: no cover
     from fabrication.nesting_sheets import SheetNesting
@@ -197,10 +197,9 @@ def grain_angle_deg(axes: np.ndarray, normal: np.ndarray, grain: str) -> float |
     ``normal``) that lays its ``grain`` direction along x (PanelSettings.grain): the plan axis "x"
     or "y", or "slope", the fall line (-z in the plane). Where that direction stands square to the
     panel (a flat panel's slope, say), the panel's first axis, its longest side. None for "none"."""
-    if grain == "none":
+    if GRAIN_DIRECTIONS[grain] is None:
         return None
-    direction = {"x": np.array([1.0, 0.0, 0.0]), "y": np.array([0.0, 1.0, 0.0]),
-                 "slope": np.array([0.0, 0.0, -1.0])}[grain]
+    direction = np.asarray(GRAIN_DIRECTIONS[grain])
     in_plane = direction - (direction @ normal) * normal
     u, v = float(in_plane @ axes[0]), float(in_plane @ axes[1])
     if math.hypot(u, v) < 1e-6:
@@ -218,7 +217,7 @@ def panel_seats(panels: list[Panel], loops: list, geometries: dict, joint_settin
     no beam, a split cell's diagonals, have none); ``cells``: each panel's cell. The pieces of a split
     cell move together, along their mean normal, so that they still meet on their diagonals as
     they are cut (each moved along its own normal, the pieces of a sharp fold ran into each other)."""
-    from .joints import joint_reach_mm
+    from .joints import cylinder_reach_mm, joint_reach_mm
 
     up = np.zeros((len(panels), 3))
     lift = np.zeros(len(panels))
@@ -236,8 +235,7 @@ def panel_seats(panels: list[Panel], loops: list, geometries: dict, joint_settin
                 continue
             pa, pb = geometries[a].position_mm, geometries[b].position_mm
             along = float((pb - pa) @ normal / np.linalg.norm(pb - pa))
-            reach.append(max(float(pa @ normal), float(pb @ normal)) - base
-                         + radius * math.sqrt(max(0.0, 1.0 - along * along)))
+            reach.append(cylinder_reach_mm(float(pa @ normal) - base, float(pb @ normal) - base, along, radius))
         up[k], lift[k] = normal, max(reach, default=0.0)
     shift = lift[:, None] * up
     cell = np.arange(len(panels)) if cells is None else np.asarray(cells)

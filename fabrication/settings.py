@@ -46,6 +46,12 @@ class BeamSettings:
                      zero_or_positive=("kerf_mm", "area_m2", "outer_size_mm"))
 
 
+#: The panel directions that can run along a sheet's grain (PanelSettings.grain): a plan axis, or
+#: the fall line (-z in the panel's plane); "none" keeps no grain.
+GRAIN_DIRECTIONS: dict[str, tuple[float, float, float] | None] = {
+    "none": None, "x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "slope": (0.0, 0.0, -1.0)}
+
+
 @dataclass(frozen=True, kw_only=True)
 class PanelSettings:
     """Panel material and cutting settings (lengths in mm, density in kg/m^3). ``grain``: the
@@ -63,14 +69,12 @@ class PanelSettings:
     split_nonplanar: bool = False
     grain: str = "none"
 
-    GRAINS = ("none", "x", "y", "slope")
-
     def __post_init__(self) -> None:
         check_ranges(self, "panel", positive=("thickness_mm", "density"),
                      zero_or_positive=("clearance_mm", "hole_diameter_mm", "hole_inset_mm", "planarity_tolerance_mm"))
-        if self.grain not in self.GRAINS:
-            raise InputError(f"panel setting grain = {self.grain!r} must be one of {', '.join(self.GRAINS)}",
-                             hint=f"set grain to one of {', '.join(self.GRAINS)}")
+        if self.grain not in GRAIN_DIRECTIONS:
+            raise InputError(f"panel setting grain = {self.grain!r} must be one of {', '.join(GRAIN_DIRECTIONS)}",
+                             hint=f"set grain to one of {', '.join(GRAIN_DIRECTIONS)}")
 
 
 @dataclass(frozen=True, kw_only=True)

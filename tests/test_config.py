@@ -290,3 +290,14 @@ def test_the_fabrication_settings_name_the_setting_and_the_fix(settings, same):
         settings(**same)
     assert f"setting {name} = {same[name]!r} must be" in str(refused.value)
     assert refused.value.hint.startswith(f"set {name} ")
+
+
+def test_the_panels_grain_values_are_the_fabrication_settings_own():
+    """[fabrication.panels] grain offers exactly the grains fabrication knows (one table)."""
+    import typing
+
+    from fabrication.settings import GRAIN_DIRECTIONS
+    from workflow.config import PanelsConfig
+
+    assert typing.get_args(PanelsConfig.model_fields["grain"].annotation) == tuple(GRAIN_DIRECTIONS)
+    assert PanelsConfig().grain == "none"

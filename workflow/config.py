@@ -540,7 +540,7 @@ class PanelsConfig(_Section):
     planarity_tolerance: Length = _default_of(PanelSettings, "planarity_tolerance_mm", per=MM, ge=0.0)
     split_nonplanar: bool = _default_of(PanelSettings, "split_nonplanar")
     #: the panel direction laid along the sheets' grain, their length: none, x, y (plan axes) or slope
-    grain: Literal["none", "x", "y", "slope"] = "none"
+    grain: Literal["none", "x", "y", "slope"] = _default_of(PanelSettings, "grain")
 
     def to_settings(self) -> PanelSettings:
         """Fabrication's panel settings (mm), once the Project has resolved thickness, material and density."""

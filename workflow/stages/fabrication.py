@@ -34,6 +34,7 @@ from fabrication.ifc import IfcBeam, IfcJoint, IfcPanel, write_gridshell_ifc
 from fabrication.joints import (
     JOINTS_STEP_LIMIT_BYTES,
     EndSlots,
+    JointGeometry,
     JointSettings,
     JointsInBackground,
     copy_placements,
@@ -205,15 +206,14 @@ def _joint_solids(joints: JointsInBackground, folder: Path, breps: Path) -> Join
                        breps={k: breps / f"{k}.brep" for k in files})
 
 
-def _seats(polymesh: PolyMesh, normals: np.ndarray, sizes_mm: np.ndarray, panels: list, pieces: list,
+def _seats(polymesh: PolyMesh, geometries: list[JointGeometry], sizes_mm: np.ndarray, panels: list, pieces: list,
            joint_settings: JointSettings) -> tuple[np.ndarray, np.ndarray]:
     """Where each panel rests on the joints and tubes (fabrication.panels.panel_seats), from the
     joints' geometry as their solids are built from it."""
     from fabrication.panels import panel_seats
 
-    geometries = {g.node: g for g in joint_geometry(polymesh, normals, sizes_mm)}
     radii = {(min(a, b), max(a, b)): 0.5 * float(s) for (a, b), s in zip(polymesh.edges, sizes_mm)}
-    return panel_seats(panels, [p.loop for p in pieces], geometries, joint_settings, radii,
+    return panel_seats(panels, [p.loop for p in pieces], {g.node: g for g in geometries}, joint_settings, radii,
                        [pieces[panel.face].cell for panel in panels])
 
 
@@ -438,10 +438,10 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
                                 project_name=project.project.name, support_nodes=np.flatnonzero(polymesh.supports))
     joint_radius_mm = getattr(joint_settings, "hub_radius_mm", None) or 1.5 * float(sizes_mm.max())
     # gridshell.step takes the joints' own solids: written once they are built (see run)
-    seats = _seats(polymesh, normals, sizes_mm, panels, pieces, joint_settings)
-    # steel nodes' fin plates enter their tubes through end slots
-    slots = (fin_plate_slots(polymesh, joint_geometry(polymesh, normals, sizes_mm), joint_settings)
-             if joint_settings.kind == "steel" else None)
+    # the joints as their solids are built: the panels rest on them, steel fin plates enter slots
+    geometries = joint_geometry(polymesh, normals, sizes_mm)
+    seats = _seats(polymesh, geometries, sizes_mm, panels, pieces, joint_settings)
+    slots = fin_plate_slots(polymesh, geometries, joint_settings) if joint_settings.kind == "steel" else None
     write_model = partial(_write_model_step, polymesh, panels, seats, table, sizes_mm, walls_mm,
                           panel_settings, joint_radius_mm, folder / "gridshell.step", slots)
     if spheres:
@@ -487,7 +487,8 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     summary["assembly"] = written
     if tubes is not None:  # while the joints build: it needs their geometry only
         clock.start("model: gridshell.ifc")
-        _write_ifc(project, folder, polymesh, normals, table, panels, sizes_mm, walls_mm, joint_settings, seats, slots)
+        _write_ifc(project, folder, polymesh, geometries, table, panels, sizes_mm, walls_mm, joint_settings, seats,
+                   slots)
         summary["ifc"] = "gridshell.ifc"
     return None if spheres else write_model
 
@@ -533,12 +534,12 @@ def _assembly_files(polymesh: PolyMesh, beam: dict, deflection_limit_m: float | 
     return dict(write_assembly(sequence, polymesh, folder))
 
 
-def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, normals: np.ndarray, table, panels: list,
-               sizes: np.ndarray, walls: np.ndarray, joint_settings: JointSettings,
+def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, geometries: list[JointGeometry], table,
+               panels: list, sizes: np.ndarray, walls: np.ndarray, joint_settings: JointSettings,
                seats: tuple[np.ndarray, np.ndarray], slots: EndSlots | None) -> None:
     """gridshell.ifc (fabrication.ifc) from the stage's cut list, panels (resting where ``seats``
-    puts them, as in gridshell.step), panels.csv, sequence.csv and the joints' geometry as the
-    joint solids are built from it."""
+    puts them, as in gridshell.step), panels.csv, sequence.csv and the joints' ``geometries`` as
+    the joint solids are built from them."""
     import pandas as pd
 
     from fabrication.nc1 import grade_name
@@ -558,7 +559,7 @@ def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, normals: np.n
         direction = (end - start) / np.linalg.norm(end - start)
         # the end slots of steel fin plates, as tube_solids cuts them
         ends = (tuple(zip(slots.sides[k], slots.lengths[k]))
-                if slots is not None and float(slots.lengths[k].sum()) < row.cut_length_mm else ())
+                if slots is not None and slots.fit(k, row.cut_length_mm) else ())
         beams.append(IfcBeam(id=row.id, start_mm=start + direction * row.setback_start_mm, direction=direction,
                              cut_length_mm=float(row.cut_length_mm), diameter_mm=float(sizes[k]),
                              wall_mm=float(walls[k]), profile=str(row.profile), mass_kg=float(row.mass_kg),
@@ -582,7 +583,7 @@ def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, normals: np.n
                                sheet=str(sheets.get(panel.id, "")), step=step_of.get(panel.id)))
     joints = []
     settings = joint_settings
-    for g in joint_geometry(polymesh, normals, sizes):
+    for g in geometries:
         own = g.sizes_mm
         size = g.beam_size_mm
         setback = float(joint_setback_mm(settings, size, smallest_angle(g.directions)))
@@ -593,7 +594,8 @@ def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, normals: np.n
                                hub_radius_mm=joint_hub_radius_mm(settings, size),
                                hub_height_mm=joint_hub_height_mm(settings, size),
                                setback_mm=setback, reach_mm=reach, outer_mm=bore + settings.wall_mm, bore_mm=bore,
-                               plate_mm=(settings.plate_thickness_mm, 0.8 * 2.5 * size) if steel else None,
+                               plate_mm=(settings.plate_thickness_mm, 0.8 * joint_hub_height_mm(settings, size))
+                               if steel else None,
                                part_file=f"joints/{joint_id(g.node)}.step"))
     write_gridshell_ifc(folder / "gridshell.ifc", project_name=project.project.name, beams=beams, panels=plates,
                         joints=joints, beam_material=grade_name(project.material.name))
