@@ -337,14 +337,17 @@ def same_joints(geometries: list[JointGeometry], tolerance_rad: float = 1e-3,
             for group in _groups_of_same(geometries, tolerance_rad, tolerance_mm) if len(group) > 1]
 
 
-def copy_placements(geometries: list[JointGeometry], reports: list[dict]) -> dict[str, tuple[str, np.ndarray]]:
+def copy_placements(geometries: list[JointGeometry], reports: list[dict],
+                    groups: list | None = None) -> dict[str, tuple[str, np.ndarray]]:
     """joint id -> (the id of the joint whose solid it is a copy of, the 4 x 4 transform in mm taking
     that joint's placed solid onto this one's) for every joint that the workers built as a turned
-    copy (``copy_of`` in its report); the rotation is ``turned_copy``'s, found again here."""
+    copy (``copy_of`` in its report); the rotation is ``turned_copy``'s, found again here.
+    ``groups``: the groups of equal joints the workers were given (JointsInBackground.groups),
+    else found again."""
     copies = {r["id"]: r["copy_of"] for r in reports if r.get("copy_of")}
     by_name = {joint_name(g.node): g for g in geometries}
     placements: dict[str, tuple[str, np.ndarray]] = {}
-    for group in _groups_of_same(geometries):
+    for group in _groups_of_same(geometries) if groups is None else groups:
         first = geometries[group[0][0]]
         for k, shift in group[1:]:
             name = joint_name(geometries[k].node)
@@ -1041,6 +1044,7 @@ class JointsInBackground:
         self.combined_step = combined_step
         self.combined_bytes = 0  # joints.step's size, written or not (0: not asked for)
         self.breps = None if breps is None else str(breps)
+        self.groups: list = []  # _groups_of_same's groups of equal joints, (index, shift) each
         self._writer: StepAssemblyWriter | None = None
         self._ranges = _id_ranges(len(self.geometries))
         self._latest: tuple[str, float] | None = None
@@ -1073,6 +1077,7 @@ class JointsInBackground:
             # others (their booleans were two thirds of a printed socket's time); most beams first
             groups = _groups_of_same(self.geometries)
             groups.sort(key=lambda group: -len(self.geometries[group[0][0]].directions))
+            self.groups = groups
             self._groups = [tuple((self._jobs[k], shift) for k, shift in group) for group in groups]
             if self.workers > 1 and len(self._jobs) > 4:
                 self._pool = self._stack.enter_context(ProcessPoolExecutor(

@@ -199,7 +199,7 @@ def _joint_solids(joints: JointsInBackground, folder: Path, breps: Path) -> Join
     """The joints' solids for gridshell.step: the built joints' own STEP files (and their .brep
     copies in ``breps``), and the turned copies placed from the joint they copy
     (fabrication.joints.copy_placements)."""
-    copies = copy_placements(joints.geometries, joints.reports)
+    copies = copy_placements(joints.geometries, joints.reports, joints.groups)
     files = {r["id"]: folder / f"{r['id']}.step" for r in joints.reports
              if r.get("built", True) and r["id"] not in copies and (folder / f"{r['id']}.step").is_file()}
     return JointSolids(files=files, copies={k: v for k, v in copies.items() if v[0] in files},
