@@ -18,7 +18,7 @@ import pandas as pd
 from engine.mesh import PolyMesh
 from engine.parts import beam_id, node_id
 
-from .files import atomic_path, stamp_step, stamp_zip
+from .files import atomic_path, stamp_zip, write_assembly_step
 from .joints import EndSlots, JointSettings, joint_geometry, joint_setback_mm, smallest_angle
 from .settings import BeamSettings
 
@@ -210,7 +210,4 @@ def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, out
     assembly = cq.Assembly(name="beams")
     for tube in tubes:
         tube.add_to(assembly)
-    with atomic_path(path) as tmp:
-        assembly.export(str(tmp), "STEP", write_pcurves=False)
-        stamp_step(tmp)
-    return Path(path)
+    return write_assembly_step(assembly, path)

@@ -21,7 +21,7 @@ from pathlib import Path
 from engine.errors import FabricationError
 
 __all__ = ["atomic_path", "atomic_folder", "write_text_atomic", "write_bytes_atomic", "save_dxf", "file_date",
-           "stamp_step", "compact_step_points", "stamp_zip", "stamp_3dm"]
+           "stamp_step", "compact_step_points", "write_assembly_step", "stamp_zip", "stamp_3dm"]
 
 
 def _umask() -> int:
@@ -129,6 +129,58 @@ def stamp_step(path: str | os.PathLike) -> None:
     numbers = itertools.count(1)
     data = _STEP_OCCURRENCE.sub(lambda m: m.group(1) + str(next(numbers)).encode() + m.group(3), data)
     path.write_bytes(canonical_step_styles(data))
+
+
+def write_assembly_step(assembly, target: str | os.PathLike, *, point_decimals: int | None = None) -> Path:
+    """Write a cadquery Assembly as an AP214 STEP file (mm, no p-curves, colours and names),
+    atomically and stamped (``stamp_step``). Every placed component is named as what it places,
+    sub-assemblies too: cadquery's ``Assembly.export`` leaves a sub-assembly's placement unnamed,
+    and readers then call the beam "B0001" by its occurrence's number. ``point_decimals``: points
+    written to so many places (``compact_step_points``). Returns the path."""
+    from cadquery.occ_impl.assembly import toCAF
+    from OCP.IFSelect import IFSelect_ReturnStatus
+    from OCP.Interface import Interface_Static
+    from OCP.STEPCAFControl import STEPCAFControl_Writer
+    from OCP.STEPControl import STEPControl_StepModelType
+    from OCP.TDataStd import TDataStd_Name
+    from OCP.TDF import TDF_Label, TDF_LabelSequence
+    from OCP.XCAFDoc import XCAFDoc_DocumentTool, XCAFDoc_ShapeTool
+    from OCP.XSControl import XSControl_WorkSession
+
+    _, document = toCAF(assembly, True)
+    tool = XCAFDoc_DocumentTool.ShapeTool_s(document.Main())
+    shapes = TDF_LabelSequence()
+    tool.GetShapes(shapes)
+    for i in range(1, shapes.Length() + 1):
+        components = TDF_LabelSequence()
+        XCAFDoc_ShapeTool.GetComponents_s(shapes.Value(i), components)
+        for j in range(1, components.Length() + 1):
+            # IsAttribute before FindAttribute: OCP crashes where FindAttribute finds nothing
+            component, referred, name = components.Value(j), TDF_Label(), TDataStd_Name()
+            if component.IsAttribute(TDataStd_Name.GetID_s()):
+                continue
+            if XCAFDoc_ShapeTool.GetReferredShape_s(component, referred) and \
+                    referred.IsAttribute(TDataStd_Name.GetID_s()) and \
+                    referred.FindAttribute(TDataStd_Name.GetID_s(), name):
+                TDataStd_Name.Set_s(component, name.Get())
+    session = XSControl_WorkSession()  # held here: the writer does not keep it alive
+    writer = STEPCAFControl_Writer(session, False)
+    writer.SetColorMode(True)
+    writer.SetLayerMode(True)
+    writer.SetNameMode(True)
+    # no p-curves (2D copies of the edges on their faces, which readers rebuild): a third of the bytes
+    Interface_Static.SetIVal_s("write.surfacecurve.mode", 0)
+    Interface_Static.SetIVal_s("write.precision.mode", 0)
+    Interface_Static.SetCVal_s("xstep.cascade.unit", "MM")
+    Interface_Static.SetCVal_s("write.step.unit", "MM")
+    writer.Transfer(document, STEPControl_StepModelType.STEPControl_AsIs)
+    with atomic_path(target) as tmp:
+        if writer.Write(str(tmp)) != IFSelect_ReturnStatus.IFSelect_RetDone:
+            raise FabricationError(f"OCCT could not write {Path(target).name}")
+        stamp_step(tmp)
+        if point_decimals is not None:
+            compact_step_points(tmp, point_decimals)
+    return Path(target)
 
 
 _STEP_POINT = re.compile(rb"(?m)^(#\d+) = CARTESIAN_POINT\('((?:[^']|'')*)',\(([-+0-9.E,\s]*)\)\s*\);")

@@ -12,7 +12,7 @@ import numpy as np
 from engine.mesh import PolyMesh
 from engine.parts import beam_id, joint_id
 
-from .files import atomic_path, compact_step_points, stamp_3dm, stamp_step, write_bytes_atomic
+from .files import stamp_3dm, write_assembly_step, write_bytes_atomic
 
 __all__ = ["JointSolids", "write_gridshell_step", "write_gridshell_3dm"]
 
@@ -116,12 +116,7 @@ def write_gridshell_step(polymesh: PolyMesh, panels, path: Path, *, tubes: list 
         face = cq.Face.makeFromWires(wire)
         solid = cq.Solid.extrudeLinear(face, cq.Vector(*(panel_thickness_mm * normal)))
         assembly.add(solid, name=panel.id, color=glass)
-    with atomic_path(path) as tmp:
-        # no p-curves (2D copies of the edges on their faces, which readers rebuild): a third of the bytes
-        assembly.export(str(tmp), "STEP", write_pcurves=False)
-        stamp_step(tmp)
-        compact_step_points(tmp)  # points to 1e-8 mm, as the joints' own files
-    return Path(path)
+    return write_assembly_step(assembly, path, point_decimals=8)  # points to 1e-8 mm, as the joints' files
 
 
 def _location(transform: np.ndarray):

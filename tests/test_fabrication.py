@@ -984,39 +984,40 @@ def test_same_joints_groups_as_comparing_every_pair():
     assert same_joints(joints) == every_pair
 
 
+def _steel_nodes_grid():
+    """A flat grid of two hexagons on steel nodes (48.3 mm tubes): (grid, joint geometries, joint
+    settings, a cut table of id, cut length and start set-back, the fin plates' end slots)."""
+    import pandas as pd
+
+    from fabrication.joints import JointSettings, fin_plate_slots, joint_geometry, joint_setback_mm, smallest_angle
+    from tests.test_panels import hex_polymesh
+
+    grid = hex_polymesh(1, 2, radius=0.6, lift=False)  # flat: the node axes (z) square to the beams
+    normals = np.tile([0.0, 0.0, 1.0], (grid.n_nodes, 1))
+    settings = JointSettings(kind="steel")
+    geometries = joint_geometry(grid, normals, 48.3)
+    setback = {g.node: joint_setback_mm(settings, 48.3, smallest_angle(g.directions)) for g in geometries}
+    e = grid.edges
+    starts = np.array([setback[a] for a in e[:, 0]])
+    cut = 1000 * grid.beam_lengths - starts - np.array([setback[b] for b in e[:, 1]])
+    table = pd.DataFrame({"id": [f"B{k + 1:04d}" for k in range(len(e))], "cut_length_mm": cut,
+                          "setback_start_mm": starts})
+    return grid, geometries, settings, table, fin_plate_slots(grid, geometries, settings)
+
+
 def test_steel_tubes_are_slotted_where_the_fin_plates_enter_and_clear_them():
     """A steel node's fin plates enter their tubes through end slots. The slotted tube's volume is
     the tube's less the slots (the annulus's area within a strip, in closed form, times the slot's
     length); each tube clears the plates of the joints at its ends (OCCT's common volume), where
     the same tube without slots runs through them."""
-    import pandas as pd
     from build123d import Location
     from OCP.BRepAlgoAPI import BRepAlgoAPI_Common
 
     from fabrication.beams import tube_solids
-    from fabrication.joints import (
-        JointSettings,
-        build_joint,
-        fin_plate_slots,
-        joint_geometry,
-        joint_setback_mm,
-        smallest_angle,
-    )
-    from tests.test_panels import hex_polymesh
+    from fabrication.joints import build_joint
 
-    grid = hex_polymesh(1, 2, radius=0.6, lift=False)  # flat: the node axes (z) square to the beams
-    normals = np.tile([0.0, 0.0, 1.0], (grid.n_nodes, 1))
-    size, wall = 48.3, 3.2
-    settings = JointSettings(kind="steel")
-    geometries = joint_geometry(grid, normals, size)
-    setback = {g.node: joint_setback_mm(settings, size, smallest_angle(g.directions)) for g in geometries}
-    e = grid.edges
-    node_length = 1000 * grid.beam_lengths
-    starts = np.array([setback[a] for a in e[:, 0]])
-    cut = node_length - starts - np.array([setback[b] for b in e[:, 1]])
-    table = pd.DataFrame({"id": [f"B{k + 1:04d}" for k in range(len(e))], "cut_length_mm": cut,
-                          "setback_start_mm": starts})
-    slots = fin_plate_slots(grid, geometries, settings)
+    grid, geometries, settings, table, slots = _steel_nodes_grid()
+    size, wall, e, cut = 48.3, 3.2, grid.edges, table["cut_length_mm"].to_numpy()
     slotted = {t.id: t for t in tube_solids(grid, table, outer_size_mm=size, wall_mm=wall, slots=slots)}
     plain = {t.id: t for t in tube_solids(grid, table, outer_size_mm=size, wall_mm=wall)}
 
@@ -1055,6 +1056,31 @@ def test_steel_tubes_are_slotted_where_the_fin_plates_enter_and_clear_them():
                                         for _, shape, location in tube.ends]
         assert sum(common(placed.wrapped, piece) for piece in pieces) < 1.0
         assert common(placed.wrapped, plain[table["id"][k]].body.wrapped) > 1000.0
+
+
+def test_beams_step_names_its_slotted_beams_as_a_reader_sees_them(tmp_path):
+    """Read back with OCCT's XCAF reader, beams.step holds one component per beam named by its id,
+    a slotted beam too (a sub-assembly whose placement cadquery leaves unnamed), and a slotted
+    beam's parts are named tube, start slot and end slot with the beam's volume between them."""
+    import cadquery as cq
+
+    from fabrication.beams import tube_solids, write_beams_step
+
+    grid, _, _, table, slots = _steel_nodes_grid()
+    table = table.iloc[:2]
+    path = write_beams_step(grid, table, tmp_path / "beams.step", outer_size_mm=48.3, wall_mm=3.2, slots=slots)
+    top, parts = _read_assembly(path)
+    assert top == "beams"
+    assert [name for name, _ in parts] == ["B0001", "B0002"]
+    tubes = tube_solids(grid, table, outer_size_mm=48.3, wall_mm=3.2, slots=slots)
+    assert all(tube.ends for tube in tubes)
+    for (name, shape), tube in zip(parts, tubes):
+        expected = _volume(tube.body.wrapped) + sum(
+            _volume(end.moved(cq.Location(location.wrapped)).wrapped) for _, end, location in tube.ends)
+        assert _volume(shape) == pytest.approx(expected, rel=1e-6), name
+    text = path.read_text()
+    for piece in ("B0001 tube", "B0001 start slot", "B0001 end slot"):
+        assert f"'{piece}'" in text
 
 
 @slow
