@@ -19,11 +19,11 @@ from engine.mesh import PolyMesh
 from engine.parts import beam_id, node_id
 
 from .files import atomic_path, stamp_zip, write_assembly_step
-from .joints import EndSlots, JointSettings, joint_geometry, joint_setback_mm, smallest_angle
+from .joints import EndSlots, JointSettings, geometry_setback_mm, joint_geometry
 from .settings import BeamSettings
 
-__all__ = ["BeamSettings", "cut_list", "write_cut_list", "TubeAsCut", "tube_solids", "write_beams_step",
-           "roll_angles_deg"]
+__all__ = ["BeamSettings", "cut_list", "write_cut_list", "RectangularSection", "TubeAsCut", "tube_solids",
+           "write_beams_step", "roll_angles_deg"]
 
 
 def roll_angles_deg(polymesh: PolyMesh, normals: np.ndarray) -> np.ndarray:
@@ -57,8 +57,7 @@ def cut_list(polymesh: PolyMesh, normals: np.ndarray, settings: BeamSettings, jo
     setback = np.zeros(polymesh.n_nodes)
     sizes = settings.outer_size_mm if outer_sizes_mm is None else np.asarray(outer_sizes_mm, dtype=float)
     for geometry in joint_geometry(polymesh, normals, sizes):
-        setback[geometry.node] = joint_setback_mm(joint_settings, geometry.beam_size_mm,
-                                                  smallest_angle(geometry.directions))
+        setback[geometry.node] = geometry_setback_mm(joint_settings, geometry)
     # to the saw's 0.1 mm, never into a joint: set-backs rounded up, the cut length down; a beam
     # shorter than its two joints take keeps a zero cut length (the caller reports it)
     setback = np.ceil(np.round(10 * setback, 6)) / 10
@@ -100,16 +99,39 @@ def write_cut_list(table: pd.DataFrame, folder: Path) -> tuple[Path, Path]:
     return folder / "cutlist.csv", folder / "cutlist.xlsx"
 
 
-def _slotted_end(size: float, wall: float | None, width: float, length: float):
-    """A tube's end of ``length`` (mm) with a slot ``width`` wide through both walls, along local z
-    from the origin, the slot across local x: the annulus (or disc) prism less the slot, once per
-    size (the tubes place it again)."""
-    from build123d import Align, Box, Circle, Cylinder, Solid, Vector
+@dataclass(frozen=True)
+class RectangularSection:
+    """A rectangular section as cut (mm): ``height_mm`` along each beam's ``up`` (b, 3) unit vectors
+    (the analysis's local z: engine.structure.grid_model.beam_up_vectors), ``width_mm`` across."""
 
-    if wall is None:
-        prism = Cylinder(0.5 * size, length, align=(Align.CENTER, Align.CENTER, Align.MIN))
+    height_mm: float
+    width_mm: float
+    up: np.ndarray
+
+
+def _profile_face(size: float, wall: float | None, rectangle: tuple[float, float, float] | None):
+    """The section as a face on local xy (mm): a disc or annulus of outer ``size``, or where
+    ``rectangle`` (height, width, turn in degrees from local y) is given a rectangle, hollow by
+    ``wall`` where given."""
+    from build123d import Circle, Rectangle
+
+    if rectangle is None:
+        outer, inner = Circle(0.5 * size), None if wall is None else Circle(0.5 * size - wall)
     else:
-        prism = Solid.extrude((Circle(0.5 * size) - Circle(0.5 * size - wall)).faces()[0], Vector(0, 0, length))
+        height, width, turn = rectangle
+        outer = Rectangle(width, height, rotation=turn)
+        inner = None if wall is None else Rectangle(width - 2 * wall, height - 2 * wall, rotation=turn)
+    return (outer if inner is None else outer - inner).faces()[0]
+
+
+def _slotted_end(size: float, wall: float | None, width: float, length: float,
+                 rectangle: tuple[float, float, float] | None = None):
+    """A beam's end of ``length`` (mm) with a slot ``width`` wide through both walls, along local z
+    from the origin, the slot across local x: the section's prism (``_profile_face``) less the
+    slot, once per size (the beams place it again)."""
+    from build123d import Align, Box, Solid, Vector
+
+    prism = Solid.extrude(_profile_face(size, wall, rectangle), Vector(0, 0, length))
     slot = Box(width, 2 * size, 2 * length, align=(Align.CENTER, Align.CENTER, Align.CENTER))
     return prism - slot
 
@@ -142,22 +164,24 @@ class TubeAsCut:
 
 def tube_solids(polymesh: PolyMesh, table: pd.DataFrame, *, outer_size_mm: float | np.ndarray,
                 wall_mm: float | np.ndarray | None = None, profile_per_tube: bool = True,
-                slots: EndSlots | None = None) -> list[TubeAsCut]:
-    """Every beam as cut (mm): a tube of outer size and ``wall_mm`` (an annulus extruded, no
-    boolean), or a rod where no wall is given, of its cut length, placed between its joints; a beam
-    of zero cut length (shorter than its joints take, reported by the caller) has none.
+                slots: EndSlots | None = None, rectangle: RectangularSection | None = None) -> list[TubeAsCut]:
+    """Every beam as cut (mm): its section (a tube of outer size and ``wall_mm``, a rod where no
+    wall is given, or ``rectangle`` turned to each beam's up, hollow by ``wall_mm`` where given)
+    extruded to its cut length, no boolean, placed between its joints; a beam of zero cut length
+    (shorter than its joints take, reported by the caller) has none.
     ``slots``: steel fin plates' end slots (fabrication.joints.fin_plate_slots): such a beam is its
     middle prism and its two slotted ends, each a placed copy of one slotted end per size (no
-    boolean per tube). ``profile_per_tube`` False extrudes every tube from one shared profile face
-    (the scheme before, kept for benchmarks/fabrication_speed.py: the same file, built in time
-    growing as the square of the tubes)."""
-    from build123d import Align, Circle, Cylinder, Location, Plane, Solid, Vector
+    boolean per beam; a rectangle's ends per turn of its section to the slot, to 0.1 degree).
+    ``profile_per_tube`` False extrudes every tube from one shared profile face (the scheme before,
+    kept for benchmarks/fabrication_speed.py: the same file, built in time growing as the square of
+    the tubes)."""
+    from build123d import Location, Plane, Solid, Vector
 
     e = polymesh.edges
     tubes = []
     sizes = np.broadcast_to(np.asarray(outer_size_mm, dtype=float), (len(e),))
     walls = None if wall_mm is None else np.broadcast_to(np.asarray(wall_mm, dtype=float), (len(e),))
-    annuli: dict[tuple[float, float], object] = {}
+    faces: dict[tuple, object] = {}
     shared: dict[tuple, object] = {}
     if slots is not None:
         import cadquery as cq
@@ -167,31 +191,40 @@ def tube_solids(polymesh: PolyMesh, table: pd.DataFrame, *, outer_size_mm: float
         start, end = 1000 * polymesh.nodes[a], 1000 * polymesh.nodes[b]
         direction = (end - start) / np.linalg.norm(end - start)
         origin = start + direction * row.setback_start_mm
-        wall = None if walls is None or not 0 < walls[k] < 0.5 * size else float(walls[k])
+        least = size if rectangle is None else min(rectangle.height_mm, rectangle.width_mm)
+        wall = None if walls is None or not 0 < walls[k] < 0.5 * least else float(walls[k])
+        section = None if rectangle is None else (float(rectangle.height_mm), float(rectangle.width_mm), 0.0)
+        # the section's local x: across a rectangle's height (its up), any square to a round one
+        across = None if rectangle is None else np.cross(rectangle.up[k], direction)
         slotted = slots is not None and slots.fit(k, row.cut_length_mm)
         ends_mm = slots.lengths[k] if slots is not None and slotted else np.zeros(2)
         length = float(row.cut_length_mm - ends_mm.sum())
-        if wall is None:
-            solid = Cylinder(0.5 * size, length, align=(Align.CENTER, Align.CENTER, Align.MIN))
-        else:
-            key = (float(size), wall)
-            if key not in annuli:
-                annuli[key] = (Circle(0.5 * size) - Circle(0.5 * size - wall)).faces()[0]
-            # a copy of the profile per tube: prisms of one shared face made the build and the
-            # STEP export grow as the square of the tubes (4500 tubes: 75 s, with copies 12 s)
-            profile = copy.deepcopy(annuli[key]) if profile_per_tube else annuli[key]
-            solid = Solid.extrude(profile, Vector(0, 0, length))
-        solid = solid.moved(Location(Plane(origin=tuple(map(float, origin + ends_mm[0] * direction)),
-                                           z_dir=tuple(map(float, direction)))))
+        key = (float(size), wall, section)
+        if key not in faces:
+            faces[key] = _profile_face(float(size), wall, section)
+        # a copy of the profile per tube: prisms of one shared face made the build and the
+        # STEP export grow as the square of the tubes (4500 tubes: 75 s, with copies 12 s)
+        profile = copy.deepcopy(faces[key]) if profile_per_tube else faces[key]
+        solid = Solid.extrude(profile, Vector(0, 0, length))
+        at = tuple(map(float, origin + ends_mm[0] * direction))
+        plane = (Plane(origin=at, z_dir=tuple(map(float, direction))) if across is None else
+                 Plane(origin=at, x_dir=tuple(map(float, across)), z_dir=tuple(map(float, direction))))
+        solid = solid.moved(Location(plane))
         solid.label = row.id
         ends = []
         if slots is not None and slotted:
-            for i, (at, inward) in enumerate(((origin, direction),
-                                              (origin + row.cut_length_mm * direction, -direction))):
-                key2 = (float(size), wall, float(slots.width), float(slots.lengths[k, i]))
+            for i, (at_end, inward) in enumerate(((origin, direction),
+                                                  (origin + row.cut_length_mm * direction, -direction))):
+                side = slots.sides[k, i]
+                shape = section
+                if rectangle is not None:  # the rectangle's turn in the slot's axes: its height along up
+                    y = np.cross(inward, side)
+                    turn = np.degrees(np.arctan2(np.cross(y, rectangle.up[k]) @ inward, y @ rectangle.up[k]))
+                    shape = (section[0], section[1], round(float(turn), 1) % 360.0)
+                key2 = (float(size), wall, float(slots.width), float(slots.lengths[k, i]), shape)
                 if key2 not in shared:
                     shared[key2] = cq.Shape.cast(_slotted_end(*key2).wrapped)
-                place = Plane(origin=tuple(map(float, at)), x_dir=tuple(map(float, slots.sides[k, i])),
+                place = Plane(origin=tuple(map(float, at_end)), x_dir=tuple(map(float, side)),
                               z_dir=tuple(map(float, inward)))
                 ends.append(("start slot" if i == 0 else "end slot", shared[key2], Location(place)))
         tubes.append(TubeAsCut(id=row.id, body=solid, ends=tuple(ends)))
@@ -200,13 +233,13 @@ def tube_solids(polymesh: PolyMesh, table: pd.DataFrame, *, outer_size_mm: float
 
 def write_beams_step(polymesh: PolyMesh, table: pd.DataFrame, path: Path, *, outer_size_mm: float | np.ndarray,
                      wall_mm: float | np.ndarray | None = None, profile_per_tube: bool = True,
-                     slots: EndSlots | None = None) -> Path:
+                     slots: EndSlots | None = None, rectangle: RectangularSection | None = None) -> Path:
     """beams.step: the assembly "beams" of every beam as cut (``tube_solids``): one named part per
     beam, or a named sub-assembly of its prism and its slotted ends (steel fin plates)."""
     import cadquery as cq
 
     tubes = tube_solids(polymesh, table, outer_size_mm=outer_size_mm, wall_mm=wall_mm,
-                        profile_per_tube=profile_per_tube, slots=slots)
+                        profile_per_tube=profile_per_tube, slots=slots, rectangle=rectangle)
     assembly = cq.Assembly(name="beams")
     for tube in tubes:
         tube.add_to(assembly)

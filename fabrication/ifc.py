@@ -25,7 +25,9 @@ __all__ = ["IfcBeam", "IfcPanel", "IfcJoint", "write_gridshell_ifc"]
 
 @dataclass(frozen=True, kw_only=True)
 class IfcBeam:
-    """A beam between its joints: start point and unit direction (mm), cut length, tube (mm).
+    """A beam between its joints: start point and unit direction (mm), cut length and section (mm):
+    round of outer diameter ``size_mm``, or where ``width_mm`` is given a rectangle ``size_mm`` high
+    along the unit ``up``; hollow by ``wall_mm`` (0: solid).
     ``slots``: (unit direction across the slot, its length in mm) at the start and at the end, where
     steel fin plates enter (fabrication.joints.fin_plate_slots), ``slot_width_mm`` wide."""
 
@@ -33,10 +35,12 @@ class IfcBeam:
     start_mm: np.ndarray
     direction: np.ndarray
     cut_length_mm: float
-    diameter_mm: float
+    size_mm: float
     wall_mm: float
     profile: str
     mass_kg: float
+    width_mm: float | None = None
+    up: np.ndarray | None = None
     step: int | None = None
     slots: tuple = ()
     slot_width_mm: float = 0.0
@@ -91,7 +95,7 @@ def _frame(origin_mm: np.ndarray, z: np.ndarray, x: np.ndarray | None = None) ->
 
 
 def write_gridshell_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: list[IfcPanel],
-                        joints: list[IfcJoint], beam_material: str) -> Path:
+                        joints: list[IfcJoint], beam_material: str, beam_category: str = "steel") -> Path:
     """Write the IFC4 model (atomically); see the module docstring.
 
     ifcopenshell appends its ``express`` folder to ``sys.path`` as it works, and that folder's
@@ -101,13 +105,29 @@ def write_gridshell_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], 
     saved = list(sys.path)
     try:
         return _write_ifc(path, project_name=project_name, beams=beams, panels=panels, joints=joints,
-                          beam_material=beam_material)
+                          beam_material=beam_material, beam_category=beam_category)
     finally:
         sys.path[:] = saved
 
 
+def _profile(model, beam: IfcBeam):
+    """The beam's section as an IFC profile (mm): circle or rectangle, hollow where it has a wall."""
+    hollow = beam.wall_mm > 0
+    if beam.width_mm is None:
+        if hollow:
+            return model.create_entity("IfcCircleHollowProfileDef", ProfileType="AREA", ProfileName=beam.profile,
+                                       Radius=0.5 * beam.size_mm, WallThickness=beam.wall_mm)
+        return model.create_entity("IfcCircleProfileDef", ProfileType="AREA", ProfileName=beam.profile,
+                                   Radius=0.5 * beam.size_mm)
+    if hollow:  # XDim across, YDim along the member's local y (its up)
+        return model.create_entity("IfcRectangleHollowProfileDef", ProfileType="AREA", ProfileName=beam.profile,
+                                   XDim=float(beam.width_mm), YDim=float(beam.size_mm), WallThickness=beam.wall_mm)
+    return model.create_entity("IfcRectangleProfileDef", ProfileType="AREA", ProfileName=beam.profile,
+                               XDim=float(beam.width_mm), YDim=float(beam.size_mm))
+
+
 def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: list[IfcPanel],
-               joints: list[IfcJoint], beam_material: str) -> Path:
+               joints: list[IfcJoint], beam_material: str, beam_category: str) -> Path:
     import ifcopenshell
     import ifcopenshell.api.aggregate as aggregate
     import ifcopenshell.api.context as context
@@ -150,18 +170,17 @@ def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: l
 
     products = []
     profiles: dict[str, object] = {}
-    steel = material.add_material(model, name=beam_material, category="steel")
+    steel = material.add_material(model, name=beam_material, category=beam_category)
     members = []
     for beam in beams:
         member = root.create_entity(model, ifc_class="IfcMember", name=beam.id, predefined_type="MEMBER")
         if beam.profile not in profiles:
-            profiles[beam.profile] = model.create_entity(
-                "IfcCircleHollowProfileDef", ProfileType="AREA", ProfileName=beam.profile,
-                Radius=0.5 * beam.diameter_mm, WallThickness=beam.wall_mm)
+            profiles[beam.profile] = _profile(model, beam)
         representation = geometry.add_profile_representation(model, context=body, profile=profiles[beam.profile],
                                                               depth=beam.cut_length_mm / 1000.0)
         geometry.assign_representation(model, product=member, representation=representation)
-        frame = _frame(beam.start_mm, beam.direction)
+        # a rectangle's height (the profile's y) along the beam's up: local x = up x direction
+        frame = _frame(beam.start_mm, beam.direction, None if beam.up is None else np.cross(beam.up, beam.direction))
         place(member, frame)
         for end, (side, length) in enumerate(beam.slots):
             # the end slot as an opening that voids the member, in the member's own axes (mm)
@@ -170,7 +189,7 @@ def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: l
                 np.array([0.0, 0.0, beam.cut_length_mm]), np.array([0.0, 0.0, -1.0]))
             opening = root.create_entity(model, ifc_class="IfcOpeningElement", name=f"{beam.id} slot {end + 1}")
             strip = model.create_entity("IfcRectangleProfileDef", ProfileType="AREA", XDim=float(beam.slot_width_mm),
-                                        YDim=float(2 * beam.diameter_mm))
+                                        YDim=float(2 * max(beam.size_mm, beam.width_mm or 0.0)))
             up = model.create_entity("IfcDirection", DirectionRatios=(0.0, 0.0, 1.0))
             solid = model.create_entity("IfcExtrudedAreaSolid", SweptArea=strip, ExtrudedDirection=up,
                                         Position=axes(_frame(at, inward, across)), Depth=float(length))

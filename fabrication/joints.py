@@ -45,10 +45,11 @@ from .settings import check_ranges
 from .step_assembly import StepAssemblyWriter, step_part, write_step_part
 from .workers import StepOutcome, exit_with_parent, run_steps
 
-__all__ = ["JointKind", "JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "joint_hub_radius_mm",
-           "joint_sleeve_mm", "smallest_angle", "build_joint", "build_joint_and_blank", "build_joints", "same_joints",
-           "JointsInBackground", "joint_name", "copy_placements", "joint_hub_height_mm", "joint_reach_mm",
-           "cylinder_reach_mm", "EndSlots", "fin_plate_slots"]
+__all__ = ["JointKind", "JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm",
+           "geometry_setback_mm", "joint_hub_radius_mm", "joint_sleeve_mm", "smallest_angle", "build_joint",
+           "build_joint_and_blank", "build_joints", "same_joints", "JointsInBackground", "joint_name",
+           "copy_placements", "joint_hub_height_mm", "joint_reach_mm", "cylinder_reach_mm", "EndSlots",
+           "fin_plate_slots"]
 
 ENGRAVE_DEPTH_MM = 0.6
 #: The printed joint's STL: largest distance between a triangle and the surface (mm) and largest
@@ -143,18 +144,31 @@ def joint_sleeve_mm(settings: JointSettings, beam_size_mm: float) -> float:
 
 
 def joint_setback_mm(settings: JointSettings, beam_size_mm: float,
-                     smallest_angle_rad: float | np.ndarray = 2 * np.pi / 3) -> float | np.ndarray:
+                     smallest_angle_rad: float | np.ndarray = 2 * np.pi / 3,
+                     rise: float = 0.0) -> float | np.ndarray:
     """Distance from the node to where a beam ends (the socket's bore start, the steel tube's end), mm:
     outside the hub, and far enough that two beams at the smallest angle keep apart (sockets: the
-    least wall between two bores; steel: 5 mm between two tubes). Vectorised over the angles."""
+    least wall between two bores; steel: 5 mm between two tubes). Vectorised over the angles.
+    ``rise``: the largest |sine| of a beam's angle to the plane square to the node's axis; a steel
+    node's tube that rises so clears the hub with the edge of its end that leans towards the axis
+    (half the beam size times the rise nearer the axis, the end's centre the cosine as far out)."""
     half = np.maximum(np.sin(0.5 * np.asarray(smallest_angle_rad, dtype=float)), 0.05)
     hub = joint_hub_radius_mm(settings, beam_size_mm)
     if settings.kind == "steel":
-        setback = np.maximum(hub + 5.0, (0.5 * beam_size_mm + 2.5) / half)
+        rise = min(abs(float(rise)), 0.95)
+        clear_hub = (hub + 5.0 + 0.5 * beam_size_mm * rise) / math.sqrt(1.0 - rise * rise)
+        setback = np.maximum(clear_hub, (0.5 * beam_size_mm + 2.5) / half)
     else:
         bore = 0.5 * beam_size_mm + settings.clearance_mm
         setback = np.maximum((2 * bore + settings.min_wall_mm) / (2 * half), 0.8 * hub)
     return float(setback) if setback.ndim == 0 else setback
+
+
+def geometry_setback_mm(settings: JointSettings, geometry: JointGeometry) -> float:
+    """``joint_setback_mm`` of a joint: at its beams' smallest angle and, for a steel node, clear of
+    the hub for its steepest beam (``rise``)."""
+    rise = float(np.abs(geometry.directions @ geometry.axis).max()) if len(geometry.directions) else 0.0
+    return float(joint_setback_mm(settings, geometry.beam_size_mm, smallest_angle(geometry.directions), rise))
 
 
 def joint_hub_height_mm(settings: JointSettings, beam_size_mm: float) -> float:
@@ -180,7 +194,7 @@ def joint_reach_mm(geometry: JointGeometry, settings: JointSettings, direction: 
     hub_radius, height = joint_hub_radius_mm(settings, size), joint_hub_height_mm(settings, size)
     along = float(geometry.axis @ n)
     reach = cylinder_reach_mm(-0.5 * height * along, 0.5 * height * along, along, hub_radius)
-    setback = joint_setback_mm(settings, size, smallest_angle(geometry.directions))
+    setback = geometry_setback_mm(settings, geometry)
     for d, own in zip(geometry.directions, geometry.sizes_mm):
         rise = float(d @ n)
         if settings.kind == "steel":
@@ -714,7 +728,7 @@ def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings, *, b
     bore = 0.5 * size + settings.clearance_mm
     outer = bore + settings.wall_mm
     angle = smallest_angle(directions)
-    setback = joint_setback_mm(settings, size, angle)
+    setback = geometry_setback_mm(settings, geometry)
     sleeve = joint_sleeve_mm(settings, size)
     report = {"id": name, "node": geometry.node, "beams": int(len(directions)), "setback_mm": setback,
               "smallest_angle_deg": float(np.degrees(angle))}

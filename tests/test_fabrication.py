@@ -984,19 +984,22 @@ def test_same_joints_groups_as_comparing_every_pair():
     assert same_joints(joints) == every_pair
 
 
-def _steel_nodes_grid():
-    """A flat grid of two hexagons on steel nodes (48.3 mm tubes): (grid, joint geometries, joint
-    settings, a cut table of id, cut length and start set-back, the fin plates' end slots)."""
+def _steel_nodes_grid(tilt_deg: float = 0.0, size_mm: float = 48.3):
+    """A flat grid of two hexagons on steel nodes for beams of ``size_mm``, the node axes turned
+    ``tilt_deg`` from the plane's normal about x (so that beams along y rise from the nodes' planes):
+    (grid, joint geometries, joint settings, a cut table of id, cut length and start set-back, the fin
+    plates' end slots)."""
     import pandas as pd
 
-    from fabrication.joints import JointSettings, fin_plate_slots, joint_geometry, joint_setback_mm, smallest_angle
+    from fabrication.joints import JointSettings, fin_plate_slots, geometry_setback_mm, joint_geometry
     from tests.test_panels import hex_polymesh
 
-    grid = hex_polymesh(1, 2, radius=0.6, lift=False)  # flat: the node axes (z) square to the beams
-    normals = np.tile([0.0, 0.0, 1.0], (grid.n_nodes, 1))
+    grid = hex_polymesh(1, 2, radius=0.6, lift=False)
+    tilt = np.radians(tilt_deg)
+    normals = np.tile([0.0, -np.sin(tilt), np.cos(tilt)], (grid.n_nodes, 1))
     settings = JointSettings(kind="steel")
-    geometries = joint_geometry(grid, normals, 48.3)
-    setback = {g.node: joint_setback_mm(settings, 48.3, smallest_angle(g.directions)) for g in geometries}
+    geometries = joint_geometry(grid, normals, size_mm)
+    setback = {g.node: geometry_setback_mm(settings, g) for g in geometries}
     e = grid.edges
     starts = np.array([setback[a] for a in e[:, 0]])
     cut = 1000 * grid.beam_lengths - starts - np.array([setback[b] for b in e[:, 1]])
@@ -1005,13 +1008,66 @@ def _steel_nodes_grid():
     return grid, geometries, settings, table, fin_plate_slots(grid, geometries, settings)
 
 
+def _common_volume(shape_a, shape_b) -> float:
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Common
+
+    return _volume(BRepAlgoAPI_Common(shape_a, shape_b).Shape())
+
+
+def _pieces(tube) -> list:
+    """A beam as cut's solids (OCP shapes): its prism and its placed slotted ends."""
+    import cadquery as cq
+
+    return [tube.body.wrapped] + [shape.moved(cq.Location(location.wrapped)).wrapped
+                                  for _, shape, location in tube.ends]
+
+
+@pytest.mark.parametrize("section", ["CHS 48.3 x 3.2", "rectangle 80 x 40"])
+def test_beams_rising_from_a_steel_nodes_plane_clear_its_hub_and_plates(section):
+    """Node axes turned 15 degrees from the grid's normal: beams rise from the nodes' planes. Every
+    beam as cut, round or rectangular, clears the joints at both its ends (OCCT's common volume);
+    a rectangle is its height along the beam's up and its width across (its vertices' spans), and
+    its slotted ends lie within the beam's unslotted prism."""
+    from build123d import Location
+
+    from engine.structure.grid_model import beam_up_vectors
+    from fabrication.beams import RectangularSection, tube_solids
+    from fabrication.joints import build_joint
+
+    rectangle = section.startswith("rectangle")
+    size = 80.0 if rectangle else 48.3
+    grid, geometries, settings, table, slots = _steel_nodes_grid(tilt_deg=15.0, size_mm=size)
+    normals = np.array([g.axis for g in sorted(geometries, key=lambda g: g.node)])
+    shape = RectangularSection(80.0, 40.0, beam_up_vectors(grid, normals)) if rectangle else None
+    wall = None if rectangle else 3.2
+    tubes = tube_solids(grid, table, outer_size_mm=size, wall_mm=wall, slots=slots, rectangle=shape)
+    assert all(len(t.ends) == 2 for t in tubes)
+    for g in geometries:
+        joint, _ = build_joint(g, settings)
+        placed = joint.moved(Location(tuple(map(float, g.position_mm)))).wrapped
+        for k, (a, b) in enumerate(grid.edges):
+            if g.node in (a, b):
+                assert sum(_common_volume(placed, piece) for piece in _pieces(tubes[k])) < 1.0, (g.node, k)
+    if rectangle:
+        from OCP.BRepBuilderAPI import BRepBuilderAPI_Copy  # noqa: F401  (OCP's topology loads with it)
+
+        plain = tube_solids(grid, table, outer_size_mm=size, rectangle=shape)
+        for k, (tube, whole) in enumerate(zip(tubes, plain)):
+            corners = np.array([tuple(v) for v in whole.body.vertices()])
+            direction = grid.nodes[grid.edges[k, 1]] - grid.nodes[grid.edges[k, 0]]
+            direction /= np.linalg.norm(direction)
+            assert np.ptp(corners @ shape.up[k]) == pytest.approx(80.0, abs=1e-6)
+            assert np.ptp(corners @ np.cross(shape.up[k], direction)) == pytest.approx(40.0, abs=1e-6)
+            for end in _pieces(tube)[1:]:
+                assert _common_volume(end, whole.body.wrapped) == pytest.approx(_volume(end), rel=1e-6)
+
+
 def test_steel_tubes_are_slotted_where_the_fin_plates_enter_and_clear_them():
     """A steel node's fin plates enter their tubes through end slots. The slotted tube's volume is
     the tube's less the slots (the annulus's area within a strip, in closed form, times the slot's
     length); each tube clears the plates of the joints at its ends (OCCT's common volume), where
     the same tube without slots runs through them."""
     from build123d import Location
-    from OCP.BRepAlgoAPI import BRepAlgoAPI_Common
 
     from fabrication.beams import tube_solids
     from fabrication.joints import build_joint
@@ -1028,15 +1084,10 @@ def test_steel_tubes_are_slotted_where_the_fin_plates_enter_and_clear_them():
     annulus = np.pi * (size**2 - (size - 2 * wall) ** 2) / 4
     removed = strip(0.5 * size, slots.width) - strip(0.5 * size - wall, slots.width)
 
-    def ends_volume(tube) -> float:
-        import cadquery as cq
-
-        return sum(_volume(shape.moved(cq.Location(location.wrapped)).wrapped) for _, shape, location in tube.ends)
-
     for k, beam in enumerate(table["id"]):
         tube = slotted[beam]
         assert len(tube.ends) == 2
-        total = _volume(tube.body.wrapped) + ends_volume(tube)
+        total = sum(_volume(piece) for piece in _pieces(tube))
         expected = annulus * cut[k] - removed * slots.lengths[k].sum()
         assert total == pytest.approx(expected, rel=1e-6), beam
     node = max(geometries, key=lambda g: len(g.directions))
@@ -1045,25 +1096,15 @@ def test_steel_tubes_are_slotted_where_the_fin_plates_enter_and_clear_them():
     incident = [k for k, (a, b) in enumerate(e) if node.node in (a, b)]
     assert len(incident) == 3
 
-    def common(shape_a, shape_b) -> float:
-        return _volume(BRepAlgoAPI_Common(shape_a, shape_b).Shape())
-
-    import cadquery as cq
-
     for k in incident:
-        tube = slotted[table["id"][k]]
-        pieces = [tube.body.wrapped] + [shape.moved(cq.Location(location.wrapped)).wrapped
-                                        for _, shape, location in tube.ends]
-        assert sum(common(placed.wrapped, piece) for piece in pieces) < 1.0
-        assert common(placed.wrapped, plain[table["id"][k]].body.wrapped) > 1000.0
+        assert sum(_common_volume(placed.wrapped, piece) for piece in _pieces(slotted[table["id"][k]])) < 1.0
+        assert _common_volume(placed.wrapped, plain[table["id"][k]].body.wrapped) > 1000.0
 
 
 def test_beams_step_names_its_slotted_beams_as_a_reader_sees_them(tmp_path):
     """Read back with OCCT's XCAF reader, beams.step holds one component per beam named by its id,
     a slotted beam too (a sub-assembly whose placement cadquery leaves unnamed), and a slotted
     beam's parts are named tube, start slot and end slot with the beam's volume between them."""
-    import cadquery as cq
-
     from fabrication.beams import tube_solids, write_beams_step
 
     grid, _, _, table, slots = _steel_nodes_grid()
@@ -1075,8 +1116,7 @@ def test_beams_step_names_its_slotted_beams_as_a_reader_sees_them(tmp_path):
     tubes = tube_solids(grid, table, outer_size_mm=48.3, wall_mm=3.2, slots=slots)
     assert all(tube.ends for tube in tubes)
     for (name, shape), tube in zip(parts, tubes):
-        expected = _volume(tube.body.wrapped) + sum(
-            _volume(end.moved(cq.Location(location.wrapped)).wrapped) for _, end, location in tube.ends)
+        expected = sum(_volume(piece) for piece in _pieces(tube))
         assert _volume(shape) == pytest.approx(expected, rel=1e-6), name
     text = path.read_text()
     for piece in ("B0001 tube", "B0001 start slot", "B0001 end slot"):

@@ -65,7 +65,7 @@ def test_writing_the_ifc_leaves_the_project_templates_importable(tmp_path):
             "from pathlib import Path\n"
             "from fabrication.ifc import IfcBeam, write_gridshell_ifc\n"
             "beam = IfcBeam(id='B0001', start_mm=np.zeros(3), direction=np.array([1.0, 0, 0]), cut_length_mm=100.0,\n"
-            "               diameter_mm=10.0, wall_mm=1.0, profile='CHS 10x1', mass_kg=1.0)\n"
+            "               size_mm=10.0, wall_mm=1.0, profile='CHS 10x1', mass_kg=1.0)\n"
             f"write_gridshell_ifc(Path({str(tmp_path / 'a.ifc')!r}), project_name='t', beams=[beam], panels=[],\n"
             "                    joints=[], beam_material='S355')\n"
             "print(r.files('templates').joinpath('report.html').is_file())\n")
@@ -87,7 +87,7 @@ def test_a_steel_nodes_tube_is_voided_by_its_end_slots(tmp_path):
 
     D, t, cut, width, lengths = 48.3, 3.2, 1000.0, 20.0, (150.0, 100.0)
     common = dict(id="B0001", start_mm=np.zeros(3), direction=np.array([1.0, 0.0, 0.0]), cut_length_mm=cut,
-                  diameter_mm=D, wall_mm=t, profile="CHS 48.3x3.2", mass_kg=4.0)
+                  size_mm=D, wall_mm=t, profile="CHS 48.3x3.2", mass_kg=4.0)
     sides = (np.array([0.0, 0.0, 1.0]), np.array([0.0, np.sqrt(0.5), np.sqrt(0.5)]))
     volumes = {}
     for name, beam in (("plain", IfcBeam(**common)),
@@ -110,3 +110,36 @@ def test_a_steel_nodes_tube_is_voided_by_its_end_slots(tmp_path):
 
     removed = (strip(0.5 * D) - strip(0.5 * D - t)) * sum(lengths)
     assert volumes["plain"] - volumes["slotted"] == pytest.approx(removed, rel=0.005)
+
+
+@pytest.mark.parametrize("wall", [0.0, 8.0])
+def test_a_rectangular_member_is_its_section_turned_to_the_beams_up(tmp_path, wall):
+    """A rectangular beam (glulam, or a hollow section) is swept as its rectangle: ifcopenshell's
+    geometry engine gives the area times the cut length, and in world coordinates the member spans its
+    height along the beam's up and its width across."""
+    import ifcopenshell.geom
+    import ifcopenshell.util.shape as shape
+
+    from fabrication.ifc import IfcBeam, write_gridshell_ifc
+
+    h, w, cut = 200.0, 100.0, 1500.0
+    direction = np.array([1.0, 1.0, 0.5]) / 1.5
+    up = np.array([-0.3, 0.1, 1.0])
+    up -= (up @ direction) * direction
+    up /= np.linalg.norm(up)
+    beam = IfcBeam(id="B0001", start_mm=np.array([100.0, 200.0, 300.0]), direction=direction, cut_length_mm=cut,
+                   size_mm=h, width_mm=w, up=up, wall_mm=wall, profile="GL24h 200x100", mass_kg=12.6)
+    path = write_gridshell_ifc(tmp_path / "a.ifc", project_name="rect", beams=[beam], panels=[], joints=[],
+                               beam_material="GL24h", beam_category="wood")
+    model = ifcopenshell.open(str(path))
+    member = model.by_type("IfcMember")[0]
+    assert model.by_type("IfcMaterial")[0].Category == "wood"
+    settings = ifcopenshell.geom.settings()
+    settings.set("use-world-coords", True)
+    geometry = ifcopenshell.geom.create_shape(settings, member).geometry
+    area = h * w - (h - 2 * wall) * (w - 2 * wall) if wall else h * w
+    assert shape.get_volume(geometry) * 1e9 == pytest.approx(area * cut, rel=1e-6)
+    points = 1000 * np.asarray(geometry.verts).reshape(-1, 3)
+    assert np.ptp(points @ up) == pytest.approx(h, abs=1e-3)
+    assert np.ptp(points @ np.cross(up, direction)) == pytest.approx(w, abs=1e-3)
+    assert np.ptp(points @ direction) == pytest.approx(cut, abs=1e-3)

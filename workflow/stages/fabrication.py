@@ -25,8 +25,9 @@ from engine.design.sections import material
 from engine.findings import Finding
 from engine.mesh import PolyMesh
 from engine.parts import joint_id
-from engine.structure.grid_model import node_normals
+from engine.structure.grid_model import beam_up_vectors, node_normals
 from fabrication.assembly import plan_assembly, write_assembly
+from fabrication.beams import RectangularSection, tube_solids
 from fabrication.clearance import joint_clashes_parallel
 from fabrication.drawings import write_plan_drawings
 from fabrication.files import atomic_path, write_text_atomic
@@ -39,13 +40,12 @@ from fabrication.joints import (
     JointsInBackground,
     copy_placements,
     fin_plate_slots,
+    geometry_setback_mm,
     joint_geometry,
     joint_hub_height_mm,
     joint_hub_radius_mm,
-    joint_setback_mm,
     joint_sleeve_mm,
     same_joints,
-    smallest_angle,
 )
 from fabrication.limits import BuildLimits, default_min_cut_length_mm
 from fabrication.model3d import JointSolids, write_gridshell_3dm, write_gridshell_step
@@ -193,6 +193,8 @@ GRIDSHELL_STEP_JOINT_BYTES = 30_000_000
 #: Fewer bytes than any joint's STEP file takes (the cap's steel nodes: 32 kB each, printed sockets
 #: some 110 kB): more distinct joints than the limit over this are spheres, known before they are built.
 JOINT_STEP_BYTES_AT_LEAST = 20_000
+#: IFC4's IfcMaterial.Category for a material kind that it names otherwise.
+IFC_MATERIAL_CATEGORY = {"timber": "wood"}
 
 
 def _joint_solids(joints: JointsInBackground, folder: Path, breps: Path) -> JointSolids:
@@ -204,6 +206,20 @@ def _joint_solids(joints: JointsInBackground, folder: Path, breps: Path) -> Join
              if r.get("built", True) and r["id"] not in copies and (folder / f"{r['id']}.step").is_file()}
     return JointSolids(files=files, copies={k: v for k, v in copies.items() if v[0] in files},
                        breps={k: breps / f"{k}.brep" for k in files})
+
+
+def _beam_shapes(project: Project, polymesh: PolyMesh, normals: np.ndarray,
+                 tube_walls_mm: np.ndarray | None) -> tuple[RectangularSection | None, np.ndarray | None]:
+    """(rectangle, walls in mm) of the beams as solids: a rectangular [section] turned to each beam's
+    up (the analysis's local z), hollow by its thickness where it is a rectangular_hollow; None and
+    the tubes' walls (None: solid rods) for round sections."""
+    s = project.section
+    if s.kind not in ("rectangular_hollow", "solid_rectangle"):
+        return None, tube_walls_mm
+    rectangle = RectangularSection(height_mm=MM * s.height, width_mm=MM * s.width,
+                                   up=beam_up_vectors(polymesh, normals))
+    walls = np.full(len(polymesh.edges), MM * s.thickness) if s.kind == "rectangular_hollow" else None
+    return rectangle, walls
 
 
 def _seats(polymesh: PolyMesh, geometries: list[JointGeometry], sizes_mm: np.ndarray, panels: list, pieces: list,
@@ -218,17 +234,17 @@ def _seats(polymesh: PolyMesh, geometries: list[JointGeometry], sizes_mm: np.nda
 
 
 def _write_model_step(polymesh: PolyMesh, panels: list, seats: tuple[np.ndarray, np.ndarray], table,
-                      sizes_mm: np.ndarray, walls_mm: np.ndarray | None, panel_settings: PanelSettings,
-                      joint_radius_mm: float, path: Path, slots: EndSlots | None, joints: JointSolids) -> dict:
+                      sizes_mm: np.ndarray, walls_mm: np.ndarray | None, rectangle: RectangularSection | None,
+                      panel_settings: PanelSettings, joint_radius_mm: float, path: Path, slots: EndSlots | None,
+                      joints: JointSolids) -> dict:
     """gridshell.step with the beams as cut, the joints' own solids (spheres where there are none,
     or where the distinct joints' STEP files exceed GRIDSHELL_STEP_JOINT_BYTES) and the panels
     resting on them (fabrication.panels.panel_seats); returns fabrication.json's record of what it
     holds."""
-    from fabrication.beams import tube_solids
 
     distinct = joints.distinct_bytes
     real = bool(joints.files) and distinct <= GRIDSHELL_STEP_JOINT_BYTES
-    tubes = tube_solids(polymesh, table, outer_size_mm=sizes_mm, wall_mm=walls_mm, slots=slots)
+    tubes = tube_solids(polymesh, table, outer_size_mm=sizes_mm, wall_mm=walls_mm, slots=slots, rectangle=rectangle)
     write_gridshell_step(polymesh, panels, path, tubes=tubes, joints=joints if real else None,
                          joint_radius_mm=joint_radius_mm, seats=seats, panel_thickness_mm=panel_settings.thickness_mm)
     n_nodes = polymesh.n_nodes
@@ -353,6 +369,8 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     tubes = sections if sections is not None else project_sections(project, len(polymesh.edges))
     sizes_mm = np.full(len(polymesh.edges), size_mm) if tubes is None else MM * tubes.diameter
     walls_mm = None if tubes is None else MM * tubes.thickness
+    # the beams as solids: round (tubes, or rods), or rectangles turned to each beam's up
+    rectangle, solid_walls_mm = _beam_shapes(project, polymesh, normals, walls_mm)
     clock.start("beams: cut list")
     from fabrication.beams import cut_list, write_beams_step, write_cut_list
 
@@ -442,12 +460,13 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     geometries = joint_geometry(polymesh, normals, sizes_mm)
     seats = _seats(polymesh, geometries, sizes_mm, panels, pieces, joint_settings)
     slots = fin_plate_slots(polymesh, geometries, joint_settings) if joint_settings.kind == "steel" else None
-    write_model = partial(_write_model_step, polymesh, panels, seats, table, sizes_mm, walls_mm,
+    write_model = partial(_write_model_step, polymesh, panels, seats, table, sizes_mm, solid_walls_mm, rectangle,
                           panel_settings, joint_radius_mm, folder / "gridshell.step", slots)
     if spheres:
         steps["model: gridshell.step"] = partial(write_model, JointSolids())
     steps["beams: beams.step"] = partial(write_beams_step, polymesh, table, folder / "beams" / "beams.step",
-                                         outer_size_mm=sizes_mm, wall_mm=walls_mm, slots=slots)
+                                         outer_size_mm=sizes_mm, wall_mm=solid_walls_mm, slots=slots,
+                                         rectangle=rectangle)
     steps["model: gridshell.3dm"] = partial(write_gridshell_3dm, polymesh, panels, sizes_mm / 2, joint_radius_mm,
                                             folder / "gridshell.3dm")
     # independent steps, longest first: here one after another, and on the joints' workers as they run
@@ -485,11 +504,10 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     # the stage folder is a temporary one until the stage succeeds: name the file from the stage's folder
     written["csv"] = Path(written["csv"]).relative_to(folder).as_posix()
     summary["assembly"] = written
-    if tubes is not None:  # while the joints build: it needs their geometry only
-        clock.start("model: gridshell.ifc")
-        _write_ifc(project, folder, polymesh, geometries, table, panels, sizes_mm, walls_mm, joint_settings, seats,
-                   slots)
-        summary["ifc"] = "gridshell.ifc"
+    clock.start("model: gridshell.ifc")  # while the joints build: it needs their geometry only
+    _write_ifc(project, folder, polymesh, geometries, table, panels, sizes_mm, solid_walls_mm, rectangle,
+               joint_settings, seats, slots)
+    summary["ifc"] = "gridshell.ifc"
     return None if spheres else write_model
 
 
@@ -535,8 +553,8 @@ def _assembly_files(polymesh: PolyMesh, beam: dict, deflection_limit_m: float | 
 
 
 def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, geometries: list[JointGeometry], table,
-               panels: list, sizes: np.ndarray, walls: np.ndarray, joint_settings: JointSettings,
-               seats: tuple[np.ndarray, np.ndarray], slots: EndSlots | None) -> None:
+               panels: list, sizes: np.ndarray, walls: np.ndarray | None, rectangle: RectangularSection | None,
+               joint_settings: JointSettings, seats: tuple[np.ndarray, np.ndarray], slots: EndSlots | None) -> None:
     """gridshell.ifc (fabrication.ifc) from the stage's cut list, panels (resting where ``seats``
     puts them, as in gridshell.step), panels.csv, sequence.csv and the joints' ``geometries`` as
     the joint solids are built from them."""
@@ -561,8 +579,12 @@ def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, geometries: l
         ends = (tuple(zip(slots.sides[k], slots.lengths[k]))
                 if slots is not None and slots.fit(k, row.cut_length_mm) else ())
         beams.append(IfcBeam(id=row.id, start_mm=start + direction * row.setback_start_mm, direction=direction,
-                             cut_length_mm=float(row.cut_length_mm), diameter_mm=float(sizes[k]),
-                             wall_mm=float(walls[k]), profile=str(row.profile), mass_kg=float(row.mass_kg),
+                             cut_length_mm=float(row.cut_length_mm),
+                             size_mm=float(sizes[k]) if rectangle is None else rectangle.height_mm,
+                             width_mm=None if rectangle is None else rectangle.width_mm,
+                             up=None if rectangle is None else rectangle.up[k],
+                             wall_mm=0.0 if walls is None else float(walls[k]), profile=str(row.profile),
+                             mass_kg=float(row.mass_kg),
                              step=step_of.get(row.id), slots=ends,
                              slot_width_mm=slots.width if slots is not None else 0.0))
     sheets, masses = {}, {}
@@ -586,7 +608,7 @@ def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, geometries: l
     for g in geometries:
         own = g.sizes_mm
         size = g.beam_size_mm
-        setback = float(joint_setback_mm(settings, size, smallest_angle(g.directions)))
+        setback = geometry_setback_mm(settings, g)
         reach = setback + np.array([joint_sleeve_mm(settings, s) for s in own])
         bore = 0.5 * own + settings.clearance_mm
         steel = settings.kind == "steel"
@@ -597,8 +619,10 @@ def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, geometries: l
                                plate_mm=(settings.plate_thickness_mm, 0.8 * joint_hub_height_mm(settings, size))
                                if steel else None,
                                part_file=f"joints/{joint_id(g.node)}.step"))
+    kind = material(project.material.name).kind
     write_gridshell_ifc(folder / "gridshell.ifc", project_name=project.project.name, beams=beams, panels=plates,
-                        joints=joints, beam_material=grade_name(project.material.name))
+                        joints=joints, beam_material=grade_name(project.material.name),
+                        beam_category=IFC_MATERIAL_CATEGORY.get(kind, kind))
 
 
 def _jsonable(value):
