@@ -17,9 +17,10 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -38,7 +39,8 @@ from fabrication.settings import GRAIN_DIRECTIONS, PanelSettings
 if TYPE_CHECKING:  # pragma: no cover
     from fabrication.nesting_sheets import SheetNesting
 
-__all__ = ["PanelSettings", "Panel", "flatten_panels", "grain_angle_deg", "panel_seats", "write_panel_dxfs",
+__all__ = ["PanelSettings", "Panel", "flatten_panels", "grain_angle_deg", "panel_seats", "trim_at_folds",
+           "write_panel_dxfs",
            "write_panels_csv", "add_panel", "panel_label"]
 
 
@@ -247,6 +249,186 @@ def panel_seats(panels: list[Panel], loops: list, geometries: dict, joint_settin
             # far enough along the mean normal for each piece to clear what is under it
             shift[members] = max(lift[m] / max(float(up[m] @ mean), 1e-3) for m in members) * mean
     return up, shift
+
+
+#: What to change where a panel is cut back to nothing at its folds.
+FOLD_FIX = ("lower [fabrication.panels] clearance or thickness, or smaller joints ([fabrication.joints] "
+            "hub_radius), or more cells ([remesh] n_cells) for gentler folds")
+
+
+def trim_at_folds(panels: list[Panel], loops: list, nodes_m: np.ndarray, seats: tuple[np.ndarray, np.ndarray],
+                  settings: PanelSettings, *,
+                  problems: list[tuple[str, str]] | None = None) -> tuple[list[Panel], np.ndarray]:
+    """The panels cut back where, resting on their seats (``panel_seats``), two of them would close
+    their joint at a fold: (panels, how far each outline was cut back, mm).
+
+    A panel is inset by the clearance from its cell's edges in its nodes' plane; lifted along its
+    own normal onto the joints, two neighbours at a valley fold move towards each other (the lift
+    times the sine of half the fold each). Each neighbour must stay ``clearance_mm`` clear, over its
+    whole thickness, of a plane through their shared edge's direction and halfway between their
+    normals, placed halfway across the gap left between them; each outline is cut by it where it is
+    not (both by the same amount). Panels that meet at a node
+    only (round a split cell) and whose slabs then come within two clearances of each other
+    (a linear programme on their convex hulls) each lose the same corner at that node, cut square to
+    its bisector, as little as keeps them apart (bisection).
+    ``loops``: each panel's node loop (into ``nodes_m``, (n, 3) m) by its ``face``; the neighbours
+    are the panels whose loops share an edge or a node.
+    Nothing is cut at a ridge or where the lift is small. A panel that nothing would be left of
+    raises InputError; with ``problems`` (a list) it is left uncut and (panel id, message) appended."""
+    up, shift = seats
+    by_edge: dict[tuple[int, int], list[int]] = {}
+    by_node: dict[int, set[int]] = {}
+    for k, panel in enumerate(panels):
+        loop = [int(i) for i in loops[panel.face]]
+        for a, b in zip(loop, loop[1:] + loop[:1]):
+            by_edge.setdefault((min(a, b), max(a, b)), []).append(k)
+            by_node.setdefault(a, set()).add(k)
+    centres = np.array([1e3 * np.asarray(p.outline_3d_m).mean(axis=0) for p in panels]).reshape(-1, 3)
+    polygons = [Polygon(p.outline_mm) for p in panels]
+    edge_neighbours: list[set[int]] = [set() for _ in panels]
+    seated = [1e3 * np.asarray(p.origin_m) + shift[k] for k, p in enumerate(panels)]
+
+    def nearest(k: int, normal: np.ndarray, at: np.ndarray) -> float:
+        """How near panel k as seated (its current outline, both faces) comes to the plane through
+        ``at`` square to ``normal``: the least of normal . (x - at) over it."""
+        outline = np.asarray(polygons[k].exterior.coords) @ np.asarray(panels[k].axes) + seated[k]
+        return float(min((outline - at) @ normal) + min(0.0, settings.thickness_mm * float(up[k] @ normal)))
+
+    for (a, b), sharing in sorted(by_edge.items()):
+        if len(sharing) != 2:
+            continue
+        k, j = sharing
+        edge_neighbours[k].add(j)
+        edge_neighbours[j].add(k)
+        if polygons[k].is_empty or polygons[j].is_empty:
+            continue
+        pa = 1e3 * nodes_m[a]
+        along = 1e3 * nodes_m[b] - pa
+        along /= np.linalg.norm(along)
+        middle = up[k] + up[j]
+        middle -= (middle @ along) * along
+        if np.linalg.norm(middle) < 1e-9:
+            continue
+        normal = np.cross(along, middle)
+        normal /= np.linalg.norm(normal)
+        if float((centres[k] - pa) @ normal) < float((centres[j] - pa) @ normal):  # towards k
+            normal = -normal
+        # the plane halfway across the gap left between the two, each kept a clearance from it
+        gap_k, gap_j = nearest(k, normal, pa), nearest(j, -normal, pa)
+        middle_of_gap = pa + 0.5 * (gap_k - gap_j) * normal
+        for m, side in ((k, normal), (j, -normal)):
+            alpha, beta = float(side @ panels[m].axes[0]), float(side @ panels[m].axes[1])
+            if math.hypot(alpha, beta) < 1e-6:
+                continue
+            # alpha x + beta y >= gamma over the outline (2D, mm), its top face included
+            gamma = (settings.clearance_mm - min(0.0, settings.thickness_mm * float(side @ up[m]))
+                     - float(side @ (seated[m] - middle_of_gap)))
+            polygons[m] = _cut(polygons[m], alpha, beta, gamma)
+    lost = {k for k, polygon in enumerate(polygons) if polygon.is_empty}
+    # panels that meet at a node only: their corners there, as little as keeps them apart
+    for a, around in sorted(by_node.items()):
+        for k, j in itertools.combinations(sorted(around), 2):
+            if j in edge_neighbours[k] or k in lost or j in lost:
+                continue
+            slabs = [(panels[m], up[m], 1e3 * np.asarray(panels[m].origin_m) + shift[m]) for m in (k, j)]
+            corners = [_corner(panels[m], polygons[m], 1e3 * nodes_m[a]) for m in (k, j)]
+
+            def meet(depth: float) -> bool:
+                cut = [_cut_corner(polygons[m], *corner, depth) for m, corner in zip((k, j), corners)]
+                return not any(c.is_empty for c in cut) and _slabs_meet(
+                    *[(c, *slab) for c, slab in zip(cut, slabs)], settings.thickness_mm, settings.clearance_mm)
+
+            if not meet(0.0):
+                continue
+            low, high = 0.0, max(math.sqrt(polygons[m].area) for m in (k, j)) + settings.clearance_mm
+            if meet(high):
+                continue  # no corner cut parts them: left as they are (the edge planes hold the rest)
+            while high - low > 0.05:
+                low, high = (low, 0.5 * (low + high)) if not meet(0.5 * (low + high)) else (0.5 * (low + high), high)
+            for m, corner in zip((k, j), corners):
+                polygons[m] = _cut_corner(polygons[m], *corner, high)
+    out, cut_back = list(panels), np.zeros(len(panels))
+    for k, panel in enumerate(panels):
+        polygon = polygons[k]
+        if polygon.is_empty or polygon.area <= 0:
+            message = f"panel {panel.id}: resting on its joints, nothing of it is left between its folds"
+            if problems is None:
+                raise InputError(message, hint=FOLD_FIX)
+            problems.append((panel.id, message))
+        elif polygon.area < panel.area_mm2 - 1e-6:
+            polygon = shapely.geometry.polygon.orient(shapely.simplify(polygon, 1e-6), 1.0)
+            outline = np.asarray(polygon.exterior.coords)[:-1]
+            cut_back[k] = float(Polygon(panel.outline_mm).hausdorff_distance(polygon))
+            out[k] = replace(panel, outline_mm=outline, holes_mm=_hole_centres(outline, polygon, settings),
+                             area_mm2=float(polygon.area), perimeter_mm=float(polygon.length),
+                             outline_3d_m=np.asarray(panel.origin_m) + 1e-3 * outline @ np.asarray(panel.axes))
+    return out, cut_back
+
+
+def _cut(polygon: Polygon, alpha: float, beta: float, gamma: float) -> Polygon:
+    """``polygon`` where alpha x + beta y >= gamma (its largest part); empty if nothing is left."""
+    points = np.asarray(polygon.exterior.coords)
+    if (points @ np.array([alpha, beta])).min() >= gamma - 1e-6:
+        return polygon
+    kept = polygon.intersection(_half_plane(alpha, beta, gamma, polygon))
+    if kept.is_empty or kept.area <= 0:
+        return Polygon()
+    return kept if kept.geom_type == "Polygon" else max(kept.geoms, key=lambda g: g.area)
+
+
+def _corner(panel: Panel, polygon: Polygon, node_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(vertex, unit inward bisector) in the panel's plane (mm) of the outline's corner nearest the node."""
+    outline = np.asarray(polygon.exterior.coords)[:-1]
+    node = (node_mm - 1e3 * np.asarray(panel.origin_m)) @ np.asarray(panel.axes).T
+    i = int(np.argmin(np.linalg.norm(outline - node, axis=1)))
+    before, after = outline[i - 1] - outline[i], outline[(i + 1) % len(outline)] - outline[i]
+    inward = before / np.linalg.norm(before) + after / np.linalg.norm(after)
+    if np.linalg.norm(inward) < 1e-9:
+        inward = np.array([-before[1], before[0]])
+    centre = np.asarray(polygon.centroid.coords[0])
+    if float(inward @ (centre - outline[i])) < 0:
+        inward = -inward
+    return outline[i], inward / np.linalg.norm(inward)
+
+
+def _cut_corner(polygon: Polygon, vertex: np.ndarray, inward: np.ndarray, depth: float) -> Polygon:
+    """``polygon`` less its corner at ``vertex``, cut square to ``inward`` at ``depth`` (mm)."""
+    return polygon if depth <= 0 else _cut(polygon, float(inward[0]), float(inward[1]),
+                                           float(inward @ vertex) + depth)
+
+
+def _slabs_meet(first: tuple, second: tuple, thickness_mm: float, clearance_mm: float) -> bool:
+    """Whether two panels as placed come within two clearances of each other: each (outline polygon
+    in its plane (mm), panel, up, origin (mm) of its seat), a slab ``thickness_mm`` thick towards up,
+    taken as its convex hull; a linear programme finds a point in both, each grown by a clearance."""
+    from scipy.optimize import linprog
+
+    rows, bounds = [], []
+    for polygon, panel, up, origin in (first, second):
+        hull = np.asarray(shapely.geometry.polygon.orient(polygon.convex_hull, 1.0).exterior.coords)
+        axes = np.asarray(panel.axes)
+        edges = np.diff(hull, axis=0)
+        outward = np.c_[edges[:, 1], -edges[:, 0]] / np.linalg.norm(edges, axis=1)[:, None]
+        normals = outward @ axes  # (m, 3) in space
+        rows.append(normals)
+        bounds.append(np.einsum("ij,ij->i", outward, hull[:-1]) + normals @ origin + clearance_mm)
+        rows += [up[None, :], -up[None, :]]
+        bounds += [np.array([up @ origin + thickness_mm + clearance_mm]), np.array([-(up @ origin) + clearance_mm])]
+    result = linprog(np.zeros(3), A_ub=np.vstack(rows), b_ub=np.concatenate(bounds), bounds=[(None, None)] * 3,
+                     method="highs")
+    return result.status == 0
+
+
+def _half_plane(alpha: float, beta: float, gamma: float, polygon: Polygon) -> Polygon:
+    """The part of the plane where alpha x + beta y >= gamma, as a polygon covering ``polygon``."""
+    n = np.array([alpha, beta]) / math.hypot(alpha, beta)
+    g = gamma / math.hypot(alpha, beta)
+    x0, y0, x1, y1 = polygon.bounds
+    r = 2 * math.hypot(x1 - x0, y1 - y0) + abs(g) + 1.0
+    centre = np.array([0.5 * (x0 + x1), 0.5 * (y0 + y1)])
+    foot = centre + (g - centre @ n) * n  # on the line
+    t = np.array([-n[1], n[0]])
+    return Polygon([foot - r * t, foot + r * t, foot + r * t + r * n, foot - r * t + r * n])
 
 
 def flatten_panels(polymesh: PolyMesh, settings: PanelSettings | None = None, *,

@@ -222,3 +222,85 @@ def test_panels_csv(tmp_path):
         assert row.mass_kg == pytest.approx(area * 1e-6 * 4e-3 * 1000, rel=1e-3)
         assert row.vertex_count == len(p.outline_mm)
     assert table["sheet"].isna().all()
+
+
+def _slab(panel, up: np.ndarray, shift_mm: np.ndarray, thickness_mm: float):
+    """A panel as gridshell.step places it (fabrication.model3d): its outline moved to its seat and
+    extruded by its thickness towards ``up`` (an OCP solid)."""
+    import cadquery as cq
+
+    outline = 1000 * np.asarray(panel.outline_3d_m) + shift_mm
+    face = cq.Face.makeFromWires(cq.Wire.makePolygon([cq.Vector(*p) for p in outline], close=True))
+    return cq.Solid.extrudeLinear(face, cq.Vector(*(thickness_mm * up))).wrapped
+
+
+def _distance_and_overlap(a, b) -> tuple[float, float]:
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Common
+    from OCP.BRepExtrema import BRepExtrema_DistShapeShape
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    props = GProp_GProps()
+    BRepGProp.VolumeProperties_s(BRepAlgoAPI_Common(a, b).Shape(), props)
+    return BRepExtrema_DistShapeShape(a, b).Value(), props.Mass()
+
+
+@pytest.mark.parametrize("rise", [0.3, -0.3])
+def test_panels_lifted_onto_their_joints_keep_their_joint_open_at_a_valley_fold(rise):
+    """Two 1 m panels meet on a beam at a fold of 33 degrees, lifted 150 mm onto their joints. At
+    a valley (both rising from the beam) they would run into each other: cut back, they keep the
+    two clearances between them (OCCT's distance between the slabs), and are otherwise as flattened.
+    At a ridge nothing is cut."""
+    from fabrication.joints import JointSettings, joint_geometry
+    from fabrication.panels import panel_seats, trim_at_folds
+
+    nodes = np.array([[0, 0, 0], [1, 0, 0], [1, 1, rise], [0, 1, rise], [0, -1, rise], [1, -1, rise]], float)
+    grid = PolyMesh(nodes=nodes, faces=((0, 1, 2, 3), (1, 0, 4, 5)))
+    settings = PanelSettings(clearance_mm=10.0, thickness_mm=10.0)
+    panels = flatten_panels(grid, settings)
+    joints = JointSettings(kind="steel", hub_radius_mm=100.0)
+    geometries = {g.node: g for g in joint_geometry(grid, np.tile([0.0, 0.0, 1.0], (len(nodes), 1)), 60.0)}
+    seats = panel_seats(panels, list(grid.faces), geometries, joints, {})
+    assert (np.linalg.norm(seats[1], axis=1) > 100).all()
+    trimmed, cut_back = trim_at_folds(panels, list(grid.faces), nodes, seats, settings)
+    before = _distance_and_overlap(*(_slab(p, u, s, 10.0) for p, u, s in zip(panels, *seats)))
+    after = _distance_and_overlap(*(_slab(p, u, s, 10.0) for p, u, s in zip(trimmed, *seats)))
+    if rise > 0:
+        assert before[1] > 1000.0  # mm3: the untrimmed panels overlap
+        assert after[1] == 0.0 and after[0] == pytest.approx(20.0, abs=0.05)
+        assert (cut_back > 10).all()
+        for old, new in zip(panels, trimmed):
+            assert Polygon(new.outline_mm).within(Polygon(old.outline_mm).buffer(1e-6))
+            assert new.area_mm2 == pytest.approx(Polygon(new.outline_mm).area)
+    else:
+        assert before[0] > 20.0
+        assert (cut_back == 0).all()
+        assert all(new is old for old, new in zip(panels, trimmed))
+
+
+def test_panels_round_a_valley_node_keep_clear_of_each_other_also_where_they_meet_at_the_node_only():
+    """Six triangles round a node 300 mm below their rim (an upturned hexagonal pyramid), lifted
+    onto a large hub: neighbours across an edge keep their two clearances (20 mm), and panels that
+    meet at the node only do not touch (OCCT's distance and common volume of every pair)."""
+    import itertools
+
+    from fabrication.joints import JointSettings, joint_geometry
+    from fabrication.panels import panel_seats, trim_at_folds
+
+    rim = [[np.cos(a), np.sin(a), 0.3] for a in np.arange(6) * np.pi / 3]
+    nodes = np.array([[0.0, 0.0, 0.0], *rim])
+    grid = PolyMesh(nodes=nodes, faces=tuple((0, 1 + i, 1 + (i + 1) % 6) for i in range(6)))
+    settings = PanelSettings(clearance_mm=10.0, thickness_mm=10.0)
+    panels = flatten_panels(grid, settings)
+    geometries = {g.node: g for g in joint_geometry(grid, np.tile([0.0, 0.0, 1.0], (len(nodes), 1)), 60.0)}
+    seats = panel_seats(panels, list(grid.faces), geometries, JointSettings(kind="steel", hub_radius_mm=100.0), {})
+    trimmed, cut_back = trim_at_folds(panels, list(grid.faces), nodes, seats, settings)
+    assert (cut_back > 0).all()
+    slabs = [_slab(p, u, s, 10.0) for p, u, s in zip(trimmed, *seats)]
+    for i, j in itertools.combinations(range(6), 2):
+        distance, overlap = _distance_and_overlap(slabs[i], slabs[j])
+        assert overlap == 0.0
+        if j - i in (1, 5):
+            assert distance == pytest.approx(20.0, abs=0.05)
+        else:
+            assert distance > 10.0, (i, j, distance)

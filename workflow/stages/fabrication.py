@@ -436,7 +436,7 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     steps: dict[str, Callable[[], object]] = {}
     if config.panels.enabled:
         clock.start("panels: flatten")
-        from fabrication.panels import flatten_panels
+        from fabrication.panels import FOLD_FIX, flatten_panels, trim_at_folds
 
         problems: list[tuple[str, str]] = []
         glazing = PolyMesh(nodes=polymesh.nodes, faces=tuple(p.loop for p in pieces))
@@ -444,6 +444,18 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
         findings += [Finding(kind="panel_outline", parts=[pid], stage="fabrication", message=message,
                              fix="[fabrication.panels] clearance, or a new grid ([remesh] seed)")
                      for pid, message in problems]
+    # the joints as their solids are built: the panels rest on them, steel fin plates enter slots
+    geometries = joint_geometry(polymesh, normals, sizes_mm)
+    seats = _seats(polymesh, geometries, sizes_mm, panels, pieces, joint_settings)
+    if panels:
+        # resting on the joints, neighbours at a valley fold would close their joint: cut back
+        folds: list[tuple[str, str]] = []
+        panels, cut_back = trim_at_folds(panels, [p.loop for p in pieces], polymesh.nodes, seats, panel_settings,
+                                         problems=folds)
+        findings += [Finding(kind="panel_outline", parts=[pid], stage="fabrication", message=message, fix=FOLD_FIX)
+                     for pid, message in folds]
+        summary.update({"panels_cut_back_at_folds": int((cut_back > 0).sum()),
+                        "panel_cut_back_max_mm": round(float(cut_back.max()), 1)})
         cells = {panel.id: (pieces[panel.face].cell + 1, pieces[panel.face].piece) for panel in panels}
         steps["panels"] = partial(_panel_files, panels, panel_settings, stocks, folder / "panels", cells)
     if sections is not None:  # the sized tubes carry the erection stages too
@@ -456,9 +468,6 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
                                 project_name=project.project.name, support_nodes=np.flatnonzero(polymesh.supports))
     joint_radius_mm = getattr(joint_settings, "hub_radius_mm", None) or 1.5 * float(sizes_mm.max())
     # gridshell.step takes the joints' own solids: written once they are built (see run)
-    # the joints as their solids are built: the panels rest on them, steel fin plates enter slots
-    geometries = joint_geometry(polymesh, normals, sizes_mm)
-    seats = _seats(polymesh, geometries, sizes_mm, panels, pieces, joint_settings)
     slots = fin_plate_slots(polymesh, geometries, joint_settings) if joint_settings.kind == "steel" else None
     write_model = partial(_write_model_step, polymesh, panels, seats, table, sizes_mm, solid_walls_mm, rectangle,
                           panel_settings, joint_radius_mm, folder / "gridshell.step", slots)
