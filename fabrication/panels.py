@@ -403,6 +403,20 @@ def _slabs_meet(first: tuple, second: tuple, thickness_mm: float, clearance_mm: 
     taken as its convex hull; a linear programme finds a point in both, each grown by a clearance."""
     from scipy.optimize import linprog
 
+    # a cheap way out first: a direction along which their corners lie apart (most pairs do)
+    corners, centres = [], []
+    for polygon, panel, up, origin in (first, second):
+        flat = np.asarray(polygon.convex_hull.exterior.coords)[:-1] @ np.asarray(panel.axes) + origin
+        corners.append(np.vstack([flat, flat + thickness_mm * up]))
+        centres.append(corners[-1].mean(axis=0))
+    apart = centres[1] - centres[0]
+    mean_up = first[2] + second[2]
+    for direction in (apart - (apart @ mean_up) / (mean_up @ mean_up) * mean_up, apart, first[2], second[2]):
+        norm = float(np.linalg.norm(direction))
+        if norm > 1e-9:
+            a, b = corners[0] @ (direction / norm), corners[1] @ (direction / norm)
+            if a.max() + 2 * clearance_mm <= b.min() or b.max() + 2 * clearance_mm <= a.min():
+                return False
     rows, bounds = [], []
     for polygon, panel, up, origin in (first, second):
         hull = np.asarray(shapely.geometry.polygon.orient(polygon.convex_hull, 1.0).exterior.coords)
