@@ -81,3 +81,22 @@ def test_steel_joints_put_a_bolt_hole_where_the_fin_plate_reaches():
     nc1 = parse_nc1(nc1_text(pieces[0], order="job", drawing="plan"))
     assert nc1["ST"]["grade"] == "S355"
     assert [(x, d) for _, x, _, d in nc1["BO"]] == [(pytest.approx(57.15), 18.0), (pytest.approx(2000 - 57.15), 18.0)]
+
+
+def test_a_rectangular_hollow_section_is_an_m_profile_of_its_height_and_width():
+    """An RHS 200 x 100 x 8 beam: code M, height and width as given, the wall as flange and web,
+    the paint area its perimeter, the bolt holes across the web at half its height."""
+    from fabrication.joints import JointSettings
+    from fabrication.nc1 import nc1_pieces, nc1_text
+
+    table = pd.DataFrame({"id": ["B0001"], "profile": ["RHS 200x100x8"], "cut_length_mm": [3000.0],
+                          "end_angle_start_deg": [0.0], "end_angle_end_deg": [0.0]})
+    pieces = nc1_pieces(table, np.array([200.0]), np.array([8.0]), np.array([35.8]), JointSettings(kind="steel"),
+                        "steel_s355", widths_mm=np.array([100.0]))
+    nc1 = parse_nc1(nc1_text(pieces[0], order="job", drawing="plan"))
+    st = nc1["ST"]
+    assert (st["code"], float(st["height"]), float(st["width"])) == ("M", 200.0, 100.0)
+    assert float(st["flange_thickness"]) == float(st["web_thickness"]) == 8.0
+    assert float(st["paint_m2_per_m"]) == pytest.approx(0.6)
+    # the fin plate reaches one size (the larger side) into the section, its bolt at half of that
+    assert [(x, y) for _, x, y, _ in nc1["BO"]] == [(100.0, 100.0), (2900.0, 100.0)]

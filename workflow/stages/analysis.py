@@ -216,7 +216,9 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, project: Project, ctx: 
 
 def _fixes(project: Project, sections: BeamSections | None) -> VerdictFixes:
     """What to change when a verdict fails, naming the project file's keys."""
-    stiffer = ("a larger [section] diameter or thickness, a stronger [material], or more supports ([[supports]])"
+    dimensions = {"circular_hollow": "diameter or thickness", "solid_round": "diameter",
+                  "rectangular_hollow": "height, width or thickness"}.get(project.section.kind, "height or width")
+    stiffer = (f"a larger [section] {dimensions}, a stronger [material], or more supports ([[supports]])"
                + ("" if project.design.size_sections or sections is None else
                   "; or let the tubes be sized: [design] size_sections = true"))
     return VerdictFixes(stiffer=stiffer,

@@ -382,12 +382,18 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     table = cut_list(polymesh, normals, beam_settings, joint_settings, profiles=None if tubes is None else tubes.names,
                      areas_m2=areas_m2, outer_sizes_mm=sizes_mm)
     write_cut_list(table, folder / "beams")
-    if tubes is not None:
+    # the saw's files: round tubes, and rectangular hollow sections (not solid bars, nor timber)
+    if tubes is not None or (rectangle is not None and solid_walls_mm is not None):
         clock.start("beams: NC1 files")
         from fabrication.nc1 import nc1_pieces, write_nc1_files
 
-        pieces = nc1_pieces(table, sizes_mm, walls_mm, areas_m2 * _density(project), joint_settings,
-                            project.material.name)
+        masses_per_m = areas_m2 * _density(project)
+        if rectangle is not None and solid_walls_mm is not None:
+            pieces = nc1_pieces(table, np.full(len(sizes_mm), rectangle.height_mm), solid_walls_mm, masses_per_m,
+                                joint_settings, project.material.name,
+                                widths_mm=np.full(len(sizes_mm), rectangle.width_mm))
+        else:
+            pieces = nc1_pieces(table, sizes_mm, walls_mm, masses_per_m, joint_settings, project.material.name)
         summary["nc1_files"] = len(write_nc1_files(pieces, folder / "beams" / "nc1", order=project.project.name,
                                                    drawing=f"{project.project.name} plan"))
     cut = table["cut_length_mm"].to_numpy()
