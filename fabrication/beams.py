@@ -4,11 +4,13 @@ A beam's cut length is its node-to-node length less what the joint at each end t
 joint's set-back, see fabrication.joints). Socket joints take square cuts (end angles 0).
 The roll angle turns the section about the beam axis from the vertical plane through the beam
 to the plane of the beam and the mean of its end nodes' axes (surface normals). Lengths in mm.
+At steel nodes a beam's mass is less what its fin plates' end slots take out (``slot_volumes_mm3``).
 """
 
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,7 +25,7 @@ from .joints import EndSlots, JointSettings, geometry_setback_mm, joint_geometry
 from .settings import BeamSettings
 
 __all__ = ["BeamSettings", "cut_list", "write_cut_list", "RectangularSection", "TubeAsCut", "tube_solids",
-           "write_beams_step", "roll_angles_deg"]
+           "write_beams_step", "roll_angles_deg", "slot_volumes_mm3"]
 
 
 def roll_angles_deg(polymesh: PolyMesh, normals: np.ndarray) -> np.ndarray:
@@ -97,6 +99,35 @@ def write_cut_list(table: pd.DataFrame, folder: Path) -> tuple[Path, Path]:
                 sheet.to_excel(writer, sheet_name=name, index=False)
         stamp_zip(tmp)
     return folder / "cutlist.csv", folder / "cutlist.xlsx"
+
+
+def _disc_strip_mm2(radius: float, width: float) -> float:
+    """The area of a disc of ``radius`` within a strip ``width`` wide through its centre (mm2)."""
+    h = min(0.5 * width, radius)
+    return 2.0 * (h * math.sqrt(radius * radius - h * h) + radius * radius * math.asin(h / radius))
+
+
+def slot_volumes_mm3(slots: EndSlots, cut_lengths_mm: np.ndarray, sizes_mm: np.ndarray,
+                     walls_mm: np.ndarray | None, rectangle: "RectangularSection | None" = None) -> np.ndarray:
+    """(b,) what the fin plates' end slots take out of each beam as cut (mm3), in closed form: the
+    section's area within the slot's strip times the slots' lengths, for beams whose slots fit
+    (``EndSlots.fit``): an annulus's or a disc's strip; a rectangle's two walls the slot crosses
+    (its full height where solid), the section's small turn to the slot neglected."""
+    removed = np.zeros(len(cut_lengths_mm))
+    for k, cut in enumerate(cut_lengths_mm):
+        if cut <= 0 or not slots.fit(k, float(cut)):
+            continue
+        wall = None if walls_mm is None else float(walls_mm[k])
+        if rectangle is None:
+            radius = 0.5 * float(sizes_mm[k])
+            area = _disc_strip_mm2(radius, slots.width)
+            if wall is not None and 0 < wall < radius:
+                area -= _disc_strip_mm2(radius - wall, slots.width)
+        else:
+            depth = rectangle.height_mm if wall is None else 2.0 * wall
+            area = min(slots.width, rectangle.width_mm) * depth
+        removed[k] = area * float(slots.lengths[k].sum())
+    return removed
 
 
 @dataclass(frozen=True)

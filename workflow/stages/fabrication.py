@@ -27,7 +27,7 @@ from engine.mesh import PolyMesh
 from engine.parts import joint_id
 from engine.structure.grid_model import beam_up_vectors, node_normals
 from fabrication.assembly import plan_assembly, write_assembly
-from fabrication.beams import RectangularSection, tube_solids
+from fabrication.beams import RectangularSection, slot_volumes_mm3, tube_solids
 from fabrication.clearance import joint_clashes_parallel
 from fabrication.drawings import write_plan_drawings
 from fabrication.files import atomic_path, write_text_atomic
@@ -381,6 +381,12 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     areas_m2 = np.full(len(sizes_mm), section.A) if tubes is None else tubes.properties["A"]
     table = cut_list(polymesh, normals, beam_settings, joint_settings, profiles=None if tubes is None else tubes.names,
                      areas_m2=areas_m2, outer_sizes_mm=sizes_mm)
+    # the joints as their solids are built: the panels rest on them, steel fin plates enter slots
+    geometries = joint_geometry(polymesh, normals, sizes_mm)
+    slots = fin_plate_slots(polymesh, geometries, joint_settings) if joint_settings.kind == "steel" else None
+    if slots is not None:  # the beams' mass as cut, less their slots
+        removed = slot_volumes_mm3(slots, table["cut_length_mm"].to_numpy(), sizes_mm, solid_walls_mm, rectangle)
+        table["mass_kg"] = np.round(table["mass_kg"] - 1e-9 * removed * _density(project), 4)
     write_cut_list(table, folder / "beams")
     # the saw's files: round tubes, and rectangular hollow sections (not solid bars, nor timber)
     if tubes is not None or (rectangle is not None and solid_walls_mm is not None):
@@ -450,8 +456,6 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
         findings += [Finding(kind="panel_outline", parts=[pid], stage="fabrication", message=message,
                              fix="[fabrication.panels] clearance, or a new grid ([remesh] seed)")
                      for pid, message in problems]
-    # the joints as their solids are built: the panels rest on them, steel fin plates enter slots
-    geometries = joint_geometry(polymesh, normals, sizes_mm)
     seats = _seats(polymesh, geometries, sizes_mm, panels, pieces, joint_settings)
     if panels:
         # resting on the joints, neighbours at a valley fold would close their joint: cut back
@@ -474,7 +478,6 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
                                 project_name=project.project.name, support_nodes=np.flatnonzero(polymesh.supports))
     joint_radius_mm = getattr(joint_settings, "hub_radius_mm", None) or 1.5 * float(sizes_mm.max())
     # gridshell.step takes the joints' own solids: written once they are built (see run)
-    slots = fin_plate_slots(polymesh, geometries, joint_settings) if joint_settings.kind == "steel" else None
     write_model = partial(_write_model_step, polymesh, panels, seats, table, sizes_mm, solid_walls_mm, rectangle,
                           panel_settings, joint_radius_mm, folder / "gridshell.step", slots)
     if spheres:
