@@ -269,8 +269,8 @@ def trim_at_folds(panels: list[Panel], loops: list, nodes_m: np.ndarray, seats: 
     normals, placed halfway across the gap left between them; each outline is cut by it where it is
     not (both by the same amount). Panels that meet at a node
     only (round a split cell) and whose slabs then come within two clearances of each other
-    (a linear programme on their convex hulls) each lose the same corner at that node, cut square to
-    its bisector, as little as keeps them apart (bisection).
+    (the separating axis test on their convex hulls) each lose the same corner at that node, cut
+    square to its bisector, as little as keeps them apart (bisection).
     ``loops``: each panel's node loop (into ``nodes_m``, (n, 3) m) by its ``face``; the neighbours
     are the panels whose loops share an edge or a node.
     Nothing is cut at a ridge or where the lift is small. A panel that nothing would be left of
@@ -331,6 +331,9 @@ def trim_at_folds(panels: list[Panel], loops: list, nodes_m: np.ndarray, seats: 
             if j in edge_neighbours[k] or k in lost or j in lost:
                 continue
             slabs = [(panels[m], up[m], 1e3 * np.asarray(panels[m].origin_m) + shift[m]) for m in (k, j)]
+            if not _slabs_meet(*[(polygons[m], *slab) for m, slab in zip((k, j), slabs)], settings.thickness_mm,
+                               settings.clearance_mm):
+                continue
             corners = [_corner(panels[m], polygons[m], 1e3 * nodes_m[a]) for m in (k, j)]
 
             def meet(depth: float) -> bool:
@@ -338,8 +341,6 @@ def trim_at_folds(panels: list[Panel], loops: list, nodes_m: np.ndarray, seats: 
                 return not any(c.is_empty for c in cut) and _slabs_meet(
                     *[(c, *slab) for c, slab in zip(cut, slabs)], settings.thickness_mm, settings.clearance_mm)
 
-            if not meet(0.0):
-                continue
             low, high = 0.0, max(math.sqrt(polygons[m].area) for m in (k, j)) + settings.clearance_mm
             if meet(high):
                 continue  # no corner cut parts them: left as they are (the edge planes hold the rest)
@@ -397,40 +398,43 @@ def _cut_corner(polygon: Polygon, vertex: np.ndarray, inward: np.ndarray, depth:
                                            float(inward @ vertex) + depth)
 
 
-def _slabs_meet(first: tuple, second: tuple, thickness_mm: float, clearance_mm: float) -> bool:
-    """Whether two panels as placed come within two clearances of each other: each (outline polygon
-    in its plane (mm), panel, up, origin (mm) of its seat), a slab ``thickness_mm`` thick towards up,
-    taken as its convex hull; a linear programme finds a point in both, each grown by a clearance."""
-    from scipy.optimize import linprog
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross products of (..., 3) arrays (numpy's cross costs more than it computes here)."""
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
 
-    # a cheap way out first: a direction along which their corners lie apart (most pairs do)
-    corners, centres = [], []
-    for polygon, panel, up, origin in (first, second):
-        flat = np.asarray(polygon.convex_hull.exterior.coords)[:-1] @ np.asarray(panel.axes) + origin
-        corners.append(np.vstack([flat, flat + thickness_mm * up]))
-        centres.append(corners[-1].mean(axis=0))
-    apart = centres[1] - centres[0]
-    mean_up = first[2] + second[2]
-    for direction in (apart - (apart @ mean_up) / (mean_up @ mean_up) * mean_up, apart, first[2], second[2]):
-        norm = float(np.linalg.norm(direction))
-        if norm > 1e-9:
-            a, b = corners[0] @ (direction / norm), corners[1] @ (direction / norm)
-            if a.max() + 2 * clearance_mm <= b.min() or b.max() + 2 * clearance_mm <= a.min():
-                return False
-    rows, bounds = [], []
+
+def _apart_along(points: list[np.ndarray], candidates: np.ndarray, gap_mm: float) -> bool:
+    """Whether the two point sets lie ``gap_mm`` apart along one of the ``candidates`` (k, 3)."""
+    lengths = np.linalg.norm(candidates, axis=1)
+    keep = lengths > 1e-9 * lengths.max()
+    candidates = candidates[keep] / lengths[keep, None]
+    a, b = points[0] @ candidates.T, points[1] @ candidates.T
+    return bool(np.maximum(b.min(axis=0) - a.max(axis=0), a.min(axis=0) - b.max(axis=0)).max() >= gap_mm)
+
+
+def _slabs_meet(first: tuple, second: tuple, thickness_mm: float, clearance_mm: float) -> bool:
+    """Whether two panels as placed may come within two clearances of each other: each (outline
+    polygon in its plane (mm), panel, up, origin (mm) of its seat), a slab ``thickness_mm`` thick
+    towards up, taken as its convex hull. The separating axis test: the slabs are apart where
+    their corners lie two clearances apart along a face's normal or the cross product of an edge
+    of each (for convex solids one of these parts any two that do not touch); the line between
+    their centres and their faces' normals are tried first."""
+    points, sides, ups = [], [], []
     for polygon, panel, up, origin in (first, second):
         hull = np.asarray(shapely.geometry.polygon.orient(polygon.convex_hull, 1.0).exterior.coords)
         axes = np.asarray(panel.axes)
-        edges = np.diff(hull, axis=0)
-        outward = np.c_[edges[:, 1], -edges[:, 0]] / np.linalg.norm(edges, axis=1)[:, None]
-        normals = outward @ axes  # (m, 3) in space
-        rows.append(normals)
-        bounds.append(np.einsum("ij,ij->i", outward, hull[:-1]) + normals @ origin + clearance_mm)
-        rows += [up[None, :], -up[None, :]]
-        bounds += [np.array([up @ origin + thickness_mm + clearance_mm]), np.array([-(up @ origin) + clearance_mm])]
-    result = linprog(np.zeros(3), A_ub=np.vstack(rows), b_ub=np.concatenate(bounds), bounds=[(None, None)] * 3,
-                     method="highs")
-    return result.status == 0
+        flat = hull[:-1] @ axes + origin
+        points.append(np.vstack([flat, flat + thickness_mm * up]))
+        sides.append(np.diff(hull, axis=0) @ axes)  # (m, 3) the outline's edges in space
+        ups.append(up[None, :])
+    between = (points[1].mean(axis=0) - points[0].mean(axis=0))[None, :]
+    if _apart_along(points, np.vstack([between, *ups]), 2 * clearance_mm):
+        return False
+    normals = [_cross(side, up) for side, up in zip(sides, ups)]
+    edges = [np.vstack([side, up]) for side, up in zip(sides, ups)]
+    crossed = _cross(edges[0][:, None, :], edges[1][None, :, :]).reshape(-1, 3)
+    return not _apart_along(points, np.vstack([*normals, crossed]), 2 * clearance_mm)
 
 
 def _half_plane(alpha: float, beta: float, gamma: float, polygon: Polygon) -> Polygon:
