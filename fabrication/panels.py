@@ -422,11 +422,12 @@ def _slabs_meet(first: tuple, second: tuple, thickness_mm: float, clearance_mm: 
     their centres and their faces' normals are tried first."""
     points, sides, ups = [], [], []
     for polygon, panel, up, origin in (first, second):
-        hull = np.asarray(shapely.geometry.polygon.orient(polygon.convex_hull, 1.0).exterior.coords)
+        # a polygon's corners project as its convex hull's; its own edges serve as the hull's
+        outline = np.asarray(polygon.exterior.coords)
         axes = np.asarray(panel.axes)
-        flat = hull[:-1] @ axes + origin
+        flat = outline[:-1] @ axes + origin
         points.append(np.vstack([flat, flat + thickness_mm * up]))
-        sides.append(np.diff(hull, axis=0) @ axes)  # (m, 3) the outline's edges in space
+        sides.append(np.diff(outline, axis=0) @ axes)  # (m, 3) the outline's edges in space
         ups.append(up[None, :])
     between = (points[1].mean(axis=0) - points[0].mean(axis=0))[None, :]
     if _apart_along(points, np.vstack([between, *ups]), 2 * clearance_mm):
@@ -438,15 +439,19 @@ def _slabs_meet(first: tuple, second: tuple, thickness_mm: float, clearance_mm: 
 
 
 def _half_plane(alpha: float, beta: float, gamma: float, polygon: Polygon) -> Polygon:
-    """The part of the plane where alpha x + beta y >= gamma, as a polygon covering ``polygon``."""
-    n = np.array([alpha, beta]) / math.hypot(alpha, beta)
-    g = gamma / math.hypot(alpha, beta)
+    """The part of the plane where alpha x + beta y >= gamma, as a polygon covering ``polygon``
+    (plain floats: numpy's set-up costs more than these few products)."""
+    norm = math.hypot(alpha, beta)
+    nx, ny, g = alpha / norm, beta / norm, gamma / norm
     x0, y0, x1, y1 = polygon.bounds
     r = 2 * math.hypot(x1 - x0, y1 - y0) + abs(g) + 1.0
-    centre = np.array([0.5 * (x0 + x1), 0.5 * (y0 + y1)])
-    foot = centre + (g - centre @ n) * n  # on the line
-    t = np.array([-n[1], n[0]])
-    return Polygon([foot - r * t, foot + r * t, foot + r * t + r * n, foot - r * t + r * n])
+    cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    step = g - (cx * nx + cy * ny)
+    fx, fy = cx + step * nx, cy + step * ny  # on the line
+    tx, ty = -ny * r, nx * r
+    ox, oy = nx * r, ny * r
+    return shapely.polygons([(fx - tx, fy - ty), (fx + tx, fy + ty), (fx + tx + ox, fy + ty + oy),
+                             (fx - tx + ox, fy - ty + oy)])
 
 
 def flatten_panels(polymesh: PolyMesh, settings: PanelSettings | None = None, *,
