@@ -267,10 +267,10 @@ def trim_at_folds(panels: list[Panel], loops: list, nodes_m: np.ndarray, seats: 
     times the sine of half the fold each). Each neighbour must stay ``clearance_mm`` clear, over its
     whole thickness, of a plane through their shared edge's direction and halfway between their
     normals, placed halfway across the gap left between them; each outline is cut by it where it is
-    not (both by the same amount). Panels that meet at a node
-    only (round a split cell) and whose slabs then come within two clearances of each other
-    (the separating axis test on their convex hulls) each lose the same corner at that node, cut
-    square to its bisector, as little as keeps them apart (bisection).
+    not (both by the same amount). Panels that meet at a node only (round a split cell) and whose
+    slabs then come within two clearances of each other (the separating axis test on their convex
+    hulls) each lose the same corner at that node, cut square to its bisector, as little as keeps
+    them apart (bisection); where no such cut parts them they are left as they are.
     ``loops``: each panel's node loop (into ``nodes_m``, (n, 3) m) by its ``face``; the neighbours
     are the panels whose loops share an edge or a node.
     Nothing is cut at a ridge or where the lift is small. A panel that nothing would be left of
@@ -330,7 +330,7 @@ def trim_at_folds(panels: list[Panel], loops: list, nodes_m: np.ndarray, seats: 
         for k, j in itertools.combinations(sorted(around), 2):
             if j in edge_neighbours[k] or k in lost or j in lost:
                 continue
-            slabs = [(panels[m], up[m], 1e3 * np.asarray(panels[m].origin_m) + shift[m]) for m in (k, j)]
+            slabs = [(panels[m], up[m], seated[m]) for m in (k, j)]
             if not _slabs_meet(*[(polygons[m], *slab) for m, slab in zip((k, j), slabs)], settings.thickness_mm,
                                settings.clearance_mm):
                 continue
