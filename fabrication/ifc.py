@@ -131,9 +131,7 @@ def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: l
     import ifcopenshell
     import ifcopenshell.api.aggregate as aggregate
     import ifcopenshell.api.context as context
-    import ifcopenshell.api.geometry as geometry
     import ifcopenshell.api.material as material
-    import ifcopenshell.api.pset as pset
     import ifcopenshell.api.root as root
     import ifcopenshell.api.unit as unit
     import ifcopenshell.guid
@@ -164,21 +162,53 @@ def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: l
         # made here rather than by the placement API, whose entity order varied from run to run
         product.ObjectPlacement = model.create_entity("IfcLocalPlacement", RelativePlacement=axes(frame))
 
-    def properties(product, values: dict) -> None:
-        props = pset.add_pset(model, product=product, name="Pset_Gridshell")
-        pset.edit_pset(model, pset=props, properties={k: v for k, v in values.items() if v is not None})
+    # the products, their shapes and property sets made as entities: ifcopenshell's API took some
+    # 3 ms a product in its bookkeeping (37 s for the large job's 10 800 products)
+    def product(ifc_class: str, name: str, **attributes):
+        return model.create_entity(ifc_class, GlobalId=ifcopenshell.guid.new(), Name=name, **attributes)
+
+    def swept_shape(item) -> object:
+        """An IfcProductDefinitionShape of one swept solid on the body context."""
+        representation = model.create_entity("IfcShapeRepresentation", ContextOfItems=body,
+                                             RepresentationIdentifier="Body", RepresentationType="SweptSolid",
+                                             Items=[item])
+        return model.create_entity("IfcProductDefinitionShape", Representations=[representation])
+
+    def extruded(profile, depth_mm: float):
+        """``profile`` extruded along its local z by ``depth_mm`` from the product's placement."""
+        position = model.create_entity(
+            "IfcAxis2Placement3D", Location=model.create_entity("IfcCartesianPoint", Coordinates=(0.0, 0.0, 0.0)),
+            Axis=model.create_entity("IfcDirection", DirectionRatios=(0.0, 0.0, 1.0)),
+            RefDirection=model.create_entity("IfcDirection", DirectionRatios=(1.0, 0.0, 0.0)))
+        along = model.create_entity("IfcDirection", DirectionRatios=(0.0, 0.0, 1.0))
+        return model.create_entity("IfcExtrudedAreaSolid", SweptArea=profile, Position=position,
+                                   ExtrudedDirection=along, Depth=float(depth_mm))
+
+    def properties(item, values: dict) -> None:
+        """Pset_Gridshell: each value a single value, IfcLabel (text), IfcInteger or IfcReal."""
+        single = []
+        for key, value in values.items():
+            if value is None:
+                continue
+            kind = ("IfcLabel" if isinstance(value, str) else
+                    "IfcInteger" if isinstance(value, (int, np.integer)) and not isinstance(value, bool) else "IfcReal")
+            nominal = model.create_entity(kind, str(value) if kind == "IfcLabel" else
+                                          int(value) if kind == "IfcInteger" else float(value))
+            single.append(model.create_entity("IfcPropertySingleValue", Name=key, NominalValue=nominal))
+        props = model.create_entity("IfcPropertySet", GlobalId=ifcopenshell.guid.new(), Name="Pset_Gridshell",
+                                    HasProperties=single)
+        model.create_entity("IfcRelDefinesByProperties", GlobalId=ifcopenshell.guid.new(), RelatedObjects=[item],
+                            RelatingPropertyDefinition=props)
 
     products = []
     profiles: dict[str, object] = {}
     steel = material.add_material(model, name=beam_material, category=beam_category)
     members = []
     for beam in beams:
-        member = root.create_entity(model, ifc_class="IfcMember", name=beam.id, predefined_type="MEMBER")
+        member = product("IfcMember", beam.id, PredefinedType="MEMBER")
         if beam.profile not in profiles:
             profiles[beam.profile] = _profile(model, beam)
-        representation = geometry.add_profile_representation(model, context=body, profile=profiles[beam.profile],
-                                                              depth=beam.cut_length_mm / 1000.0)
-        geometry.assign_representation(model, product=member, representation=representation)
+        member.Representation = swept_shape(extruded(profiles[beam.profile], beam.cut_length_mm))
         # a rectangle's height (the profile's y) along the beam's up: local x = up x direction
         frame = _frame(beam.start_mm, beam.direction, None if beam.up is None else np.cross(beam.up, beam.direction))
         place(member, frame)
@@ -187,15 +217,13 @@ def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: l
             across = frame[:3, :3].T @ np.asarray(side, float)
             at, inward = (np.zeros(3), np.array([0.0, 0.0, 1.0])) if end == 0 else (
                 np.array([0.0, 0.0, beam.cut_length_mm]), np.array([0.0, 0.0, -1.0]))
-            opening = root.create_entity(model, ifc_class="IfcOpeningElement", name=f"{beam.id} slot {end + 1}")
+            opening = product("IfcOpeningElement", f"{beam.id} slot {end + 1}")
             strip = model.create_entity("IfcRectangleProfileDef", ProfileType="AREA", XDim=float(beam.slot_width_mm),
                                         YDim=float(2 * max(beam.size_mm, beam.width_mm or 0.0)))
             up = model.create_entity("IfcDirection", DirectionRatios=(0.0, 0.0, 1.0))
             solid = model.create_entity("IfcExtrudedAreaSolid", SweptArea=strip, ExtrudedDirection=up,
                                         Position=axes(_frame(at, inward, across)), Depth=float(length))
-            geometry.assign_representation(model, product=opening, representation=model.create_entity(
-                "IfcShapeRepresentation", ContextOfItems=body, RepresentationIdentifier="Body",
-                RepresentationType="SweptSolid", Items=[solid]))
+            opening.Representation = swept_shape(solid)
             opening.ObjectPlacement = model.create_entity(
                 "IfcLocalPlacement", PlacementRelTo=member.ObjectPlacement, RelativePlacement=axes(np.eye(4)))
             model.create_entity("IfcRelVoidsElement", GlobalId=ifcopenshell.guid.new(), RelatingBuildingElement=member,
@@ -207,24 +235,25 @@ def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: l
         material.assign_material(model, products=members, material=steel)
     products += members
     materials: dict[str, object] = {}
+    plates_of: dict[str, list] = {}
     for panel in panels:
-        plate = root.create_entity(model, ifc_class="IfcPlate", name=panel.id, predefined_type="CURTAIN_PANEL")
+        plate = product("IfcPlate", panel.id, PredefinedType="CURTAIN_PANEL")
         outline = np.asarray(panel.outline_mm, float)
         x, y = np.asarray(panel.axes[0], float), np.asarray(panel.axes[1], float)
         local = np.c_[(outline - outline[0]) @ x, (outline - outline[0]) @ y]
         points = [model.create_entity("IfcCartesianPoint", Coordinates=(float(u), float(v))) for u, v in local]
         curve = model.create_entity("IfcPolyline", Points=points + points[:1])
         profile = model.create_entity("IfcArbitraryClosedProfileDef", ProfileType="AREA", OuterCurve=curve)
-        representation = geometry.add_profile_representation(model, context=body, profile=profile,
-                                                              depth=panel.thickness_mm / 1000.0, cardinal_point=None)
-        geometry.assign_representation(model, product=plate, representation=representation)
+        plate.Representation = swept_shape(extruded(profile, panel.thickness_mm))
         place(plate, _frame(outline[0], np.cross(x, y), x))
         if panel.material not in materials:
             materials[panel.material] = material.add_material(model, name=panel.material, category="glass")
-        material.assign_material(model, products=[plate], material=materials[panel.material])
+        plates_of.setdefault(panel.material, []).append(plate)
         properties(plate, {"Material": panel.material, "Thickness_mm": panel.thickness_mm, "Mass_kg": panel.mass_kg,
                            "Sheet": panel.sheet or None, "AssemblyStep": panel.step})
         products.append(plate)
+    for name, plates in plates_of.items():  # one assignment per material, as for the members
+        material.assign_material(model, products=plates, material=materials[name])
     def swept(profile, origin, z, depth: float, x=None):
         """An extruded solid of ``profile`` from ``origin`` along ``z`` (joint axes, mm)."""
         # entities in the order the file numbers them: the placement, then the direction
@@ -234,7 +263,7 @@ def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: l
                                    ExtrudedDirection=up, Depth=float(depth))
 
     for joint in joints:
-        fastener = root.create_entity(model, ifc_class="IfcMechanicalFastener", name=joint.id)
+        fastener = product("IfcMechanicalFastener", joint.id)
         axis = np.asarray(joint.axis, float) / np.linalg.norm(joint.axis)
         circle = lambda r: model.create_entity("IfcCircleProfileDef", ProfileType="AREA", Radius=float(r))  # noqa: E731
         items = [swept(circle(joint.hub_radius_mm), -0.5 * joint.hub_height_mm * axis, axis, joint.hub_height_mm)]
@@ -253,7 +282,7 @@ def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: l
         representation = model.create_entity("IfcShapeRepresentation", ContextOfItems=body,
                                              RepresentationIdentifier="Body", RepresentationType="SweptSolid",
                                              Items=items)
-        geometry.assign_representation(model, product=fastener, representation=representation)
+        fastener.Representation = model.create_entity("IfcProductDefinitionShape", Representations=[representation])
         place(fastener, _frame(joint.position_mm, np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])))
         properties(fastener, {"Beams": int(len(joint.directions)), "PartFile": joint.part_file or None,
                               "Geometry": "hub and sleeves or fin plates as swept solids; the joint's solid, with "
