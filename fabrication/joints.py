@@ -145,18 +145,18 @@ def joint_sleeve_mm(settings: JointSettings, beam_size_mm: float) -> float:
 
 def joint_setback_mm(settings: JointSettings, beam_size_mm: float,
                      smallest_angle_rad: float | np.ndarray = 2 * np.pi / 3,
-                     rise: float = 0.0) -> float | np.ndarray:
+                     rise: float | np.ndarray = 0.0) -> float | np.ndarray:
     """Distance from the node to where a beam ends (the socket's bore start, the steel tube's end), mm:
     outside the hub, and far enough that two beams at the smallest angle keep apart (sockets: the
-    least wall between two bores; steel: 5 mm between two tubes). Vectorised over the angles.
+    least wall between two bores; steel: 5 mm between two tubes). Vectorised over the angles and rises.
     ``rise``: the largest |sine| of a beam's angle to the plane square to the node's axis; a steel
     node's tube that rises so clears the hub with the edge of its end that leans towards the axis
     (half the beam size times the rise nearer the axis, the end's centre the cosine as far out)."""
     half = np.maximum(np.sin(0.5 * np.asarray(smallest_angle_rad, dtype=float)), 0.05)
     hub = joint_hub_radius_mm(settings, beam_size_mm)
     if settings.kind == "steel":
-        rise = min(abs(float(rise)), 0.95)
-        clear_hub = (hub + 5.0 + 0.5 * beam_size_mm * rise) / math.sqrt(1.0 - rise * rise)
+        rise = np.minimum(np.abs(np.asarray(rise, dtype=float)), 0.95)
+        clear_hub = (hub + 5.0 + 0.5 * beam_size_mm * rise) / np.sqrt(1.0 - rise * rise)
         setback = np.maximum(clear_hub, (0.5 * beam_size_mm + 2.5) / half)
     else:
         bore = 0.5 * beam_size_mm + settings.clearance_mm

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from engine.mesh import PolyMesh
+from engine.structure.grid_model import node_normals
 
 from .joints import JointSettings, joint_hub_radius_mm, joint_setback_mm, joint_sleeve_mm
 
@@ -65,9 +66,11 @@ class BuildLimits:
                    min_angle_deg=float(default_min_angle_deg(joints, beam_size_mm) if min_angle_deg is None
                                        else min_angle_deg))
 
-    def setback_mm(self, angle_rad: float | np.ndarray) -> float | np.ndarray:
-        """Set-back of a joint whose smallest angle between beams is ``angle_rad``, mm (vectorised)."""
-        return joint_setback_mm(self.joints, self.beam_size_mm, angle_rad)
+    def setback_mm(self, angle_rad: float | np.ndarray, rise: float | np.ndarray = 0.0) -> float | np.ndarray:
+        """Set-back of a joint whose smallest angle between beams is ``angle_rad`` and whose steepest
+        beam rises ``rise`` (the sine of its angle to the plane square to the joint's axis), mm
+        (vectorised)."""
+        return joint_setback_mm(self.joints, self.beam_size_mm, angle_rad, rise)
 
     def shortest_beam_mm(self, angle_rad: float = 2 * np.pi / 3) -> float:
         """Shortest buildable node-to-node length between two joints of that smallest angle, mm."""
@@ -105,10 +108,27 @@ def node_smallest_angles(polymesh: PolyMesh) -> np.ndarray:
     return out
 
 
+def node_rises(polymesh: PolyMesh) -> np.ndarray:
+    """(n_nodes,) the largest |sine| of a beam's angle to the plane square to its node's axis (the
+    grid's own node normals: engine.structure.grid_model.node_normals); 0 at a node of no beam."""
+    e = polymesh.edges
+    out = np.zeros(polymesh.n_nodes)
+    if not len(e):
+        return out
+    normals = node_normals(polymesh)
+    d = polymesh.nodes[e[:, 1]] - polymesh.nodes[e[:, 0]]
+    d /= np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
+    np.maximum.at(out, e[:, 0], np.abs(np.einsum("ij,ij->i", d, normals[e[:, 0]])))
+    np.maximum.at(out, e[:, 1], np.abs(np.einsum("ij,ij->i", d, normals[e[:, 1]])))
+    return out
+
+
 def required_beam_lengths_m(polymesh: PolyMesh, limits: BuildLimits) -> np.ndarray:
     """(n_beams,) shortest buildable node-to-node length of each beam of the grid as it is, m:
-    the two set-backs at its end nodes' smallest angles plus the minimum cut length."""
+    the two set-backs at its end nodes' smallest angles (and, at steel nodes, their steepest
+    beams' rise) plus the minimum cut length."""
     angles = node_smallest_angles(polymesh)
-    setback = limits.setback_mm(angles)
+    rises = node_rises(polymesh) if limits.joints.kind == "steel" else 0.0
+    setback = limits.setback_mm(angles, rises)
     e = polymesh.edges
     return (setback[e[:, 0]] + setback[e[:, 1]] + limits.min_cut_length_mm) / 1000.0
