@@ -301,3 +301,58 @@ def test_the_panels_grain_values_are_the_fabrication_settings_own():
 
     assert typing.get_args(PanelsConfig.model_fields["grain"].annotation) == tuple(GRAIN_DIRECTIONS)
     assert PanelsConfig().grain == "none"
+
+
+# ------------------------------------------------------------------ a small surface is built as a model
+
+def _roof_file(tmp_path: Path, span_m: float, scale: float = 1.0) -> Path:
+    """A generated roof of ``span_m`` across on plan, written in units of 1/``scale`` m."""
+    from tests.generated_surfaces import generate_surface
+
+    surface = generate_surface(3, kind="dome", span_m=span_m, n_vertices=300)
+    path = tmp_path / f"roof-{span_m:g}-{scale:g}.obj"
+    lines = [f"v {x * scale:.6f} {y * scale:.6f} {z * scale:.6f}" for x, y, z in surface.vertices]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in surface.faces]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_a_surface_under_four_metres_without_a_section_is_built_with_the_mockups_kit(tmp_path):
+    mockup = load_project(TEMPLATES / "mockup.toml")
+    for path, units in ((_roof_file(tmp_path, 1.5), "m"), (_roof_file(tmp_path, 1.5, scale=1000.0), "mm")):
+        project = parse_project({"surface": {"file": str(path), "file_units": units}})
+        assert project.section == mockup.section and project.material.name == mockup.material.name
+        assert project.fabrication.joints.kind == "socket" and project.fabrication.panels.material == "acrylic"
+        assert "1.5 m across" in project.scale_note and "[section]" in project.scale_note
+    # a real roof, or a project that names its section or its material, keeps what it says
+    roof = parse_project({"surface": {"file": str(_roof_file(tmp_path, 12.0))}})
+    assert roof.scale_note is None and roof.section.diameter == pytest.approx(0.0483)
+    assert roof.fabrication.joints.kind == "steel"
+    small = str(_roof_file(tmp_path, 1.5))
+    given = parse_project({"surface": {"file": small}, "section": {"diameter": "60.3 mm", "thickness": "4 mm"}})
+    assert given.scale_note is None and given.section.diameter == pytest.approx(0.0603)
+    assert given.material.name == roof.material.name
+    named = parse_project({"surface": {"file": small}, "material": {"name": "steel_s235"}})
+    assert named.scale_note is None and named.section == roof.section
+
+
+def test_the_quick_start_of_a_small_surface_says_it_is_a_model_and_keeps_its_cells(tmp_path, capsys):
+    """A 2.4 m roof (the mock-up's size) at the quick start's 120 cells: built with the model kit it
+    keeps its cells; with a real roof's steel nodes (named by its material) it is remeshed with
+    fewer, as its joints take more than its beams are long."""
+    import json
+
+    from workflow.cli import main
+
+    path = _roof_file(tmp_path, 2.4)
+    steel = tmp_path / "steel.toml"
+    steel.write_text(f'[surface]\nfile = {json.dumps(str(path))}\n[material]\nname = "steel_s355"\n')
+    built = {}
+    for name, command in (("model", ["--surface", str(path)]), ("steel", [str(steel)])):
+        out = tmp_path / name
+        assert main(["run", *command, "--out", str(out), "--until", "remesh", "--quiet"]) == 0
+        built[name] = json.loads((out / "04-remesh" / "remesh.json").read_text())["coarsened"]
+        err = capsys.readouterr().err
+        assert ("built as a model" in err and "2.4 m across" in err) == (name == "model")
+    assert built["model"] == {"cells_asked": 120, "cells_built": 120, "remeshes": 0}
+    assert built["steel"]["remeshes"] >= 1 and built["steel"]["cells_built"] < 60

@@ -94,6 +94,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_inputs(project, quick_start=bool(args.surface))   # what validate checks, before any stage runs
     for line in unusual_values(project):
         print(f"warning: {line}", file=sys.stderr)
+    if project.scale_note:
+        print(f"gridshell: {project.scale_note}", file=sys.stderr)
     out_dir = Path(args.out) if args.out else default_out
     progress = Progress(enabled=not args.quiet)
     progress.message(f"gridshell: {project.project.name} -> {out_dir}")
@@ -131,6 +133,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
     supported = check_selections(project)  # the selections match nodes of the surface
     for line in unusual_values(project):
         print(f"warning: {line}", file=sys.stderr)
+    if project.scale_note:
+        print(f"note: {project.scale_note}", file=sys.stderr)
     source = project.surface.file or f"template {project.surface.template}"
     if across is not None:
         source += f", {across:.3g} m across"

@@ -19,6 +19,7 @@ fabrication that bypass the project file.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import re
 import tomllib
 import types
@@ -27,10 +28,10 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
 
 from engine.design.en1993 import ChecksMethod
-from engine.errors import GridshellError
+from engine.errors import GridshellError, InputError
 from engine.remeshing.field import AnisotropyMap, FieldSettings, Orientation, SizeMap
 from engine.remeshing.grids import GridKind
 from engine.remeshing.optimize import OptimizeSettings
@@ -625,6 +626,12 @@ class Project(_Section):
     design: DesignConfig = Field(default_factory=DesignConfig)
     fabrication: FabricationConfig = Field(default_factory=FabricationConfig)
     report: ReportConfig = Field(default_factory=ReportConfig)
+    _scale_note: str | None = PrivateAttr(default=None)
+
+    @property
+    def scale_note(self) -> str | None:
+        """One line where the project took MODEL_KIT for a small surface (parse_project), else None."""
+        return self._scale_note
 
     @model_validator(mode="after")
     def _design_needs_tubes(self) -> "Project":
@@ -837,10 +844,31 @@ def _format_errors(error: ValidationError, source: str) -> str:
     return "\n".join(lines)
 
 
+MODEL_ACROSS_M = 4.0
+"""A surface file smaller than this across (m) whose project gives neither [section] nor [material]
+is built as a model, with MODEL_KIT: the real roof's default steel tube (CHS 48.3 x 3.2) and its
+steel nodes would leave a 1.5 m surface a dozen cells, each beam longer than two nodes' set-backs."""
+MODEL_KIT: dict[str, dict[str, Any]] = {
+    "material": {"name": "aluminium_6063"},
+    "section": {"kind": "circular_hollow", "diameter": 0.012, "thickness": 0.0015},
+}
+"""The mock-up's kit (templates/mockup.toml): aluminium tubes 12 x 1.5 mm, which take printed sockets
+and, through them, acrylic panels on a laser bed (the joint kind's defaults)."""
+
+
 def parse_project(data: dict, *, source: str = "project", base_dir: Path | None = None) -> Project:
-    """Validate a project dictionary; relative surface paths resolve against ``base_dir``."""
+    """Validate a project dictionary; relative surface paths resolve against ``base_dir``. A surface
+    file under MODEL_ACROSS_M across, with no [section] and no [material], takes MODEL_KIT
+    (``Project.scale_note`` says so)."""
     try:
         project = Project.model_validate(data)
+        across = None if "section" in data or "material" in data else _file_across_m(project, base_dir)
+        if across is not None and SURFACE_EXTENT_M[0] <= across < MODEL_ACROSS_M:
+            project = Project.model_validate({**data, **MODEL_KIT})
+            project._scale_note = (
+                f"the surface is {_distance(across)} across, under {MODEL_ACROSS_M:g} m: it is built as a model, "
+                "with the mock-up's aluminium tubes 12 x 1.5 mm, printed sockets and acrylic panels "
+                "(a project file's [section] and [material] choose others)")
     except ValidationError as exc:
         raise ConfigError(_format_errors(exc, source),
                           hint="compare with a template: gridshell init DIR --template mockup") from None
@@ -856,6 +884,33 @@ def parse_project(data: dict, *, source: str = "project", base_dir: Path | None 
         design = project.design.model_copy(update={"catalogue": str((base_dir / spec).resolve())})
         project = project.model_copy(update={"design": design})
     return project
+
+
+def _file_across_m(project: Project, base_dir: Path | None) -> float | None:
+    """The size across (m) of ``project``'s surface file, as check_inputs measures it; None for a
+    template, or a file that does not read (check_inputs then says why)."""
+    if project.surface.file is None:
+        return None
+    path = Path(project.surface.file)
+    if not path.is_absolute() and base_dir is not None:
+        path = base_dir / path
+    try:
+        stat = path.resolve().stat()
+        raw = _raw_extent(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+    except (OSError, InputError):
+        return None
+    return raw * _FILE_UNITS[project.surface.file_units] if raw > 0 else None
+
+
+@functools.lru_cache(maxsize=32)
+def _raw_extent(path: str, mtime_ns: int, size: int) -> float:
+    """The largest side of the bounding box of the mesh file ``path``, in its own units (the file's
+    time and size key the cache: a sweep parses its project once per point)."""
+    from .surface_io import read_surface
+
+    vertices = read_surface(path)[0]
+    finite = vertices[np.isfinite(vertices).all(axis=1)]
+    return float(np.ptp(finite, axis=0).max()) if len(finite) else 0.0
 
 
 def load_project(path: str | Path) -> Project:
@@ -956,7 +1011,6 @@ def check_inputs(project: Project, *, quick_start: bool = False) -> float | None
 
     if project.design.size_sections:
         from engine.design.catalogue import catalogue
-        from engine.errors import InputError
 
         try:
             catalogue(project.design.catalogue).up_to(project.design.max_diameter)
