@@ -31,7 +31,7 @@ from shapely.geometry import Polygon
 
 from engine.errors import InputError
 from engine.mesh import PolyMesh
-from engine.parts import panel_id, sheet_id
+from engine.parts import node_id, panel_id, sheet_id
 from fabrication.dxf import ENGRAVE_STYLE, cutting_layers, new_document, save_dxf
 from fabrication.files import write_text_atomic
 from fabrication.settings import GRAIN_DIRECTIONS, PanelSettings
@@ -258,7 +258,7 @@ FOLD_FIX = ("lower [fabrication.panels] clearance or thickness, or smaller joint
 
 def trim_at_folds(panels: list[Panel], loops: list, nodes_m: np.ndarray, seats: tuple[np.ndarray, np.ndarray],
                   settings: PanelSettings, *,
-                  problems: list[tuple[str, str]] | None = None) -> tuple[list[Panel], np.ndarray]:
+                  problems: list[tuple[tuple[str, ...], str]] | None = None) -> tuple[list[Panel], np.ndarray]:
     """The panels cut back where, resting on their seats (``panel_seats``), two of them would close
     their joint at a fold: (panels, how far each outline was cut back, mm).
 
@@ -270,11 +270,12 @@ def trim_at_folds(panels: list[Panel], loops: list, nodes_m: np.ndarray, seats: 
     not (both by the same amount). Panels that meet at a node only (round a split cell) and whose
     slabs then come within two clearances of each other (the separating axis test on their convex
     hulls) each lose the same corner at that node, cut square to its bisector, as little as keeps
-    them apart (bisection); where no such cut parts them they are left as they are.
+    them apart (bisection); where no such cut parts them they are left as they are (a problem).
     ``loops``: each panel's node loop (into ``nodes_m``, (n, 3) m) by its ``face``; the neighbours
     are the panels whose loops share an edge or a node.
     Nothing is cut at a ridge or where the lift is small. A panel that nothing would be left of
-    raises InputError; with ``problems`` (a list) it is left uncut and (panel id, message) appended."""
+    raises InputError; with ``problems`` (a list) it is left uncut and ((panel id,), message)
+    appended, as is ((panel id, panel id), message) for a pair left too close."""
     up, shift = seats
     by_edge: dict[tuple[int, int], list[int]] = {}
     by_node: dict[int, set[int]] = {}
@@ -342,8 +343,14 @@ def trim_at_folds(panels: list[Panel], loops: list, nodes_m: np.ndarray, seats: 
                     *[(c, *slab) for c, slab in zip(cut, slabs)], settings.thickness_mm, settings.clearance_mm)
 
             low, high = 0.0, max(math.sqrt(polygons[m].area) for m in (k, j)) + settings.clearance_mm
-            if meet(high):
-                continue  # no corner cut parts them: left as they are (the edge planes hold the rest)
+            if meet(high):  # no corner cut parts them: left as they are, and said so
+                if problems is not None:
+                    problems.append(((panels[k].id, panels[j].id),
+                                     f"panels {panels[k].id} and {panels[j].id}, which meet at node {node_id(a)} "
+                                     f"only, come within two clearances ({2 * settings.clearance_mm:g} mm) of "
+                                     "each other resting on their joints, and no cut of their corners there "
+                                     "parts them"))
+                continue
             while high - low > 0.05:
                 low, high = (low, 0.5 * (low + high)) if not meet(0.5 * (low + high)) else (0.5 * (low + high), high)
             for m, corner in zip((k, j), corners):
@@ -355,7 +362,7 @@ def trim_at_folds(panels: list[Panel], loops: list, nodes_m: np.ndarray, seats: 
             message = f"panel {panel.id}: resting on its joints, nothing of it is left between its folds"
             if problems is None:
                 raise InputError(message, hint=FOLD_FIX)
-            problems.append((panel.id, message))
+            problems.append(((panel.id,), message))
         elif polygon.area < panel.area_mm2 - 1e-6:
             polygon = shapely.geometry.polygon.orient(shapely.simplify(polygon, 1e-6), 1.0)
             outline = np.asarray(polygon.exterior.coords)[:-1]

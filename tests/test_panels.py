@@ -304,3 +304,29 @@ def test_panels_round_a_valley_node_keep_clear_of_each_other_also_where_they_mee
             assert distance == pytest.approx(20.0, abs=0.05)
         else:
             assert distance > 10.0, (i, j, distance)
+
+
+def test_panels_that_no_corner_cut_parts_are_reported_with_their_node():
+    """Two slivers 2 m long share a node only and cross each other 1-2 m from it: no cut of their
+    corners at the node parts them, so they stay as they are and the pair is a problem naming both
+    panels and the node; a pair side by side in one plane is not."""
+    from fabrication.panels import trim_at_folds
+
+    def run(far_z: float, far_y: tuple[float, float] = (0.05, 0.15)):
+        nodes = np.array([[0, 0, 0], [2, 0, 0], [2, 0.2, 0], [2, far_y[0], far_z], [2, far_y[1], -far_z]], float)
+        grid = PolyMesh(nodes=nodes, faces=((0, 1, 2), (0, 3, 4)))
+        settings = PanelSettings(clearance_mm=10.0, thickness_mm=10.0)
+        panels = flatten_panels(grid, settings)
+        up = np.array([np.cross(*p.axes) for p in panels])
+        problems: list = []
+        trimmed, cut_back = trim_at_folds(panels, list(grid.faces), nodes, (up, np.zeros((2, 3))), settings,
+                                          problems=problems)
+        return panels, trimmed, cut_back, problems
+
+    panels, trimmed, cut_back, problems = run(0.3)
+    assert problems == [(("P0001", "P0002"), problems[0][1])]
+    assert "N0001" in problems[0][1] and (cut_back == 0).all()
+    assert all(new is old for old, new in zip(panels, trimmed))
+    # side by side in one plane, their edges apart by 50 mm at the far ends: nothing to say
+    _, _, cut_back, problems = run(0.0, (-0.05, -0.2))
+    assert problems == [] and (cut_back == 0).all()

@@ -459,11 +459,11 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     seats = _seats(polymesh, geometries, sizes_mm, panels, pieces, joint_settings)
     if panels:
         # resting on the joints, neighbours at a valley fold would close their joint: cut back
-        folds: list[tuple[str, str]] = []
+        folds: list[tuple[tuple[str, ...], str]] = []
         panels, cut_back = trim_at_folds(panels, [p.loop for p in pieces], polymesh.nodes, seats, panel_settings,
                                          problems=folds)
-        findings += [Finding(kind="panel_outline", parts=[pid], stage="fabrication", message=message, fix=FOLD_FIX)
-                     for pid, message in folds]
+        findings += [Finding(kind="panel_outline", parts=list(ids), stage="fabrication", message=message, fix=FOLD_FIX)
+                     for ids, message in folds]
         summary.update({"panels_cut_back_at_folds": int((cut_back > 0).sum()),
                         "panel_cut_back_max_mm": round(float(cut_back.max()), 1)})
         cells = {panel.id: (pieces[panel.face].cell + 1, pieces[panel.face].piece) for panel in panels}
