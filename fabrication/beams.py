@@ -112,7 +112,8 @@ def slot_volumes_mm3(slots: EndSlots, cut_lengths_mm: np.ndarray, sizes_mm: np.n
     """(b,) what the fin plates' end slots take out of each beam as cut (mm3), in closed form: the
     section's area within the slot's strip times the slots' lengths, for beams whose slots fit
     (``EndSlots.fit``): an annulus's or a disc's strip; a rectangle's two walls the slot crosses
-    (its full height where solid), the section's small turn to the slot neglected."""
+    (its full height where solid, or the slot's height where that is less: a knife plate's), the
+    section's small turn to the slot neglected."""
     removed = np.zeros(len(cut_lengths_mm))
     for k, cut in enumerate(cut_lengths_mm):
         if cut <= 0 or not slots.fit(k, float(cut)):
@@ -125,9 +126,16 @@ def slot_volumes_mm3(slots: EndSlots, cut_lengths_mm: np.ndarray, sizes_mm: np.n
                 area -= _disc_strip_mm2(radius - wall, slots.width)
         else:
             depth = rectangle.height_mm if wall is None else 2.0 * wall
+            if wall is None and slots.height is not None:
+                depth = min(depth, slots.height)
             area = min(slots.width, rectangle.width_mm) * depth
         removed[k] = area * float(slots.lengths[k].sum())
     return removed
+
+
+#: A rectangular beam's slotted ends are shared between beams whose section turns to the slot by the
+#: same angle to this step (degrees); the end then differs from its beam's own turn by half a step.
+SECTION_TURN_STEP_DEG = 0.1
 
 
 @dataclass(frozen=True)
@@ -156,14 +164,16 @@ def _profile_face(size: float, wall: float | None, rectangle: tuple[float, float
 
 
 def _slotted_end(size: float, wall: float | None, width: float, length: float,
-                 rectangle: tuple[float, float, float] | None = None):
-    """A beam's end of ``length`` (mm) with a slot ``width`` wide through both walls, along local z
-    from the origin, the slot across local x: the section's prism (``_profile_face``) less the
-    slot, once per size (the beams place it again)."""
+                 rectangle: tuple[float, float, float] | None = None, height: float | None = None):
+    """A beam's end of ``length`` (mm) with a slot ``width`` wide, along local z from the origin, the
+    slot across local x: through both walls, or ``height`` high along local y about the axis (a
+    knife plate's in a solid beam). The section's prism (``_profile_face``) less the slot, once per
+    size (the beams place it again)."""
     from build123d import Align, Box, Solid, Vector
 
     prism = Solid.extrude(_profile_face(size, wall, rectangle), Vector(0, 0, length))
-    slot = Box(width, 2 * size, 2 * length, align=(Align.CENTER, Align.CENTER, Align.CENTER))
+    slot = Box(width, 2 * size if height is None else height, 2 * length,
+               align=(Align.CENTER, Align.CENTER, Align.CENTER))
     return prism - slot
 
 
@@ -251,8 +261,9 @@ def tube_solids(polymesh: PolyMesh, table: pd.DataFrame, *, outer_size_mm: float
                 if rectangle is not None:  # the rectangle's turn in the slot's axes: its height along up
                     y = np.cross(inward, side)
                     turn = np.degrees(np.arctan2(np.cross(y, rectangle.up[k]) @ inward, y @ rectangle.up[k]))
-                    shape = (section[0], section[1], round(float(turn), 1) % 360.0)
-                key2 = (float(size), wall, float(slots.width), float(slots.lengths[k, i]), shape)
+                    step = SECTION_TURN_STEP_DEG
+                    shape = (section[0], section[1], round(round(float(turn) / step) * step, 6) % 360.0)
+                key2 = (float(size), wall, float(slots.width), float(slots.lengths[k, i]), shape, slots.height)
                 if key2 not in shared:
                     shared[key2] = cq.Shape.cast(_slotted_end(*key2).wrapped)
                 place = Plane(origin=tuple(map(float, at_end)), x_dir=tuple(map(float, side)),

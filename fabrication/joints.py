@@ -48,8 +48,8 @@ from .workers import StepOutcome, exit_with_parent, run_steps
 __all__ = ["JointKind", "JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm",
            "geometry_setback_mm", "joint_hub_radius_mm", "joint_sleeve_mm", "smallest_angle", "build_joint",
            "build_joint_and_blank", "build_joints", "same_joints", "JointsInBackground", "joint_name",
-           "copy_placements", "joint_hub_height_mm", "joint_reach_mm", "cylinder_reach_mm", "EndSlots",
-           "fin_plate_slots"]
+           "copy_placements", "joint_hub_height_mm", "joint_plate_height_mm", "knife_plate_height_mm",
+           "joint_reach_mm", "cylinder_reach_mm", "EndSlots", "fin_plate_slots"]
 
 ENGRAVE_DEPTH_MM = 0.6
 #: The printed joint's STL: largest distance between a triangle and the surface (mm) and largest
@@ -64,6 +64,11 @@ LABEL_MARGIN_MM = 0.5  # between the label and a sleeve rising through the hub's
 #: Steel joint: hub radius and fin plate length inside the slotted tube, per beam outer size.
 STEEL_HUB_RADIUS = 0.75
 STEEL_PLATE_ENGAGEMENT = 1.0
+#: A steel node's hub is this many times its fin plates' height tall.
+HUB_PER_PLATE_HEIGHT = 1.25
+#: A knife plate slotted into a solid rectangular (timber) beam: its height per the beam's depth,
+#: leaving a fifth of the depth of wood above and below it for the dowels' edge distance.
+KNIFE_PLATE_DEPTH = 0.6
 
 
 #: Printed sockets (small tubes) or steel hub nodes with fin plates.
@@ -73,7 +78,10 @@ JointKind = Literal["socket", "steel"]
 @dataclass(frozen=True, kw_only=True)
 class JointSettings:
     """Dimensions in mm, all positive but the clearance (zero or more). hub_radius_mm /
-    sleeve_length_mm None: derived from the beam size."""
+    sleeve_length_mm None: derived from the beam size. plate_height_mm: a steel node's fin plates'
+    height along its axis; None: twice the beam size, plates through both walls of a slotted tube;
+    a solid rectangular (timber) beam's knife plates stay within its depth (``knife_plate_height_mm``),
+    set from the section by the fabrication stage."""
 
     kind: JointKind = "socket"
     clearance_mm: float = 0.3
@@ -85,10 +93,12 @@ class JointSettings:
     sleeve_length_mm: float | None = None
     plate_thickness_mm: float = 10.0
     bolt_hole_mm: float = 18.0
+    plate_height_mm: float | None = None
 
     def __post_init__(self) -> None:
         check_ranges(self, "joint", positive=("wall_mm", "min_wall_mm", "pin_hole_mm", "hub_radius_mm",
-                                              "sleeve_length_mm", "plate_thickness_mm", "bolt_hole_mm"),
+                                              "sleeve_length_mm", "plate_thickness_mm", "bolt_hole_mm",
+                                              "plate_height_mm"),
                      zero_or_positive=("clearance_mm",))
 
 
@@ -171,11 +181,25 @@ def geometry_setback_mm(settings: JointSettings, geometry: JointGeometry) -> flo
     return float(joint_setback_mm(settings, geometry.beam_size_mm, smallest_angle(geometry.directions), rise))
 
 
+def joint_plate_height_mm(settings: JointSettings, beam_size_mm: float) -> float:
+    """A steel node's fin plates' height along its axis, mm: the setting, else twice the beam size
+    (through both walls of the slotted tube and standing out of it)."""
+    if settings.plate_height_mm is not None:
+        return float(settings.plate_height_mm)
+    return 2.0 * beam_size_mm
+
+
+def knife_plate_height_mm(depth_mm: float) -> float:
+    """The height of a knife plate slotted into a solid rectangular beam ``depth_mm`` deep, mm."""
+    return KNIFE_PLATE_DEPTH * float(depth_mm)
+
+
 def joint_hub_height_mm(settings: JointSettings, beam_size_mm: float) -> float:
     """Height of the joint's hub along its axis, mm: taller than a printed socket's sleeve (so that
-    the hub's top and the sleeves have no tangent faces), 2.5 beam sizes for a steel node."""
+    the hub's top and the sleeves have no tangent faces), HUB_PER_PLATE_HEIGHT times a steel node's
+    fin plates' (2.5 beam sizes for plates through a tube)."""
     if settings.kind == "steel":
-        return 2.5 * beam_size_mm
+        return HUB_PER_PLATE_HEIGHT * joint_plate_height_mm(settings, beam_size_mm)
     return 2.0 * (0.5 * beam_size_mm + settings.clearance_mm + settings.wall_mm) + 1.0
 
 
@@ -201,7 +225,8 @@ def joint_reach_mm(geometry: JointGeometry, settings: JointSettings, direction: 
             side = _perpendicular(d, geometry.axis)
             up = np.cross(d, side)
             end = setback + joint_sleeve_mm(settings, size)
-            reach = max(reach, max(0.5 * hub_radius * rise, end * rise) + 0.4 * height * abs(float(up @ n))
+            plate = joint_plate_height_mm(settings, size)
+            reach = max(reach, max(0.5 * hub_radius * rise, end * rise) + 0.5 * plate * abs(float(up @ n))
                         + settings.plate_thickness_mm * abs(float(side @ n)))  # either side of its plane
         else:
             outer = 0.5 * own + settings.clearance_mm + settings.wall_mm
@@ -213,11 +238,14 @@ def joint_reach_mm(geometry: JointGeometry, settings: JointSettings, direction: 
 class EndSlots:
     """The slots a steel node's fin plates need at each end of each beam (mm): ``sides`` (b, 2, 3)
     the unit direction across each slot (the plate's normal), ``lengths`` (b, 2) how far each runs
-    into the tube from its end, ``width`` across it; ends [start node, end node] as the beam's."""
+    into the tube from its end, ``width`` across it; ends [start node, end node] as the beam's.
+    ``height``: the slot's height along the beam's up, None through the whole section (a plate
+    through a tube), else a knife plate's within a solid beam."""
 
     sides: np.ndarray
     lengths: np.ndarray
     width: float
+    height: float | None = None
 
     def fit(self, beam: int, cut_length_mm: float) -> bool:
         """Whether beam ``beam``'s two slots fit within its cut length (else it is left square-cut)."""
@@ -227,7 +255,8 @@ class EndSlots:
 def fin_plate_slots(polymesh: PolyMesh, geometries: list[JointGeometry], settings: JointSettings) -> EndSlots:
     """The end slots of every beam at steel nodes, as build_joint_and_blank places the fin plates:
     each plate runs along its beam, across the node's axis, and reaches its sleeve length into the
-    tube; the slot is the plate's thickness and a clearance each side wide, and a clearance longer."""
+    tube; the slot is the plate's thickness and a clearance each side wide, and a clearance longer;
+    where the plates' height is set (knife plates) a clearance above and below them high."""
     by_node = {g.node: g for g in geometries}
     e = polymesh.edges
     sides = np.zeros((len(e), 2, 3))
@@ -239,7 +268,9 @@ def fin_plate_slots(polymesh: PolyMesh, geometries: list[JointGeometry], setting
             d = d / np.linalg.norm(d)
             sides[k, end] = _perpendicular(d, g.axis)
             lengths[k, end] = joint_sleeve_mm(settings, g.beam_size_mm) + settings.clearance_mm
-    return EndSlots(sides=sides, lengths=lengths, width=settings.plate_thickness_mm + 2 * settings.clearance_mm)
+    height = None if settings.plate_height_mm is None else settings.plate_height_mm + 2 * settings.clearance_mm
+    return EndSlots(sides=sides, lengths=lengths, width=settings.plate_thickness_mm + 2 * settings.clearance_mm,
+                    height=height)
 
 
 def joint_geometry(polymesh: PolyMesh, normals: np.ndarray, beam_size_mm: float | np.ndarray) -> list[JointGeometry]:
@@ -744,7 +775,8 @@ def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings, *, b
         for d in directions:
             side = _perpendicular(d, axis)  # the plate's normal
             centre = setback + 0.5 * sleeve
-            plate, made = _holed_plate(start * d, d, np.cross(d, side), setback + sleeve - start, 0.8 * height,
+            plate, made = _holed_plate(start * d, d, np.cross(d, side), setback + sleeve - start,
+                                       joint_plate_height_mm(settings, size),
                                        settings.plate_thickness_mm, centre - start, 0.5 * settings.bolt_hole_mm)
             plates.append(plate)
             if not made:

@@ -215,10 +215,12 @@ def panel_seats(panels: list[Panel], loops: list, geometries: dict, joint_settin
     of its joints' axes (the outside); ``shift_mm`` moves it from its nodes' best-fit plane to where
     its underside clears the joints at its corners (fabrication.joints.joint_reach_mm) and the
     tubes along its edges. ``loops``: each panel's node loop by its ``face``; ``geometries``: node ->
-    JointGeometry; ``beam_radii_mm``: (node, node) sorted -> the tube's outer radius (pairs that are
-    no beam, a split cell's diagonals, have none); ``cells``: each panel's cell. The pieces of a split
+    JointGeometry; ``beam_radii_mm``: (node, node) sorted -> the tube's outer radius, or a rectangular
+    beam's (half height, half width, its up (3,)) (pairs that are no beam, a split cell's diagonals,
+    have none); ``cells``: each panel's cell. The pieces of a split
     cell move together, along their mean normal, so that they still meet on their diagonals as
     they are cut (each moved along its own normal, the pieces of a sharp fold ran into each other)."""
+    from .beams import SECTION_TURN_STEP_DEG
     from .joints import cylinder_reach_mm, joint_reach_mm
 
     up = np.zeros((len(panels), 3))
@@ -236,8 +238,17 @@ def panel_seats(panels: list[Panel], loops: list, geometries: dict, joint_settin
             if radius is None or a not in geometries or b not in geometries:
                 continue
             pa, pb = geometries[a].position_mm, geometries[b].position_mm
-            along = float((pb - pa) @ normal / np.linalg.norm(pb - pa))
-            reach.append(cylinder_reach_mm(float(pa @ normal) - base, float(pb @ normal) - base, along, radius))
+            start, end = float(pa @ normal) - base, float(pb @ normal) - base
+            if isinstance(radius, tuple):  # a rectangle: its corners reach furthest
+                half_height, half_width, beam_up = radius
+                across = np.cross(beam_up, (pb - pa) / np.linalg.norm(pb - pa))
+                # and a slotted end, turned to the nearest SECTION_TURN_STEP_DEG, by its corner's arc
+                turned = math.hypot(half_height, half_width) * math.radians(0.5 * SECTION_TURN_STEP_DEG)
+                reach.append(max(start, end) + half_height * abs(float(beam_up @ normal))
+                             + half_width * abs(float(across @ normal)) + turned)
+            else:
+                along = float((pb - pa) @ normal / np.linalg.norm(pb - pa))
+                reach.append(cylinder_reach_mm(start, end, along, radius))
         up[k], lift[k] = normal, max(reach, default=0.0)
     shift = lift[:, None] * up
     cell = np.arange(len(panels)) if cells is None else np.asarray(cells)

@@ -350,7 +350,7 @@ def test_the_quick_start_of_a_small_surface_says_it_is_a_model_and_keeps_its_cel
     built = {}
     for name, command in (("model", ["--surface", str(path)]), ("steel", [str(steel)])):
         out = tmp_path / name
-        assert main(["run", *command, "--out", str(out), "--until", "remesh", "--quiet"]) == 0
+        assert main(["run", *command, "--out", str(out), "--until", "remesh"]) == 0
         built[name] = json.loads((out / "04-remesh" / "remesh.json").read_text())["coarsened"]
         err = capsys.readouterr().err
         assert ("built as a model" in err and "2.4 m across" in err) == (name == "model")

@@ -984,11 +984,11 @@ def test_same_joints_groups_as_comparing_every_pair():
     assert same_joints(joints) == every_pair
 
 
-def _steel_nodes_grid(tilt_deg: float = 0.0, size_mm: float = 48.3):
+def _steel_nodes_grid(tilt_deg: float = 0.0, size_mm: float = 48.3, plate_height_mm: float | None = None):
     """A flat grid of two hexagons on steel nodes for beams of ``size_mm``, the node axes turned
     ``tilt_deg`` from the plane's normal about x (so that beams along y rise from the nodes' planes):
     (grid, joint geometries, joint settings, a cut table of id, cut length and start set-back, the fin
-    plates' end slots)."""
+    plates' end slots). ``plate_height_mm``: knife plates of that height (None: through the tube)."""
     import pandas as pd
 
     from fabrication.joints import JointSettings, fin_plate_slots, geometry_setback_mm, joint_geometry
@@ -997,7 +997,7 @@ def _steel_nodes_grid(tilt_deg: float = 0.0, size_mm: float = 48.3):
     grid = hex_polymesh(1, 2, radius=0.6, lift=False)
     tilt = np.radians(tilt_deg)
     normals = np.tile([0.0, -np.sin(tilt), np.cos(tilt)], (grid.n_nodes, 1))
-    settings = JointSettings(kind="steel")
+    settings = JointSettings(kind="steel", plate_height_mm=plate_height_mm)
     geometries = joint_geometry(grid, normals, size_mm)
     setback = {g.node: geometry_setback_mm(settings, g) for g in geometries}
     e = grid.edges
@@ -1022,21 +1022,23 @@ def _pieces(tube) -> list:
                                   for _, shape, location in tube.ends]
 
 
-@pytest.mark.parametrize("section", ["CHS 48.3 x 3.2", "rectangle 80 x 40"])
+@pytest.mark.parametrize("section", ["CHS 48.3 x 3.2", "rectangle 80 x 40", "timber 80 x 40"])
 def test_beams_rising_from_a_steel_nodes_plane_clear_its_hub_and_plates(section):
     """Node axes turned 15 degrees from the grid's normal: beams rise from the nodes' planes. Every
     beam as cut, round or rectangular, clears the joints at both its ends (OCCT's common volume);
     a rectangle is its height along the beam's up and its width across (its vertices' spans), and
-    its slotted ends lie within the beam's unslotted prism."""
+    its slotted ends lie within the beam's unslotted prism. A timber beam's knife plates, within
+    its depth, sit in slots closed above and below."""
     from build123d import Location
 
     from engine.structure.grid_model import beam_up_vectors
     from fabrication.beams import RectangularSection, tube_solids
-    from fabrication.joints import build_joint
+    from fabrication.joints import build_joint, knife_plate_height_mm
 
-    rectangle = section.startswith("rectangle")
+    rectangle = not section.startswith("CHS")
     size = 80.0 if rectangle else 48.3
-    grid, geometries, settings, table, slots = _steel_nodes_grid(tilt_deg=15.0, size_mm=size)
+    knife = knife_plate_height_mm(80.0) if section.startswith("timber") else None
+    grid, geometries, settings, table, slots = _steel_nodes_grid(tilt_deg=15.0, size_mm=size, plate_height_mm=knife)
     normals = np.array([g.axis for g in sorted(geometries, key=lambda g: g.node)])
     shape = RectangularSection(80.0, 40.0, beam_up_vectors(grid, normals)) if rectangle else None
     wall = None if rectangle else 3.2
@@ -1101,18 +1103,20 @@ def test_steel_tubes_are_slotted_where_the_fin_plates_enter_and_clear_them():
         assert _common_volume(placed.wrapped, plain[table["id"][k]].body.wrapped) > 1000.0
 
 
-@pytest.mark.parametrize("section", ["CHS 48.3 x 3.2", "rectangle 80 x 40", "RHS 80 x 40 x 4"])
+@pytest.mark.parametrize("section", ["CHS 48.3 x 3.2", "rectangle 80 x 40", "RHS 80 x 40 x 4", "timber 80 x 40"])
 def test_the_cut_lists_slots_take_what_the_solids_lose(section):
     """The closed form of what the fin plates' slots take out of a beam (the cut list's mass is
     less that) equals the volume OCCT finds between the beam as cut without and with its slots,
     round or rectangular, solid or hollow (the rectangle's small turn to the slot aside: 0.5 %)."""
     from engine.structure.grid_model import beam_up_vectors
     from fabrication.beams import RectangularSection, slot_volumes_mm3, tube_solids
+    from fabrication.joints import knife_plate_height_mm
 
     rectangle = not section.startswith("CHS")
     size = 80.0 if rectangle else 48.3
-    wall = {"CHS 48.3 x 3.2": 3.2, "rectangle 80 x 40": None, "RHS 80 x 40 x 4": 4.0}[section]
-    grid, geometries, _, table, slots = _steel_nodes_grid(tilt_deg=10.0, size_mm=size)
+    wall = {"CHS 48.3 x 3.2": 3.2, "rectangle 80 x 40": None, "RHS 80 x 40 x 4": 4.0, "timber 80 x 40": None}[section]
+    knife = knife_plate_height_mm(80.0) if section.startswith("timber") else None
+    grid, geometries, _, table, slots = _steel_nodes_grid(tilt_deg=10.0, size_mm=size, plate_height_mm=knife)
     normals = np.array([g.axis for g in sorted(geometries, key=lambda g: g.node)])
     shape = RectangularSection(80.0, 40.0, beam_up_vectors(grid, normals)) if rectangle else None
     walls = None if wall is None else np.full(len(grid.edges), wall)
@@ -1174,3 +1178,27 @@ def test_with_too_many_distinct_joints_gridshell_step_draws_spheres_alongside_an
     names = {name for name, _ in parts}
     assert {f"J{i + 1:04d}" for i in range(_polymesh(out).n_nodes)} <= names
     assert sum(name.startswith("B") for name in names) == record["beams"] > 0
+
+
+def test_a_timber_beams_knife_plates_and_their_hub_stay_within_its_depth():
+    """Knife plates for a solid 200 x 100 beam: the node's hub and plates reach no further along
+    its axis than the beam's own half depth (the solid's extent, by OCCT's bounding box), where fin
+    plates through a tube stand out of it by half its size either side; a panel resting on the
+    node then clears the beam's top, not the node's."""
+    from OCP.Bnd import Bnd_Box
+    from OCP.BRepBndLib import BRepBndLib
+
+    from fabrication.joints import build_joint, joint_reach_mm, knife_plate_height_mm
+
+    def extent_along_axis(plate_height_mm):
+        _, geometries, settings, _, _ = _steel_nodes_grid(size_mm=200.0, plate_height_mm=plate_height_mm)
+        node = max(geometries, key=lambda g: len(g.directions))
+        box = Bnd_Box()
+        BRepBndLib.Add_s(build_joint(node, settings)[0].wrapped, box)
+        z_min, z_max = box.CornerMin().Z(), box.CornerMax().Z()  # the axis is z (no tilt)
+        return z_min, z_max, joint_reach_mm(node, settings, np.array([0.0, 0.0, 1.0]))
+
+    low, high, reach = extent_along_axis(knife_plate_height_mm(200.0))
+    assert high - low == pytest.approx(1.25 * 120.0, abs=0.5) and high < 100.0 and reach == pytest.approx(high, abs=1.0)
+    low, high, reach = extent_along_axis(None)
+    assert high - low == pytest.approx(2.5 * 200.0, abs=0.5) and high > 200.0

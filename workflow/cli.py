@@ -94,10 +94,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_inputs(project, quick_start=bool(args.surface))   # what validate checks, before any stage runs
     for line in unusual_values(project):
         print(f"warning: {line}", file=sys.stderr)
-    if project.scale_note:
-        print(f"gridshell: {project.scale_note}", file=sys.stderr)
     out_dir = Path(args.out) if args.out else default_out
     progress = Progress(enabled=not args.quiet)
+    if project.scale_note:
+        progress.message(f"gridshell: {project.scale_note}")
     progress.message(f"gridshell: {project.project.name} -> {out_dir}")
     names = [s.name for s in STAGES]
     if (project.design.choose == "best" and not args.only

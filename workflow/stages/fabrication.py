@@ -14,7 +14,7 @@ import os
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -44,7 +44,9 @@ from fabrication.joints import (
     joint_geometry,
     joint_hub_height_mm,
     joint_hub_radius_mm,
+    joint_plate_height_mm,
     joint_sleeve_mm,
+    knife_plate_height_mm,
     same_joints,
 )
 from fabrication.limits import BuildLimits, default_min_cut_length_mm
@@ -122,7 +124,7 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     summary: dict = {"nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
                      "limits": limits.to_dict()}
     findings: list[Finding] = []
-    joint_settings = config.joints.to_settings()
+    joint_settings = _joint_settings(project)
     summary.update({"joints": 0, "joint_problems": []})
     # the joints take both cores in worker processes; the other steps run here meanwhile
     clock.start("joints: start")
@@ -208,6 +210,16 @@ def _joint_solids(joints: JointsInBackground, folder: Path, breps: Path) -> Join
                        breps={k: breps / f"{k}.brep" for k in files})
 
 
+def _joint_settings(project: Project) -> JointSettings:
+    """The joints' settings: [fabrication.joints], with knife plates within a solid rectangular
+    (timber) beam's depth at steel nodes (fabrication.joints.knife_plate_height_mm), where fin
+    plates through a tube stand out of it."""
+    settings = project.fabrication.joints.to_settings()
+    if settings.kind == "steel" and project.section.kind == "solid_rectangle":
+        settings = replace(settings, plate_height_mm=knife_plate_height_mm(MM * project.section.height))
+    return settings
+
+
 def _beam_shapes(project: Project, polymesh: PolyMesh, normals: np.ndarray,
                  tube_walls_mm: np.ndarray | None) -> tuple[RectangularSection | None, np.ndarray | None]:
     """(rectangle, walls in mm) of the beams as solids: a rectangular [section] turned to each beam's
@@ -223,12 +235,16 @@ def _beam_shapes(project: Project, polymesh: PolyMesh, normals: np.ndarray,
 
 
 def _seats(polymesh: PolyMesh, geometries: list[JointGeometry], sizes_mm: np.ndarray, panels: list, pieces: list,
-           joint_settings: JointSettings) -> tuple[np.ndarray, np.ndarray]:
-    """Where each panel rests on the joints and tubes (fabrication.panels.panel_seats), from the
-    joints' geometry as their solids are built from it."""
+           joint_settings: JointSettings, rectangle: RectangularSection | None) -> tuple[np.ndarray, np.ndarray]:
+    """Where each panel rests on the joints and beams (fabrication.panels.panel_seats), from the
+    joints' geometry as their solids are built from it and the beams' sections as cut."""
     from fabrication.panels import panel_seats
 
-    radii = {(min(a, b), max(a, b)): 0.5 * float(s) for (a, b), s in zip(polymesh.edges, sizes_mm)}
+    if rectangle is None:
+        radii: dict = {(min(a, b), max(a, b)): 0.5 * float(s) for (a, b), s in zip(polymesh.edges, sizes_mm)}
+    else:
+        radii = {(min(a, b), max(a, b)): (0.5 * rectangle.height_mm, 0.5 * rectangle.width_mm, up)
+                 for (a, b), up in zip(polymesh.edges, rectangle.up)}
     return panel_seats(panels, [p.loop for p in pieces], {g.node: g for g in geometries}, joint_settings, radii,
                        [pieces[panel.face].cell for panel in panels])
 
@@ -456,7 +472,7 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
         findings += [Finding(kind="panel_outline", parts=[pid], stage="fabrication", message=message,
                              fix="[fabrication.panels] clearance, or a new grid ([remesh] seed)")
                      for pid, message in problems]
-    seats = _seats(polymesh, geometries, sizes_mm, panels, pieces, joint_settings)
+    seats = _seats(polymesh, geometries, sizes_mm, panels, pieces, joint_settings, rectangle)
     if panels:
         # resting on the joints, neighbours at a valley fold would close their joint: cut back
         folds: list[tuple[tuple[str, ...], str]] = []
@@ -634,7 +650,7 @@ def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, geometries: l
                                hub_radius_mm=joint_hub_radius_mm(settings, size),
                                hub_height_mm=joint_hub_height_mm(settings, size),
                                setback_mm=setback, reach_mm=reach, outer_mm=bore + settings.wall_mm, bore_mm=bore,
-                               plate_mm=(settings.plate_thickness_mm, 0.8 * joint_hub_height_mm(settings, size))
+                               plate_mm=(settings.plate_thickness_mm, joint_plate_height_mm(settings, size))
                                if steel else None,
                                part_file=f"joints/{joint_id(g.node)}.step"))
     kind = material(project.material.name).kind
