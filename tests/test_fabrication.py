@@ -544,34 +544,90 @@ def test_files_that_carry_a_date_carry_the_day_and_are_the_same_bytes_a_second_l
     assert import_step(str(tmp_path / "run0" / "J0001.step")).volume == pytest.approx(6000.0)
 
 
+def _swept_records():
+    """A hollow tube along x, a 200 x 100 rectangle turned 30 degrees about it, a 10 mm panel lifted
+    150 mm onto its joints, and a steel joint of three plates (fabrication.ifc's records, mm)."""
+    from fabrication.ifc import IfcBeam, IfcJoint, IfcPanel
+
+    turn = np.radians(30.0)
+    beams = [IfcBeam(id="B0001", start_mm=np.array([100.0, 0.0, 0.0]), direction=np.array([1.0, 0.0, 0.0]),
+                     cut_length_mm=800.0, size_mm=48.3, wall_mm=3.2, profile="CHS 48.3x3.2", mass_kg=2.9, step=3),
+             IfcBeam(id="B0002", start_mm=np.array([0.0, 100.0, 0.0]), direction=np.array([0.0, 1.0, 0.0]),
+                     cut_length_mm=600.0, size_mm=200.0, width_mm=100.0, wall_mm=0.0, profile="GL 200x100",
+                     mass_kg=5.0, up=np.array([np.sin(turn), 0.0, np.cos(turn)]))]
+    outline = np.array([[0.0, 0.0, 150.0], [1000.0, 0.0, 150.0], [1000.0, 500.0, 150.0], [0.0, 500.0, 150.0]])
+    panels = [IfcPanel(id="P0001", outline_mm=outline, axes=np.eye(3)[:2], thickness_mm=10.0,
+                       material="laminated glass", mass_kg=12.5, sheet="SHEET01")]
+    joints = [IfcJoint(id="J0001", position_mm=np.zeros(3), axis=np.array([0.0, 0.0, 1.0]),
+                       directions=np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-0.6, -0.8, 0.0]]),
+                       hub_radius_mm=36.0, hub_height_mm=120.0, setback_mm=50.0,
+                       reach_mm=np.full(3, 98.3), outer_mm=np.full(3, 30.0), bore_mm=np.full(3, 25.0),
+                       plate_mm=(10.0, 96.6))]
+    return beams, panels, joints
+
+
 def test_the_3dm_model_is_the_same_bytes_from_another_folder_a_second_later(tmp_path, monkeypatch):
     """gridshell.3dm written twice, 1.1 s apart, into folders of different names: the same bytes
     (rhino3dm's File3dm.Write records the time and the path it wrote to). Read back by rhino3dm:
     created and last edited on SOURCE_DATE_EPOCH's day, every object there, and no path inside."""
     import time
-    from types import SimpleNamespace
 
     import rhino3dm
 
-    from engine.mesh import PolyMesh
     from fabrication.model3d import write_gridshell_3dm
 
     monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")  # 2023-11-14 22:13:20 UTC
-    nodes = np.array([[0, 0, 0], [1, 0, 0.2], [1, 1, 0.3], [0, 1, 0.1]], dtype=float)
-    polymesh = PolyMesh(nodes=nodes, faces=(np.array([0, 1, 2, 3]),))
-    panels = [SimpleNamespace(id="P0001", outline_3d_m=0.9 * nodes + 0.05)]
     written = []
     for folder in ("run0", "a-longer-folder-name"):
-        path = write_gridshell_3dm(polymesh, panels, 10.0, 25.0, tmp_path / folder / "gridshell.3dm")
+        path = write_gridshell_3dm(tmp_path / folder / "gridshell.3dm", *_swept_records())
         written.append(path.read_bytes())
         time.sleep(1.1)
     assert written[0] == written[1]
     assert b"run0" not in written[0] and "run0".encode("utf-16-le") not in written[0]
     model = rhino3dm.File3dm.Read(str(tmp_path / "run0" / "gridshell.3dm"))
     assert model.Created.date().isoformat() == "2023-11-14" and model.LastEdited == model.Created
-    assert sorted(o.Attributes.Name for o in model.Objects) == ["B0001", "B0002", "B0003", "B0004", "J0001",
-                                                               "J0002", "J0003", "J0004", "P0001"]
+    assert sorted({o.Attributes.Name for o in model.Objects}) == ["B0001", "B0002", "J0001", "P0001"]
     assert model.Settings.ModelUnitSystem == rhino3dm.UnitSystem.Millimeters
+
+
+def test_the_3dm_model_holds_each_part_as_a_solid_where_the_ifc_puts_it(tmp_path):
+    """Read back by rhino3dm: each beam a capped extrusion of its section (hollow: two profiles)
+    between its set-backs, whose box is the section's turned extent (a rectangle h x w turned by
+    30 degrees spans h cos 30 + w sin 30); the panel a slab of its thickness over its outline; the
+    joint a group of its hub and three plates; the IFC's properties as user text."""
+    import rhino3dm
+
+    from fabrication.model3d import write_gridshell_3dm
+
+    path = write_gridshell_3dm(tmp_path / "gridshell.3dm", *_swept_records())
+    model = rhino3dm.File3dm.Read(str(path))
+    layer = {i: model.Layers[i].Name for i in range(len(model.Layers))}
+    objects = {}
+    for o in model.Objects:
+        objects.setdefault(o.Attributes.Name, []).append(o)
+        assert o.Geometry.IsSolid and layer[o.Attributes.LayerIndex] == {"B": "beams", "P": "panels",
+                                                                         "J": "joints"}[o.Attributes.Name[0]]
+
+    def box(o):
+        b = o.Geometry.GetBoundingBox()
+        return np.array([[b.Min.X, b.Min.Y, b.Min.Z], [b.Max.X, b.Max.Y, b.Max.Z]])
+
+    (tube,), (glulam,), (panel,) = objects["B0001"], objects["B0002"], objects["P0001"]
+    assert tube.Geometry.ProfileCount == 2 and glulam.Geometry.ProfileCount == 1
+    assert box(tube) == pytest.approx(np.array([[100.0, -24.15, -24.15], [900.0, 24.15, 24.15]]), abs=1e-6)
+    c, s = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
+    x, z = 0.5 * (200.0 * s + 100.0 * c), 0.5 * (200.0 * c + 100.0 * s)
+    assert box(glulam) == pytest.approx(np.array([[-x, 100.0, -z], [x, 700.0, z]]), abs=1e-6)
+    assert box(panel) == pytest.approx(np.array([[0.0, 0.0, 150.0], [1000.0, 500.0, 160.0]]), abs=1e-6)
+    assert tube.Attributes.GetUserString("cut_length_mm") == "800.0"
+    assert tube.Attributes.GetUserString("assembly_step") == "3"
+    assert panel.Attributes.GetUserString("sheet") == "SHEET01"
+    joint = objects["J0001"]
+    assert len(joint) == 4 and all(o.Attributes.GroupCount == 1 for o in joint)
+    hub = box(joint[0])
+    assert hub == pytest.approx(np.array([[-36.0, -36.0, -60.0], [36.0, 36.0, 60.0]]), abs=1e-6)
+    plate = box(joint[1])  # along x: 98.3 long, 10 thick, 96.6 high
+    assert plate == pytest.approx(np.array([[0.0, -5.0, -48.3], [98.3, 5.0, 48.3]]), abs=1e-6)
 
 
 def test_beams_step_holds_each_tube_as_cut(small_run):

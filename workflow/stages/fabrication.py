@@ -501,8 +501,6 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     steps["beams: beams.step"] = partial(write_beams_step, polymesh, table, folder / "beams" / "beams.step",
                                          outer_size_mm=sizes_mm, wall_mm=solid_walls_mm, slots=slots,
                                          rectangle=rectangle)
-    steps["model: gridshell.3dm"] = partial(write_gridshell_3dm, polymesh, panels, sizes_mm / 2, joint_radius_mm,
-                                            folder / "gridshell.3dm")
     # independent steps, longest first: here one after another, and on the joints' workers as they run
     # out of joints (the default job's joints outlast them; a large roof's steps outlast its joints)
     clock.start("panels, assembly, drawings, models (wall clock)")
@@ -539,9 +537,17 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     written["csv"] = Path(written["csv"]).relative_to(folder).as_posix()
     summary["assembly"] = written
     clock.start("model: gridshell.ifc")  # while the joints build: it needs their geometry only
-    _write_ifc(project, folder, polymesh, geometries, table, panels, sizes_mm, solid_walls_mm, rectangle,
-               joint_settings, seats, slots)
+    from fabrication.nc1 import grade_name
+
+    beams, plates, joints = _swept_parts(project, folder, polymesh, geometries, table, panels, sizes_mm,
+                                         solid_walls_mm, rectangle, joint_settings, seats, slots)
+    kind = material(project.material.name).kind
+    write_gridshell_ifc(folder / "gridshell.ifc", project_name=project.project.name, beams=beams, panels=plates,
+                        joints=joints, beam_material=grade_name(project.material.name),
+                        beam_category=IFC_MATERIAL_CATEGORY.get(kind, kind))
     summary["ifc"] = "gridshell.ifc"
+    clock.start("model: gridshell.3dm")
+    write_gridshell_3dm(folder / "gridshell.3dm", beams, plates, joints)
     return None if spheres else write_model
 
 
@@ -586,15 +592,14 @@ def _assembly_files(polymesh: PolyMesh, beam: dict, deflection_limit_m: float | 
     return dict(write_assembly(sequence, polymesh, folder))
 
 
-def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, geometries: list[JointGeometry], table,
-               panels: list, sizes: np.ndarray, walls: np.ndarray | None, rectangle: RectangularSection | None,
-               joint_settings: JointSettings, seats: tuple[np.ndarray, np.ndarray], slots: EndSlots | None) -> None:
-    """gridshell.ifc (fabrication.ifc) from the stage's cut list, panels (resting where ``seats``
-    puts them, as in gridshell.step), panels.csv, sequence.csv and the joints' ``geometries`` as
-    the joint solids are built from them."""
+def _swept_parts(project: Project, folder: Path, polymesh: PolyMesh, geometries: list[JointGeometry], table,
+                 panels: list, sizes: np.ndarray, walls: np.ndarray | None, rectangle: RectangularSection | None,
+                 joint_settings: JointSettings, seats: tuple[np.ndarray, np.ndarray], slots: EndSlots | None
+                 ) -> tuple[list[IfcBeam], list[IfcPanel], list[IfcJoint]]:
+    """The parts as swept solids for gridshell.ifc and gridshell.3dm (fabrication.ifc's records), from
+    the stage's cut list, panels (resting where ``seats`` puts them, as in gridshell.step),
+    panels.csv, sequence.csv and the joints' ``geometries`` as the joint solids are built from them."""
     import pandas as pd
-
-    from fabrication.nc1 import grade_name
 
     step_of: dict[str, int] = {}
     sequence = folder / "assembly" / "sequence.csv"
@@ -653,10 +658,7 @@ def _write_ifc(project: Project, folder: Path, polymesh: PolyMesh, geometries: l
                                plate_mm=(settings.plate_thickness_mm, joint_plate_height_mm(settings, size))
                                if steel else None,
                                part_file=f"joints/{joint_id(g.node)}.step"))
-    kind = material(project.material.name).kind
-    write_gridshell_ifc(folder / "gridshell.ifc", project_name=project.project.name, beams=beams, panels=plates,
-                        joints=joints, beam_material=grade_name(project.material.name),
-                        beam_category=IFC_MATERIAL_CATEGORY.get(kind, kind))
+    return beams, plates, joints
 
 
 def _jsonable(value):
