@@ -18,9 +18,9 @@ import numpy as np
 import pandas as pd
 
 from engine.mesh import PolyMesh
-from engine.parts import beam_id, node_id
 
 from .files import atomic_path, stamp_zip, write_assembly_step
+from .ids import beam_id, node_id
 from .joints import EndSlots, JointSettings, geometry_setback_mm, joint_geometry
 from .settings import BeamSettings
 

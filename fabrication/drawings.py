@@ -15,9 +15,10 @@ import numpy as np
 
 from engine.errors import InputError
 from engine.mesh import PolyMesh
-from engine.parts import beam_id, joint_id, node_id, panel_id
 from fabrication.dxf import PLAN_LAYERS, new_document, save_dxf
 from fabrication.files import atomic_path, file_date
+
+from .ids import beam_id, joint_id, node_id, panel_id
 
 __all__ = ["write_plan_drawings", "node_id", "beam_id", "panel_id", "joint_id"]
 

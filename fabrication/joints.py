@@ -38,9 +38,9 @@ import numpy as np
 
 from engine.errors import FabricationError
 from engine.mesh import PolyMesh
-from engine.parts import joint_id
 
 from .files import atomic_path, compact_step_points, stamp_step
+from .ids import joint_id
 from .settings import check_ranges
 from .step_assembly import StepAssemblyWriter, step_part, write_step_part
 from .workers import StepOutcome, exit_with_parent, run_steps

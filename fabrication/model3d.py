@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from engine.mesh import PolyMesh
-from engine.parts import beam_id, joint_id
 
 from .files import stamp_3dm, write_assembly_step, write_bytes_atomic
+from .ids import beam_id, joint_id
 
 __all__ = ["JointSolids", "write_gridshell_step", "write_gridshell_3dm"]
 

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from engine.errors import InputError
-from engine.parts import bar_id
 
 from .files import atomic_path
+from .ids import bar_id
 
 __all__ = ["BarNesting", "nest_bars", "best_fit_decreasing", "lower_bound"]
 

@@ -46,10 +46,11 @@ import shapely
 from shapely.geometry import MultiPoint, box
 
 from engine.errors import InputError
-from engine.parts import sheet_id
 from fabrication.dxf import cutting_layers, new_document, save_dxf
 from fabrication.files import atomic_path
 from fabrication.settings import SheetSettings
+
+from .ids import sheet_id
 
 if TYPE_CHECKING:  # pragma: no cover
     from fabrication.panels import Panel, PanelSettings

@@ -31,10 +31,11 @@ from shapely.geometry import Polygon
 
 from engine.errors import InputError
 from engine.mesh import PolyMesh
-from engine.parts import node_id, panel_id, sheet_id
 from fabrication.dxf import ENGRAVE_STYLE, cutting_layers, new_document, save_dxf
 from fabrication.files import write_text_atomic
 from fabrication.settings import GRAIN_DIRECTIONS, PanelSettings
+
+from .ids import node_id, panel_id, sheet_id
 
 if TYPE_CHECKING:  # pragma: no cover
     from fabrication.nesting_sheets import SheetNesting

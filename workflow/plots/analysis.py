@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.parts import beam_id
+from fabrication.ids import beam_id
 
 from ._common import frame_3d, pyplot, save_png
 

@@ -25,7 +25,6 @@ from engine.design.verdicts import VerdictFixes, design_verdicts, findings_of
 from engine.errors import ConvergenceError, MechanismError
 from engine.findings import Finding
 from engine.mesh import PolyMesh
-from engine.parts import beam_id, node_id
 from engine.structure.frame import FrameModel, factor_stiffness, linear_buckling, linear_static
 from engine.structure.grid_model import (
     BeamProperties,
@@ -39,6 +38,7 @@ from engine.structure.loads import pick_combination as choose_combination
 from engine.structure.protocol import run_protocol
 from engine.structure.supports import Supports
 from fabrication.files import atomic_path, write_text_atomic
+from fabrication.ids import beam_id, node_id
 
 from ..config import Project
 from ..plots.analysis import plot_axial_forces, plot_buckling_modes, plot_response, plot_sections, plot_utilisation

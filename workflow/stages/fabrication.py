@@ -24,13 +24,13 @@ import numpy as np
 from engine.design.sections import material
 from engine.findings import Finding
 from engine.mesh import PolyMesh
-from engine.parts import joint_id
 from engine.structure.grid_model import beam_up_vectors, node_normals
 from fabrication.assembly import plan_assembly, write_assembly
 from fabrication.beams import RectangularSection, slot_volumes_mm3, tube_solids
 from fabrication.clearance import joint_clashes_parallel
 from fabrication.drawings import write_plan_drawings
 from fabrication.files import atomic_path, write_text_atomic
+from fabrication.ids import joint_id
 from fabrication.ifc import IfcBeam, IfcJoint, IfcPanel, write_gridshell_ifc
 from fabrication.joints import (
     JOINTS_STEP_LIMIT_BYTES,

@@ -20,7 +20,6 @@ from engine.findings import Finding
 from engine.geometry.projections import CellFans, folded_cells
 from engine.geometry.symmetry import symmetrised_grid, symmetry_record
 from engine.mesh import PolyMesh, neighbour_lists, node_adjacency
-from engine.parts import joint_id, panel_id
 from engine.remeshing.collapse import (
     collapse_beams,
     dissolve_kinks,
@@ -33,6 +32,7 @@ from engine.remeshing.grids import LATTICES, GridKind, isotropic_field
 from engine.remeshing.local_global import ClosestSurfacePoints
 from engine.remeshing.optimize import OptimizeResult, OptimizeSettings, grid_quality, optimize
 from fabrication.files import write_text_atomic
+from fabrication.ids import joint_id, panel_id
 from fabrication.limits import required_beam_lengths_m
 
 from ..config import Project
