@@ -563,6 +563,13 @@ def test_a_grading_compressed_for_the_joints_is_a_finding():
     finding = compressed_finding(quality)
     assert finding["kind"] == "grading_compressed" and finding["stage"] == "optimize"
     assert "0.44" in finding["message"] and "0.76" in finding["message"] and "n_cells" in finding["fix"]
+    # the fix names the section's own keys: a rectangle has no diameter
+    from workflow.config import parse_project
+
+    glulam = parse_project({"surface": {"template": "hypar"}, "material": {"name": "glulam_gl24h"},
+                            "section": {"kind": "solid_rectangle", "height": "200 mm", "width": "100 mm"}})
+    fix = compressed_finding(quality, glulam.section.size_key())["fix"]
+    assert "[section] height, width" in fix and "diameter" not in fix
 
 
 def test_held_nodes_stay_exactly_and_the_region_left_free_is_optimised(dome):

@@ -267,6 +267,10 @@ class SectionConfig(_Section):
         return {k: getattr(self, k) for k in ("diameter", "thickness", "height", "width")
                 if getattr(self, k) is not None}
 
+    def size_key(self) -> str:
+        """Where a fix names the section's outer size: ``[section] diameter``, or height and width."""
+        return "[section] diameter" if self.kind in ("circular_hollow", "solid_round") else "[section] height, width"
+
     def outer_size_mm(self) -> float:
         """The beam's largest outer dimension in mm (tube or rod diameter, or the section height or width)."""
         return MM * (self.diameter if self.diameter is not None else max(self.height or 0.0, self.width or 0.0))

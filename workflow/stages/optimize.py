@@ -222,11 +222,11 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: RemeshedGrid, proje
     buildable.update({"collapsed_beams": collapsed, "flipped_beams": flipped, "removed_beams": removed,
                       "reoptimised": rounds, "grading_kept": grading_kept, "short_share_at_grading": share_kept})
     if buildable["too_fine"]:
-        ctx.report_findings([too_fine_finding(buildable, "optimize")])
+        ctx.report_findings([too_fine_finding(buildable, "optimize", project.section.size_key())])
     elif not grading_kept:
-        ctx.report_findings([grading_finding(share_kept, result.quality)])
+        ctx.report_findings([grading_finding(share_kept, result.quality, project.section.size_key())])
     elif compressed_grading(result.quality):
-        ctx.report_findings([compressed_finding(result.quality)])
+        ctx.report_findings([compressed_finding(result.quality, project.section.size_key())])
     planes = settings.symmetry_planes
     folded = folded_cells_on(result.polymesh, surface)
     if len(folded):
@@ -362,7 +362,7 @@ def folded_finding(cells: list[int]) -> dict:
                        "([fabrication.joints]); or send the surface with the report").to_dict()
 
 
-def grading_finding(share: float, quality: dict) -> dict:
+def grading_finding(share: float, quality: dict, size_key: str = "[section] diameter") -> dict:
     """The finding that the joints evened out the field's grading (JSON-ready)."""
     before = quality["before"].get("size_correlation")
     after = quality["after"].get("size_correlation")
@@ -373,7 +373,7 @@ def grading_finding(share: float, quality: dict) -> dict:
                    message=(f"at the field's grading {100 * share:.0f} % of the beams are too short for their "
                             f"joints, so the optimiser evened out the cell sizes{figures}"),
                    fix="fewer cells ([remesh] n_cells), less grading ([field] max_size_ratio), or smaller "
-                       "joints or tubes ([fabrication.joints], [section] diameter)").to_dict()
+                       f"joints or beams ([fabrication.joints], {size_key})").to_dict()
 
 
 def compressed_grading(quality: dict) -> bool:
@@ -383,7 +383,7 @@ def compressed_grading(quality: dict) -> bool:
     return given is not None and target is not None and target < given - COMPRESSED_SLOPE
 
 
-def compressed_finding(quality: dict) -> dict:
+def compressed_finding(quality: dict, size_key: str = "[section] diameter") -> dict:
     """The finding that the joints compressed the field's grading (JSON-ready)."""
     from engine.findings import Finding
 
@@ -397,7 +397,7 @@ def compressed_finding(quality: dict) -> dict:
                             f"field's grading in order: cell size as the field's to the power {target:.2f} instead "
                             f"of {given:.2f}{figures}"),
                    fix="fewer cells ([remesh] n_cells), less grading ([field] max_size_ratio), or smaller "
-                       "joints or tubes ([fabrication.joints], [section] diameter)").to_dict()
+                       f"joints or beams ([fabrication.joints], {size_key})").to_dict()
 
 
 def _piece_tolerance(polymesh: PolyMesh, project: Project) -> float:

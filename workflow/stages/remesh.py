@@ -90,7 +90,7 @@ def _voronoi(surface: SurfaceResult, field: GuidingField, project: Project, ctx:
                              starts_map=starts_map),
             progress=ctx.step)
     if remeshes:
-        ctx.report_findings([coarsened_finding(asked, result)])
+        ctx.report_findings([coarsened_finding(asked, result, project.section.size_key())])
     ctx.step("collapsing beams far shorter than the joints and the shortest cut take")
     polymesh, buildable = buildable_grid(result.polymesh, project, share=REMESH_SHARE)
     planes = settings.symmetry_planes
@@ -211,15 +211,15 @@ def fitted_to_joints(result: RemeshResult, project: Project, remesh_with: Callab
     return result, remeshes
 
 
-def coarsened_finding(asked: int, result: RemeshResult) -> dict:
+def coarsened_finding(asked: int, result: RemeshResult, size_key: str = "[section] diameter") -> dict:
     """The finding that the grid has fewer cells than asked, so that its joints fit (JSON-ready)."""
     built = result.polymesh.n_faces
     return Finding(kind="grid_coarsened", parts=["grid"], measure=built, limit=asked, unit="cells",
                    stage="remesh",
                    message=(f"remeshed with {built} cells instead of {asked}: at {asked} cells most beams were "
                             "shorter than their joints and the shortest cut take"),
-                   fix="smaller joints ([fabrication.joints] kind, hub_radius, sleeve_length) or a smaller tube "
-                       "([section] diameter) for more cells; [remesh] coarsen_for_joints = false keeps the "
+                   fix="smaller joints ([fabrication.joints] kind, hub_radius, sleeve_length) or a smaller beam "
+                       f"({size_key}) for more cells; [remesh] coarsen_for_joints = false keeps the "
                        "cells asked for, with joints that clash").to_dict()
 
 
@@ -271,7 +271,7 @@ def short_share(polymesh: PolyMesh, project: Project) -> float:
     return short_count(polymesh, project) / max(len(polymesh.edges), 1)
 
 
-def too_fine_finding(record: dict, stage: str) -> dict:
+def too_fine_finding(record: dict, stage: str, size_key: str = "[section] diameter") -> dict:
     """The finding that the joints are too big for the grid (JSON-ready)."""
     return Finding(kind="grid_too_fine", parts=["grid"], measure=record["shortest_beam_mm_at_120deg"],
                    limit=1000 * record["mean_beam_m"], unit="mm", stage=stage,
@@ -279,7 +279,7 @@ def too_fine_finding(record: dict, stage: str) -> dict:
                             f"and the shortest cut take ({record['shortest_beam_mm_at_120deg']:.0f} mm between "
                             f"120-degree joints, the mean beam is {1000 * record['mean_beam_m']:.0f} mm): "
                             "they are not collapsed"),
-                   fix="fewer cells ([remesh] n_cells), a smaller tube ([section] diameter) or smaller joints "
+                   fix=f"fewer cells ([remesh] n_cells), a smaller beam ({size_key}) or smaller joints "
                        "([fabrication.joints] kind, hub_radius, sleeve_length)").to_dict()
 
 
