@@ -80,12 +80,20 @@ class IfcJoint:
     plate_mm: tuple[float, float] | None = None
     part_file: str = ""
 
+def square_to(direction: np.ndarray) -> np.ndarray:
+    """A unit vector square to ``direction``: the world's z made square to it, else x (where
+    ``direction`` is near z)."""
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    trial = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    square = trial - (trial @ d) * d
+    return square / np.linalg.norm(square)
+
+
 def _frame(origin_mm: np.ndarray, z: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
     """A 4 x 4 placement in metres with its local z along ``z`` (and x along ``x`` where given)."""
     z = np.asarray(z, float) / np.linalg.norm(z)
     if x is None:
-        trial = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-        x = trial - (trial @ z) * z
+        x = square_to(z)
     x = np.asarray(x, float) - (np.asarray(x, float) @ z) * z
     x /= np.linalg.norm(x)
     matrix = np.eye(4)

@@ -13,6 +13,7 @@ from engine.mesh import PolyMesh
 
 from .files import stamp_3dm, write_assembly_step, write_bytes_atomic
 from .ids import beam_id, joint_id
+from .ifc import square_to
 
 __all__ = ["JointSolids", "write_gridshell_step", "write_gridshell_3dm"]
 
@@ -177,7 +178,7 @@ def write_gridshell_3dm(path: Path, beams: list, panels: list, joints: list) -> 
         model.Objects.AddExtrusion(solid, a)
 
     for beam in beams:
-        up = beam.up if beam.up is not None else _square_to(beam.direction)
+        up = beam.up if beam.up is not None else square_to(beam.direction)
         if beam.width_mm is None:
             outer, inner = _circle(0.5 * beam.size_mm), None
             if 0 < beam.wall_mm < 0.5 * beam.size_mm:
@@ -207,17 +208,17 @@ def write_gridshell_3dm(path: Path, beams: list, panels: list, joints: list) -> 
         axis = np.asarray(joint.axis, float) / np.linalg.norm(joint.axis)
         at = np.asarray(joint.position_mm, float)
         pieces = [("hub", _extrusion(at - 0.5 * joint.hub_height_mm * axis, axis, joint.hub_height_mm,
-                                     _square_to(axis), _circle(joint.hub_radius_mm)))]
+                                     square_to(axis), _circle(joint.hub_radius_mm)))]
         for k, (d, reach, outer, bore) in enumerate(zip(joint.directions, joint.reach_mm, joint.outer_mm,
                                                         joint.bore_mm)):
             d = np.asarray(d, float)
             if joint.plate_mm is not None:
                 thickness, height = joint.plate_mm
                 side = np.cross(d, axis)
-                up = np.cross(d, side) if np.linalg.norm(side) > 1e-9 else _square_to(d)
+                up = np.cross(d, side) if np.linalg.norm(side) > 1e-9 else square_to(d)
                 pieces.append((f"plate {k + 1}", _extrusion(at, d, float(reach), up, _rectangle(thickness, height))))
             else:  # the sleeve as one tube of the beam's bore (the solid part up to the set-back left out)
-                pieces.append((f"sleeve {k + 1}", _extrusion(at, d, float(reach), _square_to(d), _circle(outer),
+                pieces.append((f"sleeve {k + 1}", _extrusion(at, d, float(reach), square_to(d), _circle(outer),
                                                              _circle(bore))))
         for piece, solid in pieces:  # user text on the hub only: 0.4 kB an object
             add(solid, "joints", joint.id, f"{joint.id} {piece}",
@@ -228,14 +229,6 @@ def write_gridshell_3dm(path: Path, beams: list, panels: list, joints: list) -> 
     if not encoded:
         raise OSError(f"rhino3dm could not write {path}")
     return write_bytes_atomic(path, stamp_3dm(base64.b64decode(encoded)))
-
-
-def _square_to(direction: np.ndarray) -> np.ndarray:
-    """A unit vector square to ``direction``: the world's z made square to it, else x."""
-    d = np.asarray(direction, float) / np.linalg.norm(direction)
-    trial = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    up = trial - (trial @ d) * d
-    return up / np.linalg.norm(up)
 
 
 def _circle(radius: float):

@@ -912,7 +912,11 @@ def _raw_extent(path: str, mtime_ns: int, size: int) -> float:
     time and size key the cache: a sweep parses its project once per point)."""
     from .surface_io import read_surface
 
-    vertices = read_surface(path)[0]
+    return _largest_side(read_surface(path)[0])
+
+
+def _largest_side(vertices: np.ndarray) -> float:
+    """The largest side of the bounding box of the finite ``vertices`` (0 where none is)."""
     finite = vertices[np.isfinite(vertices).all(axis=1)]
     return float(np.ptp(finite, axis=0).max()) if len(finite) else 0.0
 
@@ -1034,8 +1038,7 @@ def check_inputs(project: Project, *, quick_start: bool = False) -> float | None
     vertices, faces, flagged = read_surface(path)
     if config.up_axis is None:
         _check_upright(vertices, faces, path, quick_start)
-    finite = vertices[np.isfinite(vertices).all(axis=1)]
-    raw = float(np.ptp(finite, axis=0).max()) if len(finite) else 0.0
+    raw = _largest_side(vertices)
     unit = config.file_units
     across = raw * _FILE_UNITS[unit]
     low, high = SURFACE_EXTENT_M
