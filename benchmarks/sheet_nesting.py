@@ -10,6 +10,12 @@ and variant: seconds, sheets, the area lower bound on sheets and the utilisation
 what the nester did before 2026-12-02; both must give the same sheets. ``--run OUT`` adds the panels
 of a finished run (its optimised grid and panels.obj, flattened with its own settings, on its stock
 sheets), e.g. a 1500-cell roof of benchmarks/any_roof.py.
+
+The peer, ``--peer SECONDS`` (spyrrow, the Python binding of the sparrow strip packer, in the bench
+extra): the same parts, with the same spacing and rotations, packed into one strip of the sheet's
+height less its margins, in that many seconds. Its length over the sheet's usable length is the
+number of sheets a nester would need if parts could run on across the sheets' ends, a relaxation
+of the problem: no nester that keeps each part on one sheet can do much better.
 """
 
 from __future__ import annotations
@@ -75,6 +81,23 @@ def run_panels(out: Path) -> tuple[list, list]:
     return panels, project.fabrication.sheets.to_settings()
 
 
+def sparrow_sheet_lengths(panels: list, settings: nesting_sheets.SheetSettings, seconds: int) -> tuple[float, float]:
+    """The peer: (sheet lengths, strip density) of the parts packed into one strip of the sheet's
+    usable height by sparrow (spyrrow) in ``seconds``, one thread, seed 1."""
+    import spyrrow
+
+    turns = [0.0, 90.0, 180.0, 270.0] if settings.rotations else [0.0]
+    items = [spyrrow.Item(f"p{i}", [(float(x), float(y)) for x, y in
+                                    np.asarray(p.outline_mm, float) - np.asarray(p.outline_mm, float).mean(axis=0)],
+                          1, turns) for i, p in enumerate(panels)]
+    usable_width = settings.width_mm - 2 * settings.margin_mm
+    usable_height = settings.height_mm - 2 * settings.margin_mm
+    instance = spyrrow.StripPackingInstance("sheets", usable_height, items)
+    solution = instance.solve(spyrrow.StripPackingConfig(total_computation_time=seconds, num_workers=1, seed=1,
+                                                         min_items_separation=settings.spacing_mm or None))
+    return solution.width / usable_width, solution.density
+
+
 def _without_bound(self, radius, rebuild, settings):
     return np.array([[-math.inf, -math.inf, math.inf, math.inf]])  # one piece: the whole plane
 
@@ -83,6 +106,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smaller cases")
     parser.add_argument("--run", type=Path, action="append", default=[], help="a finished run's folder")
+    parser.add_argument("--peer", type=int, default=0, metavar="SECONDS",
+                        help="also pack each case into one strip with sparrow (spyrrow) in this many seconds")
+    parser.add_argument("--cases", default="", help="comma list of case numbers to run (1-based; --run's follow)")
     args = parser.parse_args()
     small = args.quick
     cases = [
@@ -95,6 +121,8 @@ def main() -> None:
         panels, stocks = run_panels(out)
         stock = stocks[0]
         cases.append((f"{out.name}", [p for p in panels if nesting_sheets.fits_sheet(p, stock)], stock))
+    if args.cases:
+        cases = [cases[int(k) - 1] for k in args.cases.split(",")]
     bound = nesting_sheets._Sheet.free_parts
     print(f"{'panels':28s} {'sheet mm':>11s} {'variant':12s} {'s':>7s} {'sheets':>6s} {'bound':>5s} {'use %':>6s}")
     for name, panels, sheet in cases:
@@ -110,6 +138,15 @@ def main() -> None:
             print(f"{f'{len(panels)} {name}':28s} {f'{w}x{h}':>11s} {variant:12s} {seconds:7.1f} "
                   f"{nesting.n_sheets:6d} {lower:5d} {100 * nesting.utilisation:6.1f}", flush=True)
         nesting_sheets._Sheet.free_parts = bound
+        if args.peer:
+            try:
+                t = time.perf_counter()
+                lengths, density = sparrow_sheet_lengths(panels, settings, args.peer)
+                print(f"{f'{len(panels)} {name}':28s} {f'{w}x{h}':>11s} {'peer: strip':12s} "
+                      f"{time.perf_counter() - t:7.1f} {lengths:6.2f} {lower:5d} {100 * density:6.1f}  "
+                      "(sparrow: sheet lengths of one strip, its density)", flush=True)
+            except ImportError:
+                print("peer: spyrrow is not installed (pip install spyrrow)", flush=True)
 
 
 if __name__ == "__main__":
