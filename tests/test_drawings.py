@@ -84,24 +84,24 @@ def test_plans_are_drawn_at_the_smallest_standard_scale_that_fits(extent, paper,
 
 
 def _pdf_glyphs(path) -> list[list[tuple[str, tuple[float, float, float, float]]]]:
-    """Every character drawn on each page of a PDF with its box (pt), read by pdfminer.six (not by
-    matplotlib): one list per page."""
-    from pdfminer.high_level import extract_pages
-    from pdfminer.layout import LTChar, LTComponent
+    """Every character drawn on each page of a PDF with its box (pt), read by PDFium (pypdfium2, not
+    by matplotlib): one list per page. The boxes are PDFium's loose ones, the font's advance width
+    by its ascent and descent, so that two characters of one word touch."""
+    import pypdfium2 as pdfium
 
     pages = []
-
-    def walk(item, glyphs):
-        if isinstance(item, LTChar):
-            if item.get_text().strip():
-                glyphs.append((item.get_text(), item.bbox))
-        elif hasattr(item, "__iter__") and isinstance(item, LTComponent) or hasattr(item, "_objs"):
-            for child in item:
-                walk(child, glyphs)
-
-    for page in extract_pages(str(path), laparams=None):   # the characters as drawn, not grouped
-        pages.append([])
-        walk(page, pages[-1])
+    document = pdfium.PdfDocument(str(path))
+    try:
+        for page in document:
+            text = page.get_textpage()
+            glyphs = []
+            for i in range(text.count_chars()):
+                char = text.get_text_range(i, 1)
+                if char.strip():
+                    glyphs.append((char, tuple(text.get_charbox(i, loose=True))))
+            pages.append(glyphs)
+    finally:
+        document.close()
     return pages
 
 
@@ -147,7 +147,7 @@ def test_plan_pdf_labels_do_not_overlap(tmp_path, rows, cols):
     """No two characters on a page of the plan PDF overlap (so no two ids, dimensions or title lines
     do), and every id is drawn: on the first sheet, or, where it has no room there, once on the
     sheets of the plan's tiles, which the first sheet's title block names."""
-    pytest.importorskip("pdfminer")
+    pytest.importorskip("pypdfium2")
     mesh = hex_polymesh(rows, cols)
     _, pdf_path = write_plan_drawings(mesh, tmp_path, project_name="Labels")
     pages = _pdf_glyphs(pdf_path)
