@@ -356,3 +356,36 @@ def test_the_quick_start_of_a_small_surface_says_it_is_a_model_and_keeps_its_cel
         assert ("built as a model" in err and "2.4 m across" in err) == (name == "model")
     assert built["model"] == {"cells_asked": 120, "cells_built": 120, "remeshes": 0}
     assert built["steel"]["remeshes"] >= 1 and built["steel"]["cells_built"] < 60
+
+
+def test_a_project_whose_only_load_is_self_weight_is_told_so_by_validate(tmp_path, capsys):
+    """With no [loads] the beams' own weight is the only load, and validate says the verdicts leave
+    out the rest; a project with an area load or a point load is not told so."""
+    import json
+
+    from workflow.cli import main
+    from workflow.config import LoadsConfig
+
+    assert LoadsConfig().self_weight_only
+    assert not LoadsConfig.model_validate({"cases": {"dead": {"self_weight": 1.0, "area_plan": "1 kN/m^2"}}}
+                                          ).self_weight_only
+    assert not LoadsConfig.model_validate({"cases": {"wind": {"area_true": [100.0, 0.0, 0.0]}}}).self_weight_only
+    assert not LoadsConfig.model_validate({"cases": {"p": {"points": [{"node": 0, "force": [0, 0, -1e3]}]}}}
+                                          ).self_weight_only
+    path = _roof_file(tmp_path, 12.0)
+    bare, loaded = tmp_path / "bare.toml", tmp_path / "loaded.toml"
+    bare.write_text(f"[surface]\nfile = {json.dumps(str(path))}\n")
+    loaded.write_text(bare.read_text() + '[loads.cases.dead]\nself_weight = 1.0\narea_true = "0.5 kN/m^2"\n')
+    for project, told in ((bare, True), (loaded, False)):
+        assert main(["validate", str(project)]) == 0
+        err = capsys.readouterr().err
+        assert ("beams' own weight alone" in err and "[loads.cases]" in err) == told, err
+
+
+def test_a_progress_message_keeps_the_tables_it_names(capsys):
+    """Messages name TOML tables in brackets ([section], [loads.cases]); they print as written,
+    not taken for styles and dropped."""
+    from workflow.progress import Progress
+
+    Progress(enabled=True, live=False).message("add them as [loads.cases]; [design] choose = \"best\"")
+    assert "add them as [loads.cases]; [design] choose = \"best\"" in capsys.readouterr().err

@@ -211,6 +211,19 @@ class LoadsConfig(_Section):
     def combination_names(self, limit_state: str) -> list[str]:
         return [n for n, c in self.combinations.items() if c.limit_state == limit_state]
 
+    @property
+    def self_weight_only(self) -> bool:
+        """Whether the beams' own weight is the only load: no case has an area or a point load (the
+        default when a project gives no [loads])."""
+        return not any(case.area_vector("area_true") != [0.0, 0.0, 0.0]
+                       or case.area_vector("area_plan") != [0.0, 0.0, 0.0] or case.points
+                       for case in self.cases.values())
+
+
+SELF_WEIGHT_NOTE = ("the loads are the beams' own weight alone: the verdicts leave out the panels, finishes, snow "
+                    "and wind; add them as [loads.cases] (README, Project files)")
+"""What run and validate say of a project whose only load is the beams' self-weight."""
+
 
 class MaterialConfig(_Section):
     """Beam material: a named one (steel_s235, steel_s355, aluminium_6063, aluminium_6061,

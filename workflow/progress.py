@@ -149,7 +149,8 @@ class Progress:
         self._stage = None
 
     def message(self, text: str) -> None:
+        """Print one line of plain text: brackets are kept (they name TOML tables, not styles)."""
         if self.enabled and self._console is not None:
-            self._console.print(text)
+            self._console.print(text, markup=False, highlight=False, soft_wrap=True)
 
 

@@ -167,6 +167,9 @@ def _summary(project: Project, surface: SurfaceResult, polymesh, analysis: dict,
     text = {True: "Every structural check passes.",
             False: "At least one structural check fails: see the verdicts below.",
             None: "No structural verdicts (the analysis did not run)."}[passed]
+    if passed is not None and project.loads.self_weight_only:
+        text += (" The only load is the beams' own weight ([loads] gives no other): the panels, finishes, snow "
+                 "and wind are not in these verdicts.")
     if findings:
         rows = findings_rows(findings)
         tables.insert(0, Table(name="findings", caption="Findings: failing checks and parts that cannot be built as "
