@@ -59,7 +59,7 @@ def _job_name(project_path: Path) -> str:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .config import SELF_WEIGHT_NOTE, check_inputs, load_project, project_from_surface, unusual_values
+    from .config import check_inputs, load_project, project_from_surface, unusual_values
     from .progress import Progress
     from .stages import STAGES
 
@@ -96,10 +96,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"warning: {line}", file=sys.stderr)
     out_dir = Path(args.out) if args.out else default_out
     progress = Progress(enabled=not args.quiet)
-    if project.scale_note:
-        progress.message(f"gridshell: {project.scale_note}")
-    if project.loads.self_weight_only:
-        progress.message(f"gridshell: {SELF_WEIGHT_NOTE}")
+    for note in project.notes:
+        progress.message(f"gridshell: {note}")
     progress.message(f"gridshell: {project.project.name} -> {out_dir}")
     names = [s.name for s in STAGES]
     if (project.design.choose == "best" and not args.only
@@ -127,7 +125,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from .config import SELF_WEIGHT_NOTE, check_inputs, load_project, unusual_values
+    from .config import check_inputs, load_project, unusual_values
     from .stages.surface import check_selections
 
     project = load_project(args.project)
@@ -135,10 +133,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
     supported = check_selections(project)  # the selections match nodes of the surface
     for line in unusual_values(project):
         print(f"warning: {line}", file=sys.stderr)
-    if project.scale_note:
-        print(f"note: {project.scale_note}", file=sys.stderr)
-    if project.loads.self_weight_only:
-        print(f"note: {SELF_WEIGHT_NOTE}", file=sys.stderr)
+    for note in project.notes:
+        print(f"note: {note}", file=sys.stderr)
     source = project.surface.file or f"template {project.surface.template}"
     if across is not None:
         source += f", {across:.3g} m across"

@@ -650,6 +650,13 @@ class Project(_Section):
         """One line where the project took MODEL_KIT for a small surface (parse_project), else None."""
         return self._scale_note
 
+    @property
+    def notes(self) -> list[str]:
+        """What validate prints as notes and run as progress: the model-kit line, and the loads' when
+        the beams' own weight is the only one."""
+        return ([self._scale_note] if self._scale_note else []) + \
+            ([SELF_WEIGHT_NOTE] if self.loads.self_weight_only else [])
+
     @model_validator(mode="after")
     def _design_needs_tubes(self) -> "Project":
         if self.design.size_sections and self.section.kind != "circular_hollow":
