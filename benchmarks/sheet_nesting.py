@@ -87,9 +87,9 @@ def sparrow_sheet_lengths(panels: list, settings: nesting_sheets.SheetSettings, 
     import spyrrow
 
     turns = [0.0, 90.0, 180.0, 270.0] if settings.rotations else [0.0]
-    items = [spyrrow.Item(f"p{i}", [(float(x), float(y)) for x, y in
-                                    np.asarray(p.outline_mm, float) - np.asarray(p.outline_mm, float).mean(axis=0)],
-                          1, turns) for i, p in enumerate(panels)]
+    outlines = [np.asarray(p.outline_mm, float) for p in panels]
+    items = [spyrrow.Item(f"p{i}", [(float(x), float(y)) for x, y in o - o.mean(axis=0)], 1, turns)
+             for i, o in enumerate(outlines)]
     usable_width = settings.width_mm - 2 * settings.margin_mm
     usable_height = settings.height_mm - 2 * settings.margin_mm
     instance = spyrrow.StripPackingInstance("sheets", usable_height, items)
