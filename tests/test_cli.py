@@ -156,3 +156,55 @@ def test_run_without_project_takes_the_folders_project_toml(capsys, tmp_path, mo
     cap = tomllib.loads((job / "project.toml").read_text())["project"]["name"]
     assert manifest["project_file"] == str((job / "project.toml").resolve())
     assert manifest["config"]["project"]["name"] == cap != "mockup"
+
+
+def test_cells_and_set_replace_the_project_files_values_for_one_run(capsys, tmp_path):
+    job = tmp_path / "job"
+    assert _run(capsys, "init", str(job), "--template", "cap")[0] == 0
+    written = (job / "project.toml").read_text()
+    out_dir = tmp_path / "o"
+    code, out, err = _run(capsys, "run", str(job), "--cells", "77", "--set", "field.max_size_ratio=1.5",
+                          "--set", "section.diameter=60.3 mm", "--out", str(out_dir), "--until", "surface", "--quiet")
+    assert code == 0, err
+    config = json.loads((out_dir / "manifest.json").read_text())["config"]
+    assert config["remesh"]["n_cells"] == 77
+    assert config["field"]["max_size_ratio"] == 1.5
+    assert config["section"]["diameter"] == pytest.approx(0.0603)  # "60.3 mm" read as text, then as a length
+    assert (job / "project.toml").read_text() == written               # the file itself is not changed
+
+
+def test_cells_on_a_quick_start_surface(capsys, tmp_path):
+    from engine.geometry.parametric import vault
+
+    path = tmp_path / "vault.stl"
+    vault(divisions=8).to_trimesh().export(path)
+    out_dir = tmp_path / "o"
+    code, out, err = _run(capsys, "run", "--surface", str(path), "--cells", "45", "--out", str(out_dir),
+                          "--until", "surface", "--quiet")
+    assert code == 0, err
+    assert json.loads((out_dir / "manifest.json").read_text())["config"]["remesh"]["n_cells"] == 45
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--set", "remesh.n_cellz=3"], "'remesh.n_cellz' is not a project key"),
+    (["--set", "remesh"], "give KEY=VALUE"),
+    (["--set", "remesh=3"], "'remesh' is not a project key"),          # a table, not a setting
+    (["--set", "remesh.n_cells=many"], "--set remesh.n_cells='many'"),  # the project's validation, the flag named
+    (["--cells", "0"], "--cells 0"),
+])
+def test_bad_set_or_cells_exits_2_naming_the_flag(capsys, tmp_path, argv, says):
+    job = tmp_path / "job"
+    assert _run(capsys, "init", str(job), "--template", "cap")[0] == 0
+    code, out, err = _run(capsys, "run", str(job), *argv, "--out", str(tmp_path / "o"), "--until", "surface",
+                          "--quiet")
+    assert code == 2 and says in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_parse_setting_reads_toml_values_and_keeps_other_text():
+    from workflow.config import parse_setting
+
+    assert parse_setting("remesh.n_cells=300") == ("remesh.n_cells", 300)
+    assert parse_setting("field.max_size_ratio = 2.5") == ("field.max_size_ratio", 2.5)
+    assert parse_setting('project.name="a b"') == ("project.name", "a b")
+    assert parse_setting("section.thickness=3.2 mm") == ("section.thickness", "3.2 mm")

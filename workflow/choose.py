@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from engine.errors import InputError
 from fabrication.files import write_text_atomic
@@ -31,8 +32,10 @@ def score(figures: dict) -> float | None:
 
 
 def choose_best(project: Project, out_dir: Path, *, project_file: str | None, workers: int | None = None,
+                settings: dict[str, Any] | None = None,
                 say: Callable[[str], None] | None = None) -> tuple[Project, dict]:
-    """The project with the chosen values and the choice (also in OUT/choose/choice.json)."""
+    """The project with the chosen values and the choice (also in OUT/choose/choice.json);
+    ``settings``: the dotted keys that replace the project file's (``gridshell run --set``)."""
     from .config import parse_project
     from .stages import STAGES
     from .sweep import SweepSpec, _with, run_sweep, seed, sweep_points
@@ -43,6 +46,8 @@ def choose_best(project: Project, out_dir: Path, *, project_file: str | None, wo
     if project_file:
         data = read_toml(Path(project_file), "project file")
         base = Path(project_file).parent
+        for key, value in (settings or {}).items():
+            _with(data, key, value)
     else:  # a quick-start project (--surface): its settings as the sweep's base
         data, base = project.model_dump(mode="json", exclude_none=True), out_dir
     data.setdefault("design", {})["choose"] = "as_given"

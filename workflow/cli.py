@@ -59,10 +59,15 @@ def _job_name(project_path: Path) -> str:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .config import check_inputs, load_project, project_from_surface, unusual_values
+    from .config import check_inputs, load_project, parse_setting, project_from_surface, unusual_values
     from .progress import Progress
     from .stages import STAGES
 
+    settings = dict(parse_setting(text) for text in args.settings or ())
+    if args.cells is not None:
+        if args.cells < 1:
+            raise InputError(f"--cells {args.cells}: give a number of cells of 1 or more", hint="e.g. --cells 300")
+        settings["remesh.n_cells"] = args.cells
     if args.project and args.surface:
         raise InputError("give a PROJECT file or --surface MESH, not both")
     if args.supports and not args.surface:
@@ -77,7 +82,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise InputError("--only and --until cannot be combined")
     if args.surface:
         project = project_from_surface(args.surface, args.supports or "boundary", args.surface_units or "m",
-                                       args.surface_up)
+                                       args.surface_up, settings=settings)
         default_out = Path("out") / Path(args.surface).stem
         project_file = None
     else:
@@ -85,7 +90,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         here = Path("project.toml")
         given = args.project or (str(here) if here.is_file() else None)
         project_path = Path(given) if given else _template_path("mockup")
-        project = load_project(project_path)
+        project = load_project(project_path, settings=settings)
         default_out = Path("out") / (_job_name(project_path) if given else "mockup")
         project_file = str(project_path.resolve())
         if given and not args.project:
@@ -104,7 +109,8 @@ def cmd_run(args: argparse.Namespace) -> int:
             and (args.until is None or names.index(args.until) >= names.index("analysis"))):
         from .choose import choose_best
 
-        project, _ = choose_best(project, out_dir, project_file=project_file, say=progress.message)
+        project, _ = choose_best(project, out_dir, project_file=project_file, settings=settings,
+                                 say=progress.message)
     from .design_loop import run_with_fitted_grid
 
     project, summary = run_with_fitted_grid(project, out_dir, STAGES, say=progress.message, until=args.until,
@@ -228,6 +234,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the unit the --surface mesh was modelled in (default m)")
     run.add_argument("--surface-up", choices=("z", "y", "x", "-z", "-y", "-x"),
                      help="the --surface mesh's up axis (default z; Blender, SketchUp and glTF exports: y)")
+    run.add_argument("--cells", type=int, metavar="N",
+                     help="cells of the grid for this run (the project's remesh.n_cells)")
+    run.add_argument("--set", dest="settings", action="append", metavar="KEY=VALUE",
+                     help="a project setting for this run, by its dotted key: --set field.max_size_ratio=2, "
+                          "--set 'section.diameter=60.3 mm'; repeat for more")
     run.add_argument("--out", metavar="DIR", help="output folder (default out/NAME)")
     run.add_argument("--until", metavar="STAGE", help="stop after this stage")
     run.add_argument("--only", metavar="STAGE", help="run only this stage (earlier results must exist)")

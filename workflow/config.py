@@ -941,9 +941,51 @@ def _largest_side(vertices: np.ndarray) -> float:
     return float(np.ptp(finite, axis=0).max()) if len(finite) else 0.0
 
 
-def load_project(path: str | Path) -> Project:
+def is_project_key(key: str) -> bool:
+    """Whether the dotted ``key`` names one setting of a project ("remesh.n_cells"), not a table."""
+    parts = tuple(key.split("."))
+    model = _model_for(parts)
+    return model is not None and parts[-1] in model.model_fields and _model_for(parts + ("_",)) is None
+
+
+def set_key(data: dict, key: str, value: Any) -> None:
+    """Set the dotted ``key`` of the TOML ``data`` (in place), making tables on the way."""
+    *tables, last = key.split(".")
+    for name in tables:
+        data = data.setdefault(name, {})
+        if not isinstance(data, dict):
+            raise ConfigError(f"{key!r}: {name} is not a table in the project")
+    data[last] = value
+
+
+def parse_setting(text: str, flag: str = "--set") -> tuple[str, Any]:
+    """(key, value) of a command line's ``KEY=VALUE``: the value read as a TOML value (60, 2.5, true,
+    [1, 2], "text"), else taken as text ("48.3 mm", "socket"); ConfigError naming ``flag`` for a
+    key that is not a project key."""
+    key, equals, value = text.partition("=")
+    key = key.strip()
+    if not equals or not key:
+        raise ConfigError(f"{flag} {text!r}: give KEY=VALUE", hint=f"e.g. {flag} remesh.n_cells=300")
+    if not is_project_key(key):
+        raise ConfigError(f"{flag} {text!r}: {key!r} is not a project key",
+                          hint='keys are dotted project keys, e.g. "remesh.n_cells" or "field.max_size_ratio"')
+    try:
+        parsed = tomllib.loads(f"value = {value.strip()}")["value"]
+    except tomllib.TOMLDecodeError:
+        parsed = value.strip()
+    return key, parsed
+
+
+def _source(source: str, settings: dict[str, Any] | None) -> str:
+    if not settings:
+        return source
+    return f"{source} with " + ", ".join(f"--set {k}={v!r}" for k, v in settings.items())
+
+
+def load_project(path: str | Path, settings: dict[str, Any] | None = None) -> Project:
     """Read and validate a TOML project file (a folder stands for its project.toml, as
-    ``gridshell init DIR`` writes it)."""
+    ``gridshell init DIR`` writes it); ``settings``: dotted keys and values that replace the
+    file's (``gridshell run --set``)."""
     path = Path(path)
     if path.is_dir():
         if not (path / "project.toml").is_file():
@@ -952,7 +994,9 @@ def load_project(path: str | Path) -> Project:
                                    f"gridshell init {path} --template mockup")
         path = path / "project.toml"
     data = read_toml(path, "project file", hint="create one with: gridshell init DIR --template mockup")
-    return parse_project(data, source=str(path), base_dir=path.parent.resolve())
+    for key, value in (settings or {}).items():
+        set_key(data, key, value)
+    return parse_project(data, source=_source(str(path), settings), base_dir=path.parent.resolve())
 
 
 def read_toml(path: Path, what: str, *, hint: str | None = None) -> dict:
@@ -970,9 +1014,10 @@ def read_toml(path: Path, what: str, *, hint: str | None = None) -> dict:
 
 
 def project_from_surface(surface: str | Path, supports: str = "boundary", units: str = "m",
-                         up: str | None = None) -> Project:
+                         up: str | None = None, settings: dict[str, Any] | None = None) -> Project:
     """The quick-start project: a mesh file in ``units`` (m, cm, mm, in, ft) with ``up`` as its up
-    axis (None: z, checked), supports 'boundary' or 'flagged', defaults elsewhere."""
+    axis (None: z, checked), supports 'boundary' or 'flagged', defaults elsewhere, but for the
+    dotted keys of ``settings``."""
     from engine.geometry.surfaces import UP_AXES
 
     if supports not in ("boundary", "flagged"):
@@ -981,11 +1026,13 @@ def project_from_surface(surface: str | Path, supports: str = "boundary", units:
         raise ConfigError(f"--surface-units {units!r}: allowed are {', '.join(_FILE_UNITS)}")
     if up is not None and up not in UP_AXES:
         raise ConfigError(f"--surface-up {up!r}: allowed are {', '.join(UP_AXES)}")
-    return parse_project({"project": {"name": Path(surface).stem},
-                          "surface": {"file": str(Path(surface).resolve()), "file_units": units,
-                                      **({} if up is None else {"up_axis": up})},
-                          "supports": [{"select": supports, "restraint": "pinned"}]},
-                         source=f"--surface {surface}")
+    data = {"project": {"name": Path(surface).stem},
+            "surface": {"file": str(Path(surface).resolve()), "file_units": units,
+                        **({} if up is None else {"up_axis": up})},
+            "supports": [{"select": supports, "restraint": "pinned"}]}
+    for key, value in (settings or {}).items():
+        set_key(data, key, value)
+    return parse_project(data, source=_source(f"--surface {surface}", settings))
 
 
 _FILE_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}

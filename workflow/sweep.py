@@ -83,7 +83,7 @@ def _stage_names() -> list[str]:
 def load_sweep(path: str | Path) -> SweepSpec:
     """Read and check a sweep file: InputError naming the key for a missing project file, an unknown
     stage, a key that is not a project key, a value that is not a list, or an empty grid."""
-    from .config import _model_for, read_toml
+    from .config import is_project_key, read_toml
 
     path = Path(path)
     data = read_toml(path, "sweep file", hint='write one with project = "project.toml" and a [parameters] table')
@@ -107,9 +107,7 @@ def load_sweep(path: str | Path) -> SweepSpec:
         raise InputError(f"{path}: [parameters] is missing or empty",
                          hint='list values for dotted project keys, e.g. "remesh.n_cells" = [60, 120]')
     for key, values in parameters.items():
-        parts = tuple(key.split("."))
-        model = _model_for(parts)
-        if model is None or parts[-1] not in model.model_fields or _model_for(parts + ("_",)) is not None:
+        if not is_project_key(key):
             raise InputError(f"{path}: [parameters] {key!r} is not a project key",
                              hint='keys are dotted project keys, e.g. "remesh.n_cells" or "field.max_size_ratio"')
         if not isinstance(values, list) or not values:
@@ -122,12 +120,12 @@ def load_sweep(path: str | Path) -> SweepSpec:
 
 def _with(data: dict, key: str, value: Any) -> None:
     """Set the dotted ``key`` of the TOML ``data`` (in place), making tables on the way."""
-    *tables, last = key.split(".")
-    for name in tables:
-        data = data.setdefault(name, {})
-        if not isinstance(data, dict):
-            raise InputError(f"[parameters] {key!r}: {name} is not a table in the project")
-    data[last] = value
+    from .config import set_key
+
+    try:
+        set_key(data, key, value)
+    except GridshellError as exc:
+        raise InputError(f"[parameters] {exc.args[0]}") from None
 
 
 def sweep_points(spec: SweepSpec, out_dir: Path) -> list[Point]:
