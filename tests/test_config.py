@@ -379,7 +379,63 @@ def test_a_project_whose_only_load_is_self_weight_is_told_so_by_validate(tmp_pat
     for project, told in ((bare, True), (loaded, False)):
         assert main(["validate", str(project)]) == 0
         err = capsys.readouterr().err
-        assert ("beams' own weight alone" in err and "[loads.cases]" in err) == told, err
+        assert ("own weight alone" in err and "[loads.cases]" in err) == told, err
+
+
+def test_the_default_dead_load_carries_the_panels_weight(tmp_path):
+    """With no [loads], the dead case is the beams' own weight and the panels': their thickness x
+    density x g per true area, downward (10 mm glass 245.25 N/m^2, 3 mm acrylic 35.02 N/m^2); none
+    where panels are off."""
+    from engine.structure.loads import GRAVITY
+    from workflow.config import OWN_WEIGHT_NOTE, SELF_WEIGHT_NOTE, parse_project
+    from workflow.stages.surface import build_surface, resolve_loads
+
+    def dead(extra: dict) -> tuple[object, list[str]]:
+        project = parse_project({"surface": {"template": "cap"}, **extra})
+        cases, _ = resolve_loads(build_surface(project)[0], project)
+        return cases["dead"].area_true, project.notes
+
+    glass, notes = dead({})
+    assert glass == pytest.approx([0.0, 0.0, -0.010 * 2500.0 * GRAVITY]) and OWN_WEIGHT_NOTE in notes
+    acrylic, _ = dead({"material": {"name": "aluminium_6063"}, "section": {"kind": "circular_hollow",
+                                                                          "diameter": "12 mm", "thickness": "1.5 mm"}})
+    assert acrylic == pytest.approx([0.0, 0.0, -0.003 * 1190.0 * GRAVITY])
+    off, notes = dead({"fabrication": {"panels": {"enabled": False}}})
+    assert off == pytest.approx([0.0, 0.0, 0.0]) and SELF_WEIGHT_NOTE in notes
+
+
+def test_panels_in_no_load_case_are_a_note_naming_the_case_and_the_weight():
+    from workflow.config import parse_project
+
+    def note(loads: dict) -> str | None:
+        return parse_project({"surface": {"template": "cap"}, "loads": {"cases": loads}}).panels_left_out
+
+    left_out = note({"dead": {"self_weight": 1.0}, "snow": {"area_plan": "1 kN/m^2"}})
+    assert left_out is not None and "[loads.cases.dead]" in left_out and "245 N/m^2" in left_out
+    assert note({"dead": {"self_weight": 1.0, "panels": 1.0}}) is None
+    assert note({"dead": {"self_weight": 1.0, "area_true": "0.5 kN/m^2"}}) is None   # glazing given as a load
+    assert note({"dead": {"self_weight": 1.0, "area_true": "0.2 kN/m^2"}}) is not None
+    assert note({"snow": {"area_plan": "1 kN/m^2"}}) is not None                        # not a permanent case
+
+
+@pytest.mark.parametrize("name", ["mockup", "cap", "vault", "hypar", "courtyard"])
+def test_every_template_carries_its_panels(name):
+    from workflow.cli import _template_path
+    from workflow.config import load_project
+
+    assert load_project(_template_path(name)).panels_left_out is None
+
+
+def test_the_surface_stage_reads_the_panels_weight_only_where_a_case_carries_it():
+    """Its cache key holds the panels' thickness, density and on/off where a case has ``panels``,
+    and nothing of [fabrication.panels] otherwise (a panel clearance changed re-runs no analysis)."""
+    from workflow.config import PANEL_WEIGHT_KEYS, parse_project, stage_sections
+
+    carried = parse_project({"surface": {"template": "cap"}})
+    given = parse_project({"surface": {"template": "cap"},
+                           "loads": {"cases": {"dead": {"self_weight": 1.0, "area_true": "0.5 kN/m^2"}}}})
+    assert set(PANEL_WEIGHT_KEYS) <= set(stage_sections("surface", carried))
+    assert not any(k.startswith("fabrication") for k in stage_sections("surface", given))
 
 
 def test_a_progress_message_keeps_the_tables_it_names(capsys):

@@ -36,6 +36,7 @@ from engine.remeshing.field import AnisotropyMap, FieldSettings, Orientation, Si
 from engine.remeshing.grids import GridKind
 from engine.remeshing.optimize import OptimizeSettings
 from engine.remeshing.voronoi import RemeshSettings
+from engine.structure.loads import GRAVITY
 from engine.structure.protocol import TOLERABLE_DEFLECTION_RATIO, ImperfectionShape, ProtocolSettings
 from engine.structure.supports import restraint_flags
 from fabrication.joints import JointKind, JointSettings
@@ -171,9 +172,12 @@ class PointLoadSpec(_Section):
 
 
 class LoadCaseSpec(_Section):
-    """A load case. Area loads: a single value is a downward load, or [qx, qy, qz] (N/m^2)."""
+    """A load case. ``self_weight``: a factor on the beams' own weight; ``panels``: a factor on the
+    panels' ([fabrication.panels] thickness x density x g, downward per true area, none where
+    panels are off). Area loads: a single value is a downward load, or [qx, qy, qz] (N/m^2)."""
 
     self_weight: float = 0.0
+    panels: float = 0.0
     area_true: AreaLoad | list[AreaLoad] = 0.0
     area_plan: AreaLoad | list[AreaLoad] = 0.0
     points: list[PointLoadSpec] = Field(default_factory=list)
@@ -196,7 +200,8 @@ class CombinationSpec(_Section):
 
 
 class LoadsConfig(_Section):
-    cases: dict[str, LoadCaseSpec] = Field(default_factory=lambda: {"dead": LoadCaseSpec(self_weight=1.0)})
+    cases: dict[str, LoadCaseSpec] = Field(
+        default_factory=lambda: {"dead": LoadCaseSpec(self_weight=1.0, panels=1.0)})
     combinations: dict[str, CombinationSpec] = Field(default_factory=dict)
 
     @model_validator(mode="after")
@@ -213,8 +218,8 @@ class LoadsConfig(_Section):
 
     @property
     def self_weight_only(self) -> bool:
-        """Whether the beams' own weight is the only load: no case has an area or a point load (the
-        default when a project gives no [loads])."""
+        """Whether the grid-shell's own weight (beams, and panels where a case has them) is the only
+        load: no case has an area or a point load (the default when a project gives no [loads])."""
         return not any(case.area_vector("area_true") != [0.0, 0.0, 0.0]
                        or case.area_vector("area_plan") != [0.0, 0.0, 0.0] or case.points
                        for case in self.cases.values())
@@ -223,6 +228,9 @@ class LoadsConfig(_Section):
 SELF_WEIGHT_NOTE = ("the loads are the beams' own weight alone: the verdicts leave out the panels, finishes, snow "
                     "and wind; add them as [loads.cases] (README, Project files)")
 """What run and validate say of a project whose only load is the beams' self-weight."""
+OWN_WEIGHT_NOTE = ("the loads are the grid-shell's own weight alone, its beams' and its panels': the verdicts leave "
+                   "out finishes, snow and wind; add them as [loads.cases] (README, Project files)")
+"""What run and validate say of a project loaded by the beams' and the panels' own weight only."""
 
 
 class MaterialConfig(_Section):
@@ -651,11 +659,42 @@ class Project(_Section):
         return self._scale_note
 
     @property
+    def panel_weight_N_per_m2(self) -> float:
+        """The panels' own weight per area (N/m^2): thickness x density x g; 0 where panels are off."""
+        p = self.fabrication.panels
+        if not p.enabled or p.thickness is None or p.density is None:
+            return 0.0
+        return float(p.thickness * p.density * GRAVITY)
+
+    @property
+    def panels_left_out(self) -> str | None:
+        """One line when the panels weigh something and no load case carries them: no case has
+        ``panels``, and no case with the beams' weight has a downward area load as large."""
+        weight = self.panel_weight_N_per_m2
+        cases = self.loads.cases
+        if weight <= 0 or any(c.panels > 0 for c in cases.values()):
+            return None
+        permanent = [n for n, c in cases.items() if c.self_weight > 0]
+        carried = max((-c.area_vector("area_true")[2] - c.area_vector("area_plan")[2]
+                       for n, c in cases.items() if n in permanent), default=0.0)
+        if carried >= weight * (1 - PANEL_WEIGHT_ROUNDING):
+            return None
+        p = self.fabrication.panels
+        where = f"[loads.cases.{permanent[0]}]" if permanent else "a load case with self_weight = 1.0"
+        return (f"the panels ({_mm(p.thickness)} {p.material or 'panels'}, {weight:.0f} N/m^2) are in no load case: "
+                f"add panels = 1.0 to {where} (their weight from [fabrication.panels]), or an area load of at "
+                f"least {weight:.0f} N/m^2")
+
+    @property
     def notes(self) -> list[str]:
-        """What validate prints as notes and run as progress: the model-kit line, and the loads' when
-        the beams' own weight is the only one."""
-        return ([self._scale_note] if self._scale_note else []) + \
-            ([SELF_WEIGHT_NOTE] if self.loads.self_weight_only else [])
+        """What validate prints as notes and run as progress: the model-kit line; the loads' when the
+        grid-shell's own weight is the only one; the panels' when no load case carries them."""
+        own_weight = []
+        if self.loads.self_weight_only:
+            with_panels = self.panel_weight_N_per_m2 > 0 and any(c.panels > 0 for c in self.loads.cases.values())
+            own_weight = [OWN_WEIGHT_NOTE if with_panels else SELF_WEIGHT_NOTE]
+        left_out = self.panels_left_out
+        return ([self._scale_note] if self._scale_note else []) + own_weight + ([left_out] if left_out else [])
 
     @model_validator(mode="after")
     def _design_needs_tubes(self) -> "Project":
@@ -727,10 +766,20 @@ KEYS_LEFT_OUT_AT_DEFAULT: dict[str, dict[str, Any]] = {
 }
 
 
+#: A permanent area load this much under the panels' weight still carries them: loads are given to
+#: two or three figures (the mock-up's 0.035 kN/m^2 for 3 mm acrylic, 35.02 N/m^2).
+PANEL_WEIGHT_ROUNDING = 0.02
+#: What the surface stage reads of the panels when a load case carries their weight.
+PANEL_WEIGHT_KEYS = ("fabrication.panels.enabled", "fabrication.panels.thickness", "fabrication.panels.density")
+
+
 def stage_sections(stage: str, project: "Project") -> tuple[str, ...]:
-    """The project sections (or dotted keys) ``stage`` reads for ``project``: STAGE_SECTIONS, and for
-    a remesh with statics rounds the analysis keys its frame analyses take."""
+    """The project sections (or dotted keys) ``stage`` reads for ``project``: STAGE_SECTIONS; for a
+    remesh with statics rounds the analysis keys its frame analyses take; for the surface's loads,
+    where a case carries the panels, their weight's keys."""
     sections = STAGE_SECTIONS.get(stage, ())
+    if stage == "surface" and any(c.panels > 0 for c in project.loads.cases.values()):
+        sections += PANEL_WEIGHT_KEYS
     if stage == "remesh" and project.remesh.statics_rounds > 1:
         sections += ("analysis.elements_per_beam", "analysis.uls_combination")
     return sections

@@ -168,8 +168,13 @@ def _summary(project: Project, surface: SurfaceResult, polymesh, analysis: dict,
             False: "At least one structural check fails: see the verdicts below.",
             None: "No structural verdicts (the analysis did not run)."}[passed]
     if passed is not None and project.loads.self_weight_only:
-        text += (" The only load is the beams' own weight ([loads] gives no other): the panels, finishes, snow "
-                 "and wind are not in these verdicts.")
+        if any(c.panels > 0 for c in project.loads.cases.values()) and project.panel_weight_N_per_m2 > 0:
+            text += (f" The only loads are the grid-shell's own weight, its beams' and its panels' "
+                     f"({project.panel_weight_N_per_m2:.0f} N/m^2; [loads] gives no other): finishes, snow and wind "
+                     "are not in these verdicts.")
+        else:
+            text += (" The only load is the beams' own weight ([loads] gives no other): the panels, finishes, snow "
+                     "and wind are not in these verdicts.")
     if findings:
         rows = findings_rows(findings)
         tables.insert(0, Table(name="findings", caption="Findings: failing checks and parts that cannot be built as "

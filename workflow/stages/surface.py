@@ -133,12 +133,16 @@ def resolve_supports(mesh: TriMesh, specs: list[SupportSpec]) -> Supports:
 
 
 def resolve_loads(mesh: TriMesh, project: Project) -> tuple[dict[str, LoadCase], dict[str, LoadCombination]]:
-    """Load cases with point loads resolved to vertex ids, and the combinations.
+    """Load cases with point loads resolved to vertex ids, and the combinations. A case's
+    ``panels`` factor adds the panels' weight (``Project.panel_weight_N_per_m2``) to its downward
+    load per true area.
 
     Without combinations in the project, one SLS and one ULS combination are made:
     SLS = sum of all cases, ULS = 1.35 x (cases with self-weight) + 1.5 x (the others).
     """
     cases: dict[str, LoadCase] = {}
+    carried = any(c.panels > 0 for c in project.loads.cases.values())
+    panel_weight = project.panel_weight_N_per_m2 if carried else 0.0  # read only where a case carries it
     for name, spec in project.loads.cases.items():
         nodes, forces = [], []
         for point in spec.points:
@@ -148,8 +152,9 @@ def resolve_loads(mesh: TriMesh, project: Project) -> tuple[dict[str, LoadCase],
                 node = int(select_nearest(mesh.vertices, np.array(point.nearest))[0])
             nodes.append(node)
             forces.append([*point.force, *point.moment])
+        area_true = np.array(spec.area_vector("area_true")) - [0.0, 0.0, spec.panels * panel_weight]
         cases[name] = LoadCase(name=name, self_weight=spec.self_weight,
-                               area_true=spec.area_vector("area_true"), area_plan=spec.area_vector("area_plan"),
+                               area_true=area_true, area_plan=spec.area_vector("area_plan"),
                                point_nodes=np.array(nodes, dtype=np.int64) if nodes else None,
                                point_forces=np.array(forces) if forces else None)
     combinations = {name: LoadCombination(name=name, limit_state=LimitState(c.limit_state), factors=dict(c.factors))
@@ -173,8 +178,11 @@ def check_selections(project: Project) -> int:
     return int(len(supports.nodes))
 
 
-def _loads_json(cases: dict[str, LoadCase], combinations: dict[str, LoadCombination]) -> dict:
+def _loads_json(cases: dict[str, LoadCase], combinations: dict[str, LoadCombination], project: Project) -> dict:
+    factors = {n: c.panels for n, c in project.loads.cases.items() if c.panels}
     return {"units": "N, N/m^2, N m; self_weight is a factor on the structure's own weight",
+            # the panels' weight, already in the area_true of the cases that carry it (by these factors)
+            "panels": {"N_per_m2": project.panel_weight_N_per_m2 if factors else None, "factors": factors},
             "cases": {n: {"self_weight": c.self_weight, "area_true": c.area_true.tolist(),
                           "area_plan": c.area_plan.tolist(), "point_nodes": c.point_nodes.tolist(),
                           "point_forces": c.point_forces.tolist()} for n, c in cases.items()},
@@ -197,7 +205,7 @@ def run(project: Project, ctx: StageContext) -> SurfaceResult:
     write_text_atomic(ctx.folder / "supports.json", json.dumps(
         {"dofs": ["ux", "uy", "uz", "rx", "ry", "rz"], "supports": supports.to_json(),
          "selections": [s.model_dump(mode="json") for s in project.supports]}, indent=1))
-    write_text_atomic(ctx.folder / "loads.json", json.dumps(_loads_json(cases, combinations), indent=1))
+    write_text_atomic(ctx.folder / "loads.json", json.dumps(_loads_json(cases, combinations, project), indent=1))
     write_text_atomic(ctx.folder / "surface.json", json.dumps(info, indent=1, default=float))
     ctx.step("drawing")
     plot_surface(mesh, supports.nodes, ctx.folder / "surface.png", title=f"{project.project.name}: {mesh.name}")
