@@ -48,7 +48,8 @@ from .workers import StepOutcome, exit_with_parent, run_steps
 __all__ = ["JointKind", "JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm",
            "geometry_setback_mm", "joint_hub_radius_mm", "joint_sleeve_mm", "smallest_angle", "build_joint",
            "build_joint_and_blank", "build_joints", "same_joints", "JointsInBackground", "joint_name",
-           "copy_placements", "joint_hub_height_mm", "joint_plate_height_mm", "knife_plate_height_mm",
+           "copy_placements", "joint_hub_height_mm", "geometry_hub_height_mm", "joint_plate_height_mm",
+           "knife_plate_height_mm",
            "joint_reach_mm", "cylinder_reach_mm", "EndSlots", "fin_plate_slots"]
 
 ENGRAVE_DEPTH_MM = 0.6
@@ -203,6 +204,36 @@ def joint_hub_height_mm(settings: JointSettings, beam_size_mm: float) -> float:
     return 2.0 * (0.5 * beam_size_mm + settings.clearance_mm + settings.wall_mm) + 1.0
 
 
+#: A printed socket's hub is made taller so that each sleeve rising out of the plane square to its
+#: axis by up to SLEEVE_CONTAINED_DEG stays this far (mm) under the hub's top and bottom faces within
+#: the hub's radius. A sleeve that met the top face at a grazing angle near the rim (a 30 mm rod's,
+#: rising 1.6 degrees, 0.2 mm through a hub 0.5 mm over a flat sleeve) was lost by OCCT's fuse, and
+#: the joint came out in four solids. A steeper sleeve crosses the face at an angle the booleans take.
+SLEEVE_HUB_CLEARANCE_MM = 0.5
+SLEEVE_CONTAINED_DEG = 20.0
+
+
+def geometry_hub_height_mm(settings: JointSettings, geometry: JointGeometry) -> float:
+    """Height of a joint's hub along its axis, mm: ``joint_hub_height_mm``, and for printed sockets
+    at least what keeps each sleeve rising up to SLEEVE_CONTAINED_DEG inside the hub, with
+    SLEEVE_HUB_CLEARANCE_MM to spare, as far out as the hub's radius."""
+    height = joint_hub_height_mm(settings, geometry.beam_size_mm)
+    if settings.kind == "steel" or not len(geometry.directions):
+        return height
+    radius = joint_hub_radius_mm(settings, geometry.beam_size_mm)
+    sine = np.abs(geometry.directions @ geometry.axis)
+    contained = sine <= np.sin(np.radians(SLEEVE_CONTAINED_DEG))
+    if not contained.any():
+        return height
+    sine = sine[contained]
+    cosine = np.sqrt(1.0 - sine * sine)
+    outer = 0.5 * geometry.sizes_mm[contained] + settings.clearance_mm + settings.wall_mm
+    # the top line of a sleeve leaves the hub's radius (R) where s cos - outer sin = R, at the height
+    # s sin + outer cos
+    top = (radius + outer * sine) * sine / cosine + outer * cosine
+    return float(max(height, 2.0 * (top.max() + SLEEVE_HUB_CLEARANCE_MM)))
+
+
 def cylinder_reach_mm(start: float, end: float, axis_along: float, radius: float) -> float:
     """How far a cylinder reaches along a unit direction: its end centres at ``start`` and ``end``
     along it, its axis at cosine ``axis_along`` to it."""
@@ -215,7 +246,7 @@ def joint_reach_mm(geometry: JointGeometry, settings: JointSettings, direction: 
     gives them. What a panel resting on the joint clears."""
     n = np.asarray(direction, dtype=float)
     size = geometry.beam_size_mm
-    hub_radius, height = joint_hub_radius_mm(settings, size), joint_hub_height_mm(settings, size)
+    hub_radius, height = joint_hub_radius_mm(settings, size), geometry_hub_height_mm(settings, geometry)
     along = float(geometry.axis @ n)
     reach = cylinder_reach_mm(-0.5 * height * along, 0.5 * height * along, along, hub_radius)
     setback = geometry_setback_mm(settings, geometry)
@@ -798,7 +829,7 @@ def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings, *, b
         report["min_wall_mm"] = float(settings.plate_thickness_mm)
     else:
         hub_radius = joint_hub_radius_mm(settings, size)
-        hub_height = joint_hub_height_mm(settings, size)  # = 2 outer + 1
+        hub_height = geometry_hub_height_mm(settings, geometry)  # 2 outer + 1, more for rising sleeves
         hub = _cylinder(-0.5 * hub_height * axis, axis, hub_radius, hub_height)
         sleeves, tools, features = [], [], []
         # each socket fits its own tube; the hub and the set-back take the largest

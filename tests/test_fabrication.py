@@ -360,13 +360,41 @@ def test_engraving_by_faces_removes_the_glyphs_times_the_depth(monkeypatch):
 
 
 def test_a_label_over_rising_sleeves_falls_back_to_the_boolean_cut():
-    """Sleeves tilted 20 degrees up break through the hub's top face: the label is cut as before
+    """Sleeves tilted 25 degrees up break through the hub's top face: the label is cut as before
     and the joint is still one valid solid."""
     from fabrication import joints
 
-    solid, report = joints.build_joint(_joint_geometry(tilt_deg=20.0), joints.JointSettings())
+    solid, report = joints.build_joint(_joint_geometry(tilt_deg=25.0), joints.JointSettings())
     assert report["engraving"] == "boolean"
     assert len(solid.solids()) == 1 and solid.is_valid
+
+
+@pytest.mark.parametrize("tilt_deg", [0.0, 0.8, 1.6, 3.0, 8.0, 15.0, 20.0])
+def test_a_sleeve_rising_a_little_stays_inside_a_taller_hub_and_the_joint_is_one_solid(tilt_deg):
+    """Three 30 mm rods' sleeves rising 1.6 degrees met the hub's top face at a grazing angle near
+    its rim; OCCT's fuse lost one and the joint came out in four solids (an unseen generated dome).
+    The hub is now tall enough to hold each sleeve as far out as its radius, with
+    SLEEVE_HUB_CLEARANCE_MM to spare: checked on the solid by its extent along the axis at the hub's
+    radius, and the joint is one valid solid, engraved on its top face."""
+    from dataclasses import replace
+
+    from build123d import Cylinder
+
+    from fabrication import joints
+
+    settings = joints.JointSettings(clearance_mm=0.3, wall_mm=2.0, min_wall_mm=1.5)
+    geometry = replace(_joint_geometry(tilt_deg=tilt_deg), beam_size_mm=30.0)
+    solid, report = joints.build_joint(geometry, settings)
+    assert len(solid.solids()) == 1 and solid.is_valid and report["engraving"] == "faces"
+    height = joints.geometry_hub_height_mm(settings, geometry)
+    radius = joints.joint_hub_radius_mm(settings, 30.0)
+    assert height >= joints.joint_hub_height_mm(settings, 30.0)
+    # the solid within the hub's radius (less a hair) reaches no higher and no lower than the hub's
+    # top and bottom faces (the joint is built about the helper's axis, +Z, at the origin)
+    inside = solid.intersect(Cylinder(radius - 0.01, 4 * height))
+    heights = [v.Z for part in (inside if isinstance(inside, list) else [inside]) for v in part.vertices()]
+    assert max(heights) == pytest.approx(0.5 * height, abs=1e-6)
+    assert min(heights) == pytest.approx(-0.5 * height, abs=1e-6)
 
 
 def test_a_node_with_collinear_beams_is_built_and_its_chips_reported(tmp_path):

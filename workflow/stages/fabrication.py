@@ -40,9 +40,9 @@ from fabrication.joints import (
     JointsInBackground,
     copy_placements,
     fin_plate_slots,
+    geometry_hub_height_mm,
     geometry_setback_mm,
     joint_geometry,
-    joint_hub_height_mm,
     joint_hub_radius_mm,
     joint_plate_height_mm,
     joint_sleeve_mm,
@@ -653,7 +653,7 @@ def _swept_parts(project: Project, folder: Path, polymesh: PolyMesh, geometries:
         steel = settings.kind == "steel"
         joints.append(IfcJoint(id=joint_id(g.node), position_mm=g.position_mm, axis=g.axis, directions=g.directions,
                                hub_radius_mm=joint_hub_radius_mm(settings, size),
-                               hub_height_mm=joint_hub_height_mm(settings, size),
+                               hub_height_mm=geometry_hub_height_mm(settings, g),
                                setback_mm=setback, reach_mm=reach, outer_mm=bore + settings.wall_mm, bore_mm=bore,
                                plate_mm=(settings.plate_thickness_mm, joint_plate_height_mm(settings, size))
                                if steel else None,
