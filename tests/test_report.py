@@ -287,3 +287,16 @@ def test_the_report_says_where_each_imperfect_paths_load_factor_was_read(small_r
     (table,) = [t for t in tables if t[0][:3] == ["imperfection", "non-linear load factor", "read at"]]
     assert {row[0]: row[2] for row in table[1:]} == expected
     assert analysis["tolerable_deflection_m"] > 0
+
+
+def test_the_job_table_says_what_each_load_case_holds():
+    from workflow.config import LoadCaseSpec
+    from workflow.stages.report import load_case_text
+
+    dead = LoadCaseSpec(self_weight=1.0, panels=1.0, area_true="0.25 kN/m^2")
+    assert load_case_text("dead", dead, 245.25) == "dead (beams' weight, panels 245 N/m^2, 250 N/m^2 per true area)"
+    assert load_case_text("dead", dead, 0.0) == "dead (beams' weight, 250 N/m^2 per true area)"  # panels off
+    wind = LoadCaseSpec(area_true=[300.0, 0.0, 100.0])
+    assert load_case_text("wind", wind, 245.25) == "wind ([300, 0, 100] N/m^2 per true area)"
+    snow = LoadCaseSpec(area_plan="1 kN/m^2", self_weight=1.35)
+    assert load_case_text("snow", snow, 245.25) == "snow (beams' weight x 1.35, 1000 N/m^2 on plan)"

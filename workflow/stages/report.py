@@ -132,10 +132,30 @@ def findings_rows(findings: list[dict]) -> list[list]:
              ", ".join(r["worst_parts"]), r["message"], r["fix"]] for r in findings_table(findings)]
 
 
+def load_case_text(name: str, case, panel_weight_N_per_m2: float) -> str:
+    """A project load case in a few words: "dead (beams' weight, panels 245 N/m^2, 250 N/m^2 per
+    true area)"; an area load that is not downward as [qx, qy, qz]."""
+    parts = []
+    if case.self_weight:
+        parts.append("beams' weight" + (f" x {case.self_weight:g}" if case.self_weight != 1 else ""))
+    if case.panels and panel_weight_N_per_m2:
+        parts.append(f"panels {case.panels * panel_weight_N_per_m2:.0f} N/m^2")
+    for which, where in (("area_true", "per true area"), ("area_plan", "on plan")):
+        qx, qy, qz = case.area_vector(which)
+        if qx or qy:
+            parts.append(f"[{qx:.0f}, {qy:.0f}, {qz:.0f}] N/m^2 {where}")
+        elif qz:
+            parts.append(f"{-qz:.0f} N/m^2 {where}")
+    if case.points:
+        parts.append(f"{len(case.points)} point load{'s' if len(case.points) > 1 else ''}")
+    return f"{name} ({', '.join(parts) or 'no load'})"
+
+
 def _summary(project: Project, surface: SurfaceResult, polymesh, analysis: dict, fabrication: FabricationResult,
              shell: dict, findings: list[dict]) -> Section:
     supports = surface.supports
-    loads = ", ".join(surface.load_cases) or "-"
+    weight = project.panel_weight_N_per_m2 if any(c.panels for c in project.loads.cases.values()) else 0.0
+    loads = "; ".join(load_case_text(n, c, weight) for n, c in project.loads.cases.items()) or "-"
     combos = ", ".join(f"{n} ({c.limit_state.value})" for n, c in surface.combinations.items())
     values = {
         "project": project.project.name,
