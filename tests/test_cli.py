@@ -208,3 +208,12 @@ def test_parse_setting_reads_toml_values_and_keeps_other_text():
     assert parse_setting("field.max_size_ratio = 2.5") == ("field.max_size_ratio", 2.5)
     assert parse_setting('project.name="a b"') == ("project.name", "a b")
     assert parse_setting("section.thickness=3.2 mm") == ("section.thickness", "3.2 mm")
+
+
+def test_validate_takes_the_same_settings_as_run(capsys, tmp_path):
+    job = tmp_path / "job"
+    assert _run(capsys, "init", str(job), "--template", "cap")[0] == 0
+    project = str(job / "project.toml")
+    assert _run(capsys, "validate", project, "--cells", "90", "--set", "field.max_size_ratio=1.5")[0] == 0
+    code, out, err = _run(capsys, "validate", project, "--set", "field.max_size_ratio=-1")
+    assert code == 2 and "--set field.max_size_ratio=-1" in err and "Traceback" not in err

@@ -58,16 +58,32 @@ def _job_name(project_path: Path) -> str:
     return path.parent.name if path.name == "project.toml" and path.parent.name else path.stem
 
 
-def cmd_run(args: argparse.Namespace) -> int:
-    from .config import check_inputs, load_project, parse_setting, project_from_surface, unusual_values
-    from .progress import Progress
-    from .stages import STAGES
+def _settings(args: argparse.Namespace) -> dict:
+    """The dotted project keys and values of ``--set KEY=VALUE`` and ``--cells N``."""
+    from .config import parse_setting
 
     settings = dict(parse_setting(text) for text in args.settings or ())
     if args.cells is not None:
         if args.cells < 1:
             raise InputError(f"--cells {args.cells}: give a number of cells of 1 or more", hint="e.g. --cells 300")
         settings["remesh.n_cells"] = args.cells
+    return settings
+
+
+def _add_settings(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--cells", type=int, metavar="N",
+                        help="cells of the grid for this run (the project's remesh.n_cells)")
+    parser.add_argument("--set", dest="settings", action="append", metavar="KEY=VALUE",
+                        help="a project setting for this run, by its dotted key: --set field.max_size_ratio=2, "
+                             "--set 'section.diameter=60.3 mm'; repeat for more")
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from .config import check_inputs, load_project, project_from_surface, unusual_values
+    from .progress import Progress
+    from .stages import STAGES
+
+    settings = _settings(args)
     if args.project and args.surface:
         raise InputError("give a PROJECT file or --surface MESH, not both")
     if args.supports and not args.surface:
@@ -134,7 +150,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
     from .config import check_inputs, load_project, unusual_values
     from .stages.surface import check_selections
 
-    project = load_project(args.project)
+    project = load_project(args.project, settings=_settings(args))
     across = check_inputs(project)
     supported = check_selections(project)  # the selections match nodes of the surface
     for line in unusual_values(project):
@@ -234,11 +250,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the unit the --surface mesh was modelled in (default m)")
     run.add_argument("--surface-up", choices=("z", "y", "x", "-z", "-y", "-x"),
                      help="the --surface mesh's up axis (default z; Blender, SketchUp and glTF exports: y)")
-    run.add_argument("--cells", type=int, metavar="N",
-                     help="cells of the grid for this run (the project's remesh.n_cells)")
-    run.add_argument("--set", dest="settings", action="append", metavar="KEY=VALUE",
-                     help="a project setting for this run, by its dotted key: --set field.max_size_ratio=2, "
-                          "--set 'section.diameter=60.3 mm'; repeat for more")
+    _add_settings(run)
     run.add_argument("--out", metavar="DIR", help="output folder (default out/NAME)")
     run.add_argument("--until", metavar="STAGE", help="stop after this stage")
     run.add_argument("--only", metavar="STAGE", help="run only this stage (earlier results must exist)")
@@ -250,6 +262,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     validate = sub.add_parser("validate", help="check a project file")
     validate.add_argument("project")
+    _add_settings(validate)
     validate.set_defaults(func=cmd_validate)
 
     init = sub.add_parser("init", help="write a starter project file")
