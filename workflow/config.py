@@ -217,6 +217,11 @@ class LoadsConfig(_Section):
         return [n for n, c in self.combinations.items() if c.limit_state == limit_state]
 
     @property
+    def carries_panels(self) -> bool:
+        """Whether some case carries the panels' own weight (a ``panels`` factor over 0)."""
+        return any(case.panels > 0 for case in self.cases.values())
+
+    @property
     def self_weight_only(self) -> bool:
         """Whether the grid-shell's own weight (beams, and panels where a case has them) is the only
         load: no case has an area or a point load (the default when a project gives no [loads])."""
@@ -667,20 +672,25 @@ class Project(_Section):
         return float(p.thickness * p.density * GRAVITY)
 
     @property
+    def carried_panel_weight_N_per_m2(self) -> float:
+        """``panel_weight_N_per_m2`` where a load case carries the panels, else 0; [fabrication.panels]
+        is read only in the first case (the surface stage's cache key holds it only then)."""
+        return self.panel_weight_N_per_m2 if self.loads.carries_panels else 0.0
+
+    @property
     def panels_left_out(self) -> str | None:
         """One line when the panels weigh something and no load case carries them: no case has
         ``panels``, and no case with the beams' weight has a downward area load as large."""
         weight = self.panel_weight_N_per_m2
-        cases = self.loads.cases
-        if weight <= 0 or any(c.panels > 0 for c in cases.values()):
+        if weight <= 0 or self.loads.carries_panels:
             return None
-        permanent = [n for n, c in cases.items() if c.self_weight > 0]
-        carried = max((-c.area_vector("area_true")[2] - c.area_vector("area_plan")[2]
-                       for n, c in cases.items() if n in permanent), default=0.0)
+        permanent = {n: c for n, c in self.loads.cases.items() if c.self_weight > 0}
+        carried = max((-c.area_vector("area_true")[2] - c.area_vector("area_plan")[2] for c in permanent.values()),
+                      default=0.0)
         if carried >= weight * (1 - PANEL_WEIGHT_ROUNDING):
             return None
         p = self.fabrication.panels
-        where = f"[loads.cases.{permanent[0]}]" if permanent else "a load case with self_weight = 1.0"
+        where = f"[loads.cases.{next(iter(permanent))}]" if permanent else "a load case with self_weight = 1.0"
         return (f"the panels ({_mm(p.thickness)} {p.material or 'panels'}, {weight:.0f} N/m^2) are in no load case: "
                 f"add panels = 1.0 to {where} (their weight from [fabrication.panels]), or an area load of at "
                 f"least {weight:.0f} N/m^2")
@@ -691,8 +701,7 @@ class Project(_Section):
         grid-shell's own weight is the only one; the panels' when no load case carries them."""
         own_weight = []
         if self.loads.self_weight_only:
-            with_panels = self.panel_weight_N_per_m2 > 0 and any(c.panels > 0 for c in self.loads.cases.values())
-            own_weight = [OWN_WEIGHT_NOTE if with_panels else SELF_WEIGHT_NOTE]
+            own_weight = [OWN_WEIGHT_NOTE if self.carried_panel_weight_N_per_m2 > 0 else SELF_WEIGHT_NOTE]
         left_out = self.panels_left_out
         return ([self._scale_note] if self._scale_note else []) + own_weight + ([left_out] if left_out else [])
 
@@ -778,7 +787,7 @@ def stage_sections(stage: str, project: "Project") -> tuple[str, ...]:
     remesh with statics rounds the analysis keys its frame analyses take; for the surface's loads,
     where a case carries the panels, their weight's keys."""
     sections = STAGE_SECTIONS.get(stage, ())
-    if stage == "surface" and any(c.panels > 0 for c in project.loads.cases.values()):
+    if stage == "surface" and project.loads.carries_panels:
         sections += PANEL_WEIGHT_KEYS
     if stage == "remesh" and project.remesh.statics_rounds > 1:
         sections += ("analysis.elements_per_beam", "analysis.uls_combination")

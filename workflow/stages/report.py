@@ -154,7 +154,7 @@ def load_case_text(name: str, case, panel_weight_N_per_m2: float) -> str:
 def _summary(project: Project, surface: SurfaceResult, polymesh, analysis: dict, fabrication: FabricationResult,
              shell: dict, findings: list[dict]) -> Section:
     supports = surface.supports
-    weight = project.panel_weight_N_per_m2 if any(c.panels for c in project.loads.cases.values()) else 0.0
+    weight = project.carried_panel_weight_N_per_m2
     loads = "; ".join(load_case_text(n, c, weight) for n, c in project.loads.cases.items()) or "-"
     combos = ", ".join(f"{n} ({c.limit_state.value})" for n, c in surface.combinations.items())
     values = {
@@ -188,9 +188,9 @@ def _summary(project: Project, surface: SurfaceResult, polymesh, analysis: dict,
             False: "At least one structural check fails: see the verdicts below.",
             None: "No structural verdicts (the analysis did not run)."}[passed]
     if passed is not None and project.loads.self_weight_only:
-        if any(c.panels > 0 for c in project.loads.cases.values()) and project.panel_weight_N_per_m2 > 0:
+        if weight > 0:
             text += (f" The only loads are the grid-shell's own weight, its beams' and its panels' "
-                     f"({project.panel_weight_N_per_m2:.0f} N/m^2; [loads] gives no other): finishes, snow and wind "
+                     f"({weight:.0f} N/m^2; [loads] gives no other): finishes, snow and wind "
                      "are not in these verdicts.")
         else:
             text += (" The only load is the beams' own weight ([loads] gives no other): the panels, finishes, snow "

@@ -134,15 +134,14 @@ def resolve_supports(mesh: TriMesh, specs: list[SupportSpec]) -> Supports:
 
 def resolve_loads(mesh: TriMesh, project: Project) -> tuple[dict[str, LoadCase], dict[str, LoadCombination]]:
     """Load cases with point loads resolved to vertex ids, and the combinations. A case's
-    ``panels`` factor adds the panels' weight (``Project.panel_weight_N_per_m2``) to its downward
+    ``panels`` factor adds the panels' weight (``Project.carried_panel_weight_N_per_m2``) to its downward
     load per true area.
 
     Without combinations in the project, one SLS and one ULS combination are made:
     SLS = sum of all cases, ULS = 1.35 x (cases with self-weight) + 1.5 x (the others).
     """
     cases: dict[str, LoadCase] = {}
-    carried = any(c.panels > 0 for c in project.loads.cases.values())
-    panel_weight = project.panel_weight_N_per_m2 if carried else 0.0  # read only where a case carries it
+    panel_weight = project.carried_panel_weight_N_per_m2
     for name, spec in project.loads.cases.items():
         nodes, forces = [], []
         for point in spec.points:
@@ -182,7 +181,7 @@ def _loads_json(cases: dict[str, LoadCase], combinations: dict[str, LoadCombinat
     factors = {n: c.panels for n, c in project.loads.cases.items() if c.panels}
     return {"units": "N, N/m^2, N m; self_weight is a factor on the structure's own weight",
             # the panels' weight, already in the area_true of the cases that carry it (by these factors)
-            "panels": {"N_per_m2": project.panel_weight_N_per_m2 if factors else None, "factors": factors},
+            "panels": {"N_per_m2": project.carried_panel_weight_N_per_m2 if factors else None, "factors": factors},
             "cases": {n: {"self_weight": c.self_weight, "area_true": c.area_true.tolist(),
                           "area_plan": c.area_plan.tolist(), "point_nodes": c.point_nodes.tolist(),
                           "point_forces": c.point_forces.tolist()} for n, c in cases.items()},
