@@ -3,6 +3,8 @@ detection of singular matrices, for each library installed here."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -117,6 +119,33 @@ def test_pardiso_looks_for_mkl_once_per_process_and_each_factor_stays_its_own(mo
     b = np.random.default_rng(2).normal(size=400)
     for factor, matrix in ((first, first_matrix), (second, second_matrix)):
         assert np.linalg.norm(matrix @ factor.solve(b) - b) / np.linalg.norm(b) < 1e-10
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="pypardiso is not installed")
+def test_a_fresh_process_never_searches_the_environment_for_mkl():
+    """Nor at pypardiso's import, whose default solver searched sys.prefix recursively before the
+    first factor could say where MKL is (1.9 s in this project's environment, in every worker)."""
+    import os
+    import subprocess
+    import sys
+
+    code = """
+import glob, os
+os.environ.pop("PYPARDISO_MKL_RT", None)
+searches = []
+plain = glob.glob
+glob.glob = lambda pattern, **kw: (searches.append(kw.get("recursive", False)), plain(pattern, **kw))[1]
+import numpy as np, scipy.sparse as sp
+from engine.structure.solvers import factor_symmetric
+f = factor_symmetric(sp.diags([2.0] * 3000).tocsr(), library="pardiso")
+assert f.library == "pardiso" and np.allclose(f.solve(np.ones(3000)), 0.5)
+print(sum(searches))
+"""
+    env = {k: v for k, v in os.environ.items() if k != "PYPARDISO_MKL_RT"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                         cwd=str(Path(__file__).resolve().parents[1]), timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "0", "a recursive search for MKL ran"
 
 
 @pytest.mark.skipif(not pardiso_available(), reason="pypardiso is not installed")

@@ -106,11 +106,34 @@ class _SuperLU(SymmetricFactor):
 PARDISO_THREADS = 1
 
 
+def _point_pypardiso_at_mkl() -> None:
+    """Set pypardiso's own PYPARDISO_MKL_RT to MKL's runtime library where pip's wheel puts it
+    (``lib/`` of the environment), unless it is set already. Where the loader does not know the
+    library, pypardiso looks for it by a recursive search of sys.prefix at every solver it makes,
+    its import's default solver included: 1.9 s each in a 44 000-file environment (measured on the
+    5000-node frame of ``benchmarks/frame_speed.py``: 3.8 s of its first factorisation), paid again
+    by every worker process. Not found here: pypardiso searches as before."""
+    if "PYPARDISO_MKL_RT" in os.environ:
+        return
+    import glob
+    import site
+    import sys
+
+    for prefix in dict.fromkeys((sys.prefix, sys.base_prefix, site.USER_BASE)):
+        for path in sorted(glob.glob(os.path.join(prefix, "lib", "*mkl_rt*")), key=len):
+            try:
+                ctypes.CDLL(path)       # the loader keeps it: pypardiso's own load is then free
+            except OSError:
+                continue
+            os.environ["PYPARDISO_MKL_RT"] = path
+            return
+
+
 def pardiso_solver(mtype: int):
-    """A new ``pypardiso.PyPardisoSolver``, MKL's library found once per process. Where the loader
-    does not know it (pip's wheels), pypardiso looks for it at every solver it makes, by a recursive
-    search of sys.prefix: 0.6-1.4 s measured, twenty times an 8 600-DOF factorisation. The
-    path found first is handed to the next ones through pypardiso's own PYPARDISO_MKL_RT."""
+    """A new ``pypardiso.PyPardisoSolver``, MKL's library found once per process
+    (``_point_pypardiso_at_mkl``; a path pypardiso found itself is handed on through its own
+    PYPARDISO_MKL_RT)."""
+    _point_pypardiso_at_mkl()
     import pypardiso
 
     solver = pypardiso.PyPardisoSolver(mtype=mtype)
