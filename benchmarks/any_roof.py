@@ -16,12 +16,12 @@ limit; a crash, a time-out or a non-zero exit is a row with its status and the l
 Per row: seconds per stage (manifest.json), the run's wall-clock seconds, the shortest beam node to node
 (optimize.json ``shortest_beam_m``, else measured on 05-optimize/gridshell.obj), the shortest cut length
 (07-fabrication/beams/cutlist.csv; "<=0" when fabrication stopped on a beam shorter than its joints), joint
-clashes (fabrication.json ``joint_clashes``), findings by kind (fabrication.json ``findings``), the
-structural verdict (analysis.json ``verdicts``) and whether report.html was written. Keys that are not
-written yet print "-". The cut-length minimum is --min-cut-mm, else the product's own (fabrication.json
-``limits.min_cut_length_mm``), else the section's outer size (a piece shorter than the tube is wide). The
-table is printed and written to OUT/any_roof.csv (rewritten after every run). Exit code 0; with --check,
-1 when a run did not reach report.html or has joint clashes.
+and tube clashes (fabrication.json ``joint_clashes`` and ``tube_clashes``), findings by kind (fabrication.json
+``findings``), the structural verdict (analysis.json ``verdicts``) and whether report.html was written. Keys
+that are not written yet print "-". The cut-length minimum is --min-cut-mm, else the product's own
+(fabrication.json ``limits.min_cut_length_mm``), else the section's outer size (a piece shorter than the tube
+is wide). The table is printed and written to OUT/any_roof.csv (rewritten after every run). Exit code 0; with
+--check, 1 when a run did not reach report.html or has joint or tube clashes.
 """
 
 from __future__ import annotations
@@ -250,12 +250,14 @@ def _findings(stages: dict) -> tuple[object, str]:
 
 
 def _clashes(fabrication: dict | None) -> object:
-    value = None if fabrication is None else fabrication.get("joint_clashes")
-    if isinstance(value, (list, tuple, dict)):
-        return len(value)
-    if isinstance(value, int):
-        return value
-    return "-"
+    """Joint-to-joint and tube clashes together ("-" before fabrication.json has them)."""
+    if fabrication is None or "joint_clashes" not in fabrication:
+        return "-"
+    total = 0
+    for key in ("joint_clashes", "tube_clashes"):
+        value = fabrication.get(key, [])
+        total += len(value) if isinstance(value, (list, tuple, dict)) else int(value)
+    return total
 
 
 _CHILDREN: set[subprocess.Popen] = set()

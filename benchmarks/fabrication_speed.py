@@ -4,6 +4,7 @@ panel DXFs with sheet nesting (benchmarks/_bench_panels.py).
     .venv/bin/python benchmarks/fabrication_speed.py [--nodes 500] [--workers 2] [--peers 12] [--skip-panels]
     .venv/bin/python benchmarks/fabrication_speed.py --beams 4500   # beams.step only
     .venv/bin/python benchmarks/fabrication_speed.py --same-joints 3000   # grouping the joints only
+    .venv/bin/python benchmarks/fabrication_speed.py --tube-clearance 3000   # the tubes' clearance only
 
 Targets (issue 6): under 1 s per joint on average on 2 cores; 1000 panels with nesting under 30 s.
 Peers, measured in the same run on the first ``--peers`` joints, one process, CPU seconds: the id
@@ -17,6 +18,12 @@ same file with every tube extruded from one shared profile face, as it was befor
 ``--same-joints N``: the grouping of equal joints (fabrication.joints.same_joints) on the joints of
 a grid of about N nodes, and in the same run every joint compared with every group's first, as it
 was before 2026-12-04, with both groupings compared.
+
+``--tube-clearance N``: the tubes' clearance from other tubes and joints
+(fabrication.tube_clearance) on a grid of about N nodes with 12 mm tubes in printed sockets, and
+the peer in the same run: OCCT's boolean common of a tube and one joint part, timed on 20 of the
+pairs whose bounding boxes overlap and multiplied out to all of them (the route of the joints'
+own clash check, fabrication.clearance).
 """
 
 from __future__ import annotations
@@ -176,6 +183,74 @@ def bench_same_joints(nodes: int) -> None:
           f"every group's first (peer) {peer:.1f} s ({peer / max(ours, 1e-9):.0f}x); same groups: {same}")
 
 
+def bench_tube_clearance(nodes: int) -> None:
+    """Seconds of tube_clashes on a grid of about ``nodes`` nodes, tubes a twentieth of the mean
+    beam wide (as a 60 mm tube on 1.2 m beams), and the OCCT estimate."""
+    from OCP.Bnd import Bnd_Box
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Common
+    from OCP.BRepBndLib import BRepBndLib
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCylinder
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
+    from scipy.spatial import cKDTree
+
+    from fabrication.tube_clearance import tube_clashes
+
+    grid, normals = _grid(nodes)
+    size = float(1000 * grid.beam_lengths.mean() / 20)
+    settings = JointSettings()
+    geometries = joints.joint_geometry(grid, normals, size)
+    nodes_mm = 1000 * grid.nodes
+    e = grid.edges
+    direction = nodes_mm[e[:, 1]] - nodes_mm[e[:, 0]]
+    length = np.linalg.norm(direction, axis=1)
+    direction /= length[:, None]
+    setback = {g.node: joints.geometry_setback_mm(settings, g) for g in geometries}
+    start_back = np.array([setback[a] for a in e[:, 0]])
+    cut = np.maximum(length - start_back - np.array([setback[b] for b in e[:, 1]]), 0.0)
+    starts = nodes_mm[e[:, 0]] + start_back[:, None] * direction
+    ends = starts + cut[:, None] * direction
+    radii = np.full(len(e), 0.5 * size)
+    started = time.perf_counter()
+    parts = {g.node: joints.joint_parts(g, settings) for g in geometries}
+    clashes = tube_clashes(nodes_mm, e, starts, ends, radii, parts, [f"B{k + 1:04d}" for k in range(len(e))],
+                           {g.node: joints.joint_name(g.node) for g in geometries})
+    ours = time.perf_counter() - started
+
+    def cylinder(base, axis, radius, height):
+        return BRepPrimAPI_MakeCylinder(gp_Ax2(gp_Pnt(*map(float, base)), gp_Dir(*map(float, axis))),
+                                        float(radius), float(height)).Shape()
+
+    def box(shape):
+        b = Bnd_Box()
+        BRepBndLib.Add_s(shape, b)
+        return b
+
+    present = np.flatnonzero(cut > 0)
+    tubes = {i: cylinder(starts[i], direction[i], 0.5 * size, cut[i]) for i in present}
+    rows = [(g.node, row) for g in geometries for row in parts[g.node].cylinders]
+    joint_shapes = [cylinder(nodes_mm[n] + row[:3], row[3:6], row[7], row[6]) for n, row in rows]
+    centres = np.array([nodes_mm[n] + row[:3] + 0.5 * row[6] * row[3:6] for n, row in rows])
+    reach = max(float(np.hypot(0.5 * row[6], row[7])) for _, row in rows)
+    tree = cKDTree(centres)
+    part_boxes = [box(p) for p in joint_shapes]
+    pairs = []
+    for i in present:
+        tube_box = box(tubes[i])
+        middle = 0.5 * (starts[i] + ends[i])
+        for j in tree.query_ball_point(middle, 0.5 * cut[i] + 0.5 * size + reach):
+            if not tube_box.IsOut(part_boxes[j]):
+                pairs.append((i, j))
+    sample = pairs[:: max(1, len(pairs) // 20)][:20]
+    started = time.perf_counter()
+    for i, j in sample:
+        BRepAlgoAPI_Common(tubes[i], joint_shapes[j]).Shape()
+    per_pair = (time.perf_counter() - started) / max(len(sample), 1)
+    print(f"tube clearance, {len(e)} tubes of {size:.0f} mm and {len(geometries)} joints: {ours:.2f} s, "
+          f"{len(clashes)} clashes; OCCT booleans (peer) on the {len(pairs)} tube and joint part pairs whose "
+          f"boxes overlap (tubes against tubes not counted): {per_pair * 1e3:.1f} ms a pair, "
+          f"{per_pair * len(pairs):.0f} s estimated ({len(sample)} timed)")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--nodes", type=int, default=500)
@@ -184,7 +259,11 @@ def main() -> int:
     parser.add_argument("--skip-panels", action="store_true")
     parser.add_argument("--beams", type=int, default=0, help="only beams.step of a grid of about this many beams")
     parser.add_argument("--same-joints", type=int, default=0, help="only the grouping of equal joints, about N nodes")
+    parser.add_argument("--tube-clearance", type=int, default=0, help="only the tubes' clearance, about N nodes")
     args = parser.parse_args()
+    if args.tube_clearance:
+        bench_tube_clearance(args.tube_clearance)
+        return 0
     if args.same_joints:
         bench_same_joints(args.same_joints)
         return 0

@@ -50,7 +50,7 @@ __all__ = ["JointKind", "JointSettings", "JointGeometry", "joint_geometry", "joi
            "build_joint_and_blank", "build_joints", "same_joints", "JointsInBackground", "joint_name",
            "copy_placements", "joint_hub_height_mm", "geometry_hub_height_mm", "joint_plate_height_mm",
            "knife_plate_height_mm",
-           "joint_reach_mm", "cylinder_reach_mm", "EndSlots", "fin_plate_slots"]
+           "joint_reach_mm", "cylinder_reach_mm", "JointParts", "joint_parts", "EndSlots", "fin_plate_slots"]
 
 ENGRAVE_DEPTH_MM = 0.6
 #: The printed joint's STL: largest distance between a triangle and the surface (mm) and largest
@@ -263,6 +263,42 @@ def joint_reach_mm(geometry: JointGeometry, settings: JointSettings, direction: 
             outer = 0.5 * own + settings.clearance_mm + settings.wall_mm
             reach = max(reach, cylinder_reach_mm(0.0, (setback + joint_sleeve_mm(settings, own)) * rise, rise, outer))
     return float(reach)
+
+
+@dataclass(frozen=True)
+class JointParts:
+    """A joint's solid as simple parts relative to its node (mm), with the dimensions
+    build_joint_and_blank gives them: ``cylinders`` (c, 8) rows of base (3), unit axis (3), length,
+    radius (the hub, and a printed socket's sleeves, bores not taken out) and ``boxes`` (q, 12) rows
+    of origin (3), unit along (3), unit up (3), length along, height across up, thickness through
+    (a steel node's fin plates, centred on the line from ``origin`` along ``along``)."""
+
+    cylinders: np.ndarray
+    boxes: np.ndarray
+
+
+def joint_parts(geometry: JointGeometry, settings: JointSettings) -> JointParts:
+    """The joint's hub and its sleeves or fin plates as a JointParts (what a tube must clear)."""
+    size = geometry.beam_size_mm
+    axis = geometry.axis
+    hub_radius = joint_hub_radius_mm(settings, size)
+    setback = geometry_setback_mm(settings, geometry)
+    cylinders, boxes = [], []
+    if settings.kind == "steel":
+        height = joint_hub_height_mm(settings, size)
+        start, sleeve = 0.5 * hub_radius, joint_sleeve_mm(settings, size)
+        for d in geometry.directions:
+            up = np.cross(d, _perpendicular(d, axis))
+            boxes.append([*(start * d), *d, *up, setback + sleeve - start, joint_plate_height_mm(settings, size),
+                          settings.plate_thickness_mm])
+    else:
+        height = geometry_hub_height_mm(settings, geometry)
+        for d, own in zip(geometry.directions, geometry.sizes_mm):
+            outer = 0.5 * own + settings.clearance_mm + settings.wall_mm
+            cylinders.append([0.0, 0.0, 0.0, *d, setback + joint_sleeve_mm(settings, own), outer])
+    cylinders.insert(0, [*(-0.5 * height * axis), *axis, height, hub_radius])
+    return JointParts(cylinders=np.array(cylinders, dtype=float).reshape(-1, 8),
+                      boxes=np.array(boxes, dtype=float).reshape(-1, 12))
 
 
 @dataclass(frozen=True)

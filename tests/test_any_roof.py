@@ -48,6 +48,8 @@ def _check_finished(out: Path, summary) -> dict:
     assert short == reported
     clashes = {tuple(c["parts"]) for c in fabrication["joint_clashes"]}
     assert clashes == {tuple(f["parts"]) for f in fabrication["findings"] if f["kind"] == "joint_clash"}
+    tubes = {tuple(c["parts"]) for c in fabrication["tube_clashes"]}
+    assert tubes == {tuple(f["parts"]) for f in fabrication["findings"] if f["kind"] == "tube_clash"}
     for f in fabrication["findings"]:
         assert f["parts"] and f["fix"] and "[" in f["fix"], f  # names the part and the TOML key
     # optimize.json's shortest beam and smallest angle are those of the grid it wrote, measured here
@@ -110,8 +112,9 @@ def test_small_mockup_reaches_the_report_with_its_findings_reported(small_run):
     stages = _read_manifest(out / "manifest.json")["stages"]
     fabrication = json.loads((out / "07-fabrication" / "fabrication.json").read_text())
     assert fabrication["limits"]["joint_kind"] == "socket"
-    assert {f["kind"] for f in fabrication["findings"]} <= {"cut_length", "joint_clash", "joint_angle", "joint_solid",
-                                                              "sheet_size", "stock_length", "panel_outline"}
+    assert {f["kind"] for f in fabrication["findings"]} <= {"cut_length", "joint_clash", "tube_clash", "joint_angle",
+                                                              "joint_solid", "sheet_size", "stock_length",
+                                                              "panel_outline"}
     cut = pd.read_csv(out / "07-fabrication" / "beams" / "cutlist.csv")
     short = set(cut.loc[cut["cut_length_mm"] < fabrication["limits"]["min_cut_length_mm"] - 0.05, "id"])
     assert short == {f["parts"][0] for f in fabrication["findings"] if f["kind"] == "cut_length"}
@@ -209,7 +212,7 @@ def test_every_template_reaches_the_report(template, tmp_path):
     out = tmp_path / template
     fabrication = _check_finished(out, _run(project, out))
     # the templates' grids are buildable: no beam under its joints and cut, no clash
-    assert fabrication["joint_clashes"] == []
+    assert fabrication["joint_clashes"] == [] and fabrication["tube_clashes"] == []
     assert not [f for f in fabrication["findings"] if f["kind"] == "cut_length"]
 
 

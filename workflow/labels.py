@@ -88,6 +88,7 @@ LABELS: dict[str, tuple[str, str, float]] = {
     "shortest_cut_length_mm": ("shortest cut length", "mm", 1.0),
     "joints_with_a_problem": ("joints with a problem", "", 1.0),
     "joint_clashes": ("joint clashes (solids intersecting)", "", 1.0),
+    "tube_clashes": ("tubes running into another tube or a joint", "", 1.0),
 }
 
 #: unit suffixes of keys, longest first: suffix -> (unit, factor)

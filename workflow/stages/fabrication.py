@@ -44,6 +44,7 @@ from fabrication.joints import (
     geometry_setback_mm,
     joint_geometry,
     joint_hub_radius_mm,
+    joint_parts,
     joint_plate_height_mm,
     joint_sleeve_mm,
     knife_plate_height_mm,
@@ -52,6 +53,7 @@ from fabrication.joints import (
 from fabrication.limits import BuildLimits, default_min_cut_length_mm
 from fabrication.model3d import JointSolids, write_gridshell_3dm, write_gridshell_step
 from fabrication.nesting_bars import nest_bars
+from fabrication.tube_clearance import TUBE_CLASH_MM
 from fabrication.workers import run_steps
 
 from ..config import MM, Project
@@ -218,6 +220,39 @@ def _joint_settings(project: Project) -> JointSettings:
     if settings.kind == "steel" and project.section.kind == "solid_rectangle":
         settings = replace(settings, plate_height_mm=knife_plate_height_mm(MM * project.section.height))
     return settings
+
+
+def _tube_clashes(polymesh: PolyMesh, table, geometries: list[JointGeometry], joint_settings: JointSettings,
+                  sizes_mm: np.ndarray, rectangle: RectangularSection | None) -> list[dict]:
+    """fabrication.tube_clearance on the beams as cut (their axes from the cut list, round or
+    rectangular sections) and the joints as built: the tubes that overlap a joint they do not end
+    in, or a tube they share no node with."""
+    from fabrication.tube_clearance import tube_clashes
+
+    nodes_mm = MM * polymesh.nodes
+    e = polymesh.edges
+    direction = nodes_mm[e[:, 1]] - nodes_mm[e[:, 0]]
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    setback = table["setback_start_mm"].to_numpy()
+    cut = np.maximum(table["cut_length_mm"].to_numpy(), 0.0)
+    starts = nodes_mm[e[:, 0]] + setback[:, None] * direction
+    ends = starts + cut[:, None] * direction
+    radii = (0.5 * np.asarray(sizes_mm, dtype=float) if rectangle is None else
+             np.full(len(e), 0.5 * np.hypot(rectangle.height_mm, rectangle.width_mm)))
+    parts = {g.node: joint_parts(g, joint_settings) for g in geometries}
+    clashes = tube_clashes(nodes_mm, e, starts, ends, radii, parts, table["id"].tolist(),
+                           {g.node: joint_id(g.node) for g in geometries})
+    return [c.to_dict() for c in clashes]
+
+
+def _tube_clash_finding(clash: dict) -> Finding:
+    beam, other = clash["parts"]
+    what = f"joint {other}, which it does not end in" if other.startswith("J") else f"beam {other}"
+    return Finding(kind="tube_clash", parts=[beam, other], measure=clash["depth_mm"], limit=TUBE_CLASH_MM,
+                   unit="mm", stage="fabrication",
+                   message=f"beam {beam} runs {clash['depth_mm']:.1f} mm into {what}, near {clash['at_mm']} mm",
+                   fix="a smaller [section] diameter, or fewer cells ([remesh] n_cells) so that the cells are wider "
+                       "than the tubes; where the surface folds, smooth it or move its supports")
 
 
 def _beam_shapes(project: Project, polymesh: PolyMesh, normals: np.ndarray,
@@ -404,6 +439,9 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
         removed = slot_volumes_mm3(slots, table["cut_length_mm"].to_numpy(), sizes_mm, solid_walls_mm, rectangle)
         table["mass_kg"] = np.round(table["mass_kg"] - 1e-9 * removed * _density(project), 4)
     write_cut_list(table, folder / "beams")
+    clock.start("beams: clearance")
+    summary["tube_clashes"] = _tube_clashes(polymesh, table, geometries, joint_settings, sizes_mm, rectangle)
+    findings += [_tube_clash_finding(c) for c in summary["tube_clashes"]]
     # the saw's files: round tubes, and rectangular hollow sections (not solid bars, nor timber)
     if tubes is not None or (rectangle is not None and solid_walls_mm is not None):
         clock.start("beams: NC1 files")

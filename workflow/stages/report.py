@@ -309,6 +309,8 @@ def _fabrication_section(out_dir: Path) -> Section:
     summary = {k: fabrication[k] for k in ("joints", "panels", "sheets", "sheet_utilisation") if k in fabrication}
     summary["joints_with_a_problem"] = len(fabrication.get("joint_problems", []))
     summary["joint_clashes"] = len(fabrication.get("joint_clashes", []))
+    if "tube_clashes" in fabrication:
+        summary["tube_clashes"] = len(fabrication["tube_clashes"])
     summary.update({k: v for k, v in fabrication.get("limits", {}).items()
                     if k in ("min_cut_length_mm", "min_angle_deg", "shortest_beam_mm_at_120deg")})
     if "shortest_cut_length_mm" in fabrication:
