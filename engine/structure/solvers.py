@@ -119,7 +119,7 @@ def _point_pypardiso_at_mkl() -> None:
     import site
     import sys
 
-    for prefix in dict.fromkeys((sys.prefix, sys.base_prefix, site.USER_BASE)):
+    for prefix in dict.fromkeys(p for p in (sys.prefix, sys.base_prefix, site.USER_BASE) if p):
         for path in sorted(glob.glob(os.path.join(prefix, "lib", "*mkl_rt*")), key=len):
             try:
                 ctypes.CDLL(path)       # the loader keeps it: pypardiso's own load is then free
