@@ -142,9 +142,9 @@ def write_gridshell_3dm(path: Path, beams: list, panels: list, joints: list) -> 
     """gridshell.3dm: the parts as gridshell.ifc holds them (fabrication.ifc's IfcBeam, IfcPanel and
     IfcJoint, mm), as Rhino extrusions on the layers joints, beams and panels: each beam its section
     as cut between its set-backs (the fin plates' slots aside), each panel a slab of its thickness
-    resting on its joints, each joint its hub and fin plates or sleeves (tubes of the beams' bores
-    from the node: the socket's solid part up to the set-back is left out), as a group named by the
-    joint. Objects are named by their ids and carry what the IFC's property sets say as user
+    resting on its joints, each joint its hub and fin plates or sleeves (solid from the node to the
+    set-back, then a tube of the beam's bore: as printed, and as the IFC has them), as a group
+    named by the joint. Objects are named by their ids and carry what the IFC's property sets say as user
     text (profile, cut length, mass, sheet, assembly step).
 
     The same model gives the same bytes: object and layer ids follow from the names, the file is
@@ -217,9 +217,12 @@ def write_gridshell_3dm(path: Path, beams: list, panels: list, joints: list) -> 
                 side = np.cross(d, axis)
                 up = np.cross(d, side) if np.linalg.norm(side) > 1e-9 else square_to(d)
                 pieces.append((f"plate {k + 1}", _extrusion(at, d, float(reach), up, _rectangle(thickness, height))))
-            else:  # the sleeve as one tube of the beam's bore (the solid part up to the set-back left out)
-                pieces.append((f"sleeve {k + 1}", _extrusion(at, d, float(reach), square_to(d), _circle(outer),
-                                                             _circle(bore))))
+            else:  # the sleeve as printed: solid up to the set-back, then a tube of the beam's bore
+                setback = min(float(joint.setback_mm), float(reach))
+                pieces.append((f"sleeve {k + 1}", _extrusion(at, d, setback, square_to(d), _circle(outer))))
+                if reach > setback:
+                    pieces.append((f"socket {k + 1}", _extrusion(at + setback * d, d, float(reach) - setback,
+                                                                 square_to(d), _circle(outer), _circle(bore))))
         for piece, solid in pieces:  # user text on the hub only: 0.4 kB an object
             add(solid, "joints", joint.id, f"{joint.id} {piece}",
                 {"part_file": joint.part_file} if piece == "hub" else None, group=index)

@@ -660,6 +660,38 @@ def test_the_3dm_model_holds_each_part_as_a_solid_where_the_ifc_puts_it(tmp_path
     assert plate == pytest.approx(np.array([[0.0, -5.0, -48.3], [98.3, 5.0, 48.3]]), abs=1e-6)
 
 
+def test_a_printed_socket_in_the_3dm_model_is_solid_to_its_set_back_and_holds_its_tube_beyond(tmp_path):
+    """A socket joint's sleeves read back by rhino3dm: per beam a solid extrusion of the sleeve's
+    outer circle (one profile) from the node to the set-back, and a tube (outer and bore: two
+    profiles) from there to the sleeve's end; the hub's box as its radius and height."""
+    import rhino3dm
+
+    from fabrication.ifc import IfcJoint
+    from fabrication.model3d import write_gridshell_3dm
+
+    at, outer, bore, setback, reach = np.array([10.0, 20.0, 30.0]), 8.3, 6.3, 12.0, 36.0
+    directions = np.array([[1.0, 0.0, 0.0], [-0.5, np.sqrt(3) / 2, 0.0], [-0.5, -np.sqrt(3) / 2, 0.0]])
+    joint = IfcJoint(id="J0001", position_mm=at, axis=np.array([0.0, 0.0, 1.0]), directions=directions,
+                     hub_radius_mm=12.45, hub_height_mm=17.6, setback_mm=setback, reach_mm=np.full(3, reach),
+                     outer_mm=np.full(3, outer), bore_mm=np.full(3, bore))
+    model = rhino3dm.File3dm.Read(str(write_gridshell_3dm(tmp_path / "g.3dm", [], [], [joint])))
+    pieces = [o.Geometry for o in model.Objects]
+    assert len(pieces) == 1 + 2 * 3 and all(p.IsSolid for p in pieces)
+
+    def point(p):
+        return np.array([p.X, p.Y, p.Z])
+
+    found = sorted((tuple(np.round(point(p.PathStart), 6)), tuple(np.round(point(p.PathEnd), 6)), p.ProfileCount)
+                   for p in pieces[1:])
+    expected = sorted([(tuple(np.round(at, 6)), tuple(np.round(at + setback * d, 6)), 1) for d in directions]
+                      + [(tuple(np.round(at + setback * d, 6)), tuple(np.round(at + reach * d, 6)), 2)
+                         for d in directions])
+    assert found == expected
+    sleeve = next(p for p in pieces[1:] if p.ProfileCount == 1)
+    b = sleeve.GetBoundingBox()
+    assert b.Max.Z - b.Min.Z == pytest.approx(2 * outer, abs=1e-6)
+
+
 def test_beams_step_holds_each_tube_as_cut(small_run):
     """beams.step read back with OCCT's XCAF reader: a solid per beam with a cut length, named by its
     id, whose volume is the tube's area A = pi t (D - t) times its cut length (within 1 %), not a rod's."""
