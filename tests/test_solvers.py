@@ -187,3 +187,64 @@ def _solution_bits(_: int = 0) -> tuple[int, bytes]:
     factor = factor_symmetric(A, library="pardiso")
     threads = int(factor._solver.libmkl.MKL_Get_Max_Threads())
     return threads, factor.solve(np.linspace(0.0, 1.0, A.shape[0])).tobytes()
+
+
+def _random_blocks(seed: int, n_nodes: int = 40, m: int = 90):
+    rng = np.random.default_rng(seed)
+    pairs = np.array([rng.choice(n_nodes, 2, replace=False) for _ in range(m)])
+    pairs[1] = pairs[0][::-1]                                   # one pair twice, turned
+    blocks = rng.normal(size=(m, 12, 12))
+    rows = np.sort(rng.choice(6 * n_nodes, 5 * n_nodes, replace=False))
+    return pairs, blocks, n_nodes, rows
+
+
+def test_the_scatter_assembles_what_the_block_assembly_does():
+    """SchurScatter (a path's tangents assembled by one weighted count per entry) against the block
+    assembly with the free rows and columns selected: the same pattern, every diagonal entry
+    stored in the triangle, the same values to rounding; kept by the ordering while the pattern
+    holds."""
+    from engine.linalg import assemble_blocks
+    from engine.structure.condensed import FillOrdering
+    from engine.structure.solvers import _upper_with_diagonal
+
+    pairs, blocks, n_nodes, rows = _random_blocks(3)
+    ordering = FillOrdering()
+    scatter = ordering.scatter(pairs, n_nodes, rows)
+    whole = sp.csr_matrix(assemble_blocks(blocks, pairs, n_nodes)[rows][:, rows])
+    whole.sort_indices()
+    upper = _upper_with_diagonal(whole)
+    for ours, theirs in ((scatter.whole(blocks), whole), (scatter.upper(blocks), upper)):
+        assert np.array_equal(ours.indptr, theirs.indptr) and np.array_equal(ours.indices, theirs.indices)
+        assert np.abs(ours.data - theirs.data).max() <= 1e-14 * np.abs(theirs.data).max()
+    triangle = scatter.upper(blocks)                             # each row starts at its diagonal
+    assert np.array_equal(triangle.indices[triangle.indptr[:-1]], np.arange(len(rows)))
+    assert ordering.scatter(pairs.copy(), n_nodes, rows.copy()) is scatter
+    assert ordering.scatter(pairs[:-1], n_nodes, rows) is not scatter
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="pypardiso is not installed")
+def test_a_path_tangent_factored_through_the_scatter_solves_and_counts_as_the_assembled_one():
+    """A condensed factor of a frame large enough for PARDISO (over PARDISO_FROM_DOFS), with a
+    non-symmetric tangent: made with a path's ordering (the scatter) and without (the assembly),
+    the same solutions to 1e-10 and the same inertia."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from frame_speed import model
+
+    from engine.structure.beam_elements import element_mesh
+    from engine.structure.condensed import CondensedFactor, FillOrdering
+    from engine.structure.corotational import _Corotational
+
+    frame, supports, loads = model(500, 2)
+    cr = _Corotational(frame, supports)
+    x = cr.X + 1e-3 * np.random.default_rng(1).normal(size=cr.X.shape)     # off the initial state
+    _, state = cr.internal_forces(x, np.tile(np.eye(3), (cr.n_all, 1, 1)))
+    tangent = cr.tangent(state)
+    el = element_mesh(frame)
+    args = (tangent, el.connectivity, len(el.nodes), el.n_original, cr.free, 2)
+    kept, plain = CondensedFactor(*args, ordering=FillOrdering()), CondensedFactor(*args)
+    assert kept.library == plain.library == "pardiso" and 6 * el.n_original > PARDISO_FROM_DOFS
+    b = np.random.default_rng(2).normal(size=len(cr.free))
+    assert np.abs(kept.solve(b) - plain.solve(b)).max() <= 1e-10 * np.abs(plain.solve(b)).max()
+    assert kept.negative_pivots == plain.negative_pivots

@@ -28,8 +28,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["SymmetricFactor", "count_tiny", "factor_symmetric", "library_for", "pardiso_available", "pardiso_solver",
-           "describe", "PARDISO_FROM_DOFS", "PARDISO_THREADS", "SingularMatrix"]
+__all__ = ["SymmetricFactor", "count_tiny", "factor_symmetric", "factor_upper", "library_for", "pardiso_available",
+           "pardiso_solver", "describe", "PARDISO_FROM_DOFS", "PARDISO_THREADS", "SingularMatrix"]
 
 log = logging.getLogger(__name__)
 
@@ -163,11 +163,13 @@ class _Pardiso(SymmetricFactor):
 
     library = "pardiso"
 
-    def __init__(self, matrix: sp.spmatrix) -> None:
+    def __init__(self, matrix: sp.spmatrix | None, *, upper: sp.csr_matrix | None = None) -> None:
+        """``upper``: the matrix's upper triangle already made as ``_upper_with_diagonal`` makes it
+        (sorted CSR, every diagonal entry stored), in place of ``matrix``."""
         self._solver = pardiso_solver(mtype=-2)  # real symmetric indefinite: reads the upper triangle
         for index, value in PARDISO_SETTINGS.items():
             self._solver.iparm[index - 1] = value
-        upper = _upper_with_diagonal(matrix)
+        upper = _upper_with_diagonal(matrix) if upper is None else upper
         self._data = np.ascontiguousarray(upper.data, dtype=float)
         self._ia = (upper.indptr + 1).astype(np.int32)  # one-based, as iparm(35) = 0 says
         self._ja = (upper.indices + 1).astype(np.int32)
@@ -231,6 +233,12 @@ def describe() -> dict:
             "frame": (f"the beams' internal nodes condensed out, then PARDISO from {PARDISO_FROM_DOFS} DOF (the "
                       "symmetric part of a co-rotational tangent), SuperLU below" if pardiso
                       else "the beams' internal nodes condensed out, then SuperLU (pypardiso is not installed)")}
+
+
+def factor_upper(upper: sp.csr_matrix) -> SymmetricFactor:
+    """PARDISO's factor of a symmetric matrix given by its upper triangle (sorted CSR, every
+    diagonal entry stored, zeros too). Raises ImportError or OSError where PARDISO does not load."""
+    return _Pardiso(None, upper=upper)
 
 
 def factor_symmetric(matrix: sp.spmatrix, *, library: str = "auto") -> SymmetricFactor:
