@@ -193,6 +193,7 @@ def bench_tube_clearance(nodes: int) -> None:
     from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
     from scipy.spatial import cKDTree
 
+    from fabrication.beams import BeamSettings, cut_list, tube_axes_mm
     from fabrication.tube_clearance import tube_clashes
 
     grid, normals = _grid(nodes)
@@ -201,13 +202,11 @@ def bench_tube_clearance(nodes: int) -> None:
     geometries = joints.joint_geometry(grid, normals, size)
     nodes_mm = 1000 * grid.nodes
     e = grid.edges
-    direction = nodes_mm[e[:, 1]] - nodes_mm[e[:, 0]]
-    length = np.linalg.norm(direction, axis=1)
-    direction /= length[:, None]
-    setback = {g.node: joints.geometry_setback_mm(settings, g) for g in geometries}
-    start_back = np.array([setback[a] for a in e[:, 0]])
-    cut = np.maximum(length - start_back - np.array([setback[b] for b in e[:, 1]]), 0.0)
-    starts = nodes_mm[e[:, 0]] + start_back[:, None] * direction
+    # the tubes as the fabrication stage cuts them
+    table = cut_list(grid, normals, BeamSettings(profile_name="tube", material_name="steel", density=7850.0,
+                                                 outer_size_mm=size), settings)
+    cut = table["cut_length_mm"].to_numpy()
+    starts, direction = tube_axes_mm(grid, table["setback_start_mm"].to_numpy())
     ends = starts + cut[:, None] * direction
     radii = np.full(len(e), 0.5 * size)
     started = time.perf_counter()

@@ -24,8 +24,8 @@ from .ids import beam_id, node_id
 from .joints import EndSlots, JointSettings, geometry_setback_mm, joint_geometry
 from .settings import BeamSettings
 
-__all__ = ["BeamSettings", "cut_list", "write_cut_list", "RectangularSection", "TubeAsCut", "tube_solids",
-           "write_beams_step", "roll_angles_deg", "slot_volumes_mm3"]
+__all__ = ["BeamSettings", "cut_list", "write_cut_list", "RectangularSection", "TubeAsCut", "tube_axes_mm",
+           "tube_solids", "write_beams_step", "roll_angles_deg", "slot_volumes_mm3"]
 
 
 def roll_angles_deg(polymesh: PolyMesh, normals: np.ndarray) -> np.ndarray:
@@ -203,6 +203,17 @@ class TubeAsCut:
         assembly.add(beam)
 
 
+def tube_axes_mm(polymesh: PolyMesh, setback_start_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(starts (b, 3), directions (b, 3)): where each beam's tube as cut begins, at its start
+    joint's set-back from the node (mm), and its unit direction from start node to end node."""
+    starts, directions = np.empty((len(polymesh.edges), 3)), np.empty((len(polymesh.edges), 3))
+    for k, ((a, b), setback) in enumerate(zip(polymesh.edges, np.asarray(setback_start_mm, dtype=float))):
+        start, end = 1000 * polymesh.nodes[a], 1000 * polymesh.nodes[b]
+        directions[k] = (end - start) / np.linalg.norm(end - start)
+        starts[k] = start + directions[k] * setback
+    return starts, directions
+
+
 def tube_solids(polymesh: PolyMesh, table: pd.DataFrame, *, outer_size_mm: float | np.ndarray,
                 wall_mm: float | np.ndarray | None = None, profile_per_tube: bool = True,
                 slots: EndSlots | None = None, rectangle: RectangularSection | None = None) -> list[TubeAsCut]:
@@ -226,12 +237,10 @@ def tube_solids(polymesh: PolyMesh, table: pd.DataFrame, *, outer_size_mm: float
     shared: dict[tuple, object] = {}
     if slots is not None:
         import cadquery as cq
-    for k, (row, (a, b), size) in enumerate(zip(table.itertuples(index=False), e, sizes)):
+    origins, directions = tube_axes_mm(polymesh, table["setback_start_mm"].to_numpy())
+    for k, (row, origin, direction, size) in enumerate(zip(table.itertuples(index=False), origins, directions, sizes)):
         if row.cut_length_mm <= 0:
             continue
-        start, end = 1000 * polymesh.nodes[a], 1000 * polymesh.nodes[b]
-        direction = (end - start) / np.linalg.norm(end - start)
-        origin = start + direction * row.setback_start_mm
         least = size if rectangle is None else min(rectangle.height_mm, rectangle.width_mm)
         wall = None if walls is None or not 0 < walls[k] < 0.5 * least else float(walls[k])
         section = None if rectangle is None else (float(rectangle.height_mm), float(rectangle.width_mm), 0.0)

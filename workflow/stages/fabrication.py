@@ -26,7 +26,7 @@ from engine.findings import Finding
 from engine.mesh import PolyMesh
 from engine.structure.grid_model import beam_up_vectors, node_normals
 from fabrication.assembly import plan_assembly, write_assembly
-from fabrication.beams import RectangularSection, slot_volumes_mm3, tube_solids
+from fabrication.beams import RectangularSection, slot_volumes_mm3, tube_axes_mm, tube_solids
 from fabrication.clearance import joint_clashes_parallel
 from fabrication.drawings import write_plan_drawings
 from fabrication.files import atomic_path, write_text_atomic
@@ -229,18 +229,13 @@ def _tube_clashes(polymesh: PolyMesh, table, geometries: list[JointGeometry], jo
     in, or a tube they share no node with."""
     from fabrication.tube_clearance import tube_clashes
 
-    nodes_mm = MM * polymesh.nodes
     e = polymesh.edges
-    direction = nodes_mm[e[:, 1]] - nodes_mm[e[:, 0]]
-    direction /= np.linalg.norm(direction, axis=1)[:, None]
-    setback = table["setback_start_mm"].to_numpy()
-    cut = np.maximum(table["cut_length_mm"].to_numpy(), 0.0)
-    starts = nodes_mm[e[:, 0]] + setback[:, None] * direction
-    ends = starts + cut[:, None] * direction
+    starts, direction = tube_axes_mm(polymesh, table["setback_start_mm"].to_numpy())
+    ends = starts + np.maximum(table["cut_length_mm"].to_numpy(), 0.0)[:, None] * direction
     radii = (0.5 * np.asarray(sizes_mm, dtype=float) if rectangle is None else
              np.full(len(e), 0.5 * np.hypot(rectangle.height_mm, rectangle.width_mm)))
     parts = {g.node: joint_parts(g, joint_settings) for g in geometries}
-    clashes = tube_clashes(nodes_mm, e, starts, ends, radii, parts, table["id"].tolist(),
+    clashes = tube_clashes(MM * polymesh.nodes, e, starts, ends, radii, parts, table["id"].tolist(),
                            {g.node: joint_id(g.node) for g in geometries})
     return [c.to_dict() for c in clashes]
 
@@ -646,16 +641,14 @@ def _swept_parts(project: Project, folder: Path, polymesh: PolyMesh, geometries:
             for part in str(row.parts).split():
                 step_of.setdefault(part, int(row.step))
     beams = []
-    for k, row in enumerate(table.itertuples(index=False)):
+    starts, directions = tube_axes_mm(polymesh, table["setback_start_mm"].to_numpy())
+    for k, (row, start, direction) in enumerate(zip(table.itertuples(index=False), starts, directions)):
         if row.cut_length_mm <= 0:
             continue
-        a, b = polymesh.edges[k]
-        start, end = MM * polymesh.nodes[a], MM * polymesh.nodes[b]
-        direction = (end - start) / np.linalg.norm(end - start)
         # the end slots of steel fin plates, as tube_solids cuts them
         ends = (tuple(zip(slots.sides[k], slots.lengths[k]))
                 if slots is not None and slots.fit(k, row.cut_length_mm) else ())
-        beams.append(IfcBeam(id=row.id, start_mm=start + direction * row.setback_start_mm, direction=direction,
+        beams.append(IfcBeam(id=row.id, start_mm=start, direction=direction,
                              cut_length_mm=float(row.cut_length_mm),
                              size_mm=float(sizes[k]) if rectangle is None else rectangle.height_mm,
                              width_mm=None if rectangle is None else rectangle.width_mm,
