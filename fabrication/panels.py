@@ -337,11 +337,10 @@ def trim_at_folds(panels: list[Panel], loops: list, nodes_m: np.ndarray, seats: 
             gamma = (settings.clearance_mm - min(0.0, settings.thickness_mm * float(side @ up[m]))
                      - float(side @ (seated[m] - middle_of_gap)))
             polygons[m] = _cut(polygons[m], alpha, beta, gamma)
-    lost = {k for k, polygon in enumerate(polygons) if polygon.is_empty}
     # panels that meet at a node only: their corners there, as little as keeps them apart
     for a, around in sorted(by_node.items()):
         for k, j in itertools.combinations(sorted(around), 2):
-            if j in edge_neighbours[k] or k in lost or j in lost:
+            if j in edge_neighbours[k] or polygons[k].is_empty or polygons[j].is_empty:
                 continue
             slabs = [(panels[m], up[m], seated[m]) for m in (k, j)]
             if not _slabs_meet(*[(polygons[m], *slab) for m, slab in zip((k, j), slabs)], settings.thickness_mm,
@@ -357,16 +356,16 @@ def trim_at_folds(panels: list[Panel], loops: list, nodes_m: np.ndarray, seats: 
             low, high = 0.0, max(math.sqrt(polygons[m].area) for m in (k, j)) + settings.clearance_mm
             if meet(high):  # no corner cut parts them: left as they are, and said so
                 if problems is not None:
-                    problems.append(((panels[k].id, panels[j].id),
-                                     f"panels {panels[k].id} and {panels[j].id}, which meet at node {node_id(a)} "
-                                     f"only, come within two clearances ({2 * settings.clearance_mm:g} mm) of "
-                                     "each other resting on their joints, and no cut of their corners there "
-                                     "parts them"))
+                    problems.append(((panels[k].id, panels[j].id), _unparted(panels[k], panels[j], a, settings)))
                 continue
             while high - low > 0.05:
                 low, high = (low, 0.5 * (low + high)) if not meet(0.5 * (low + high)) else (0.5 * (low + high), high)
-            for m, corner in zip((k, j), corners):
-                polygons[m] = _cut_corner(polygons[m], *corner, high)
+            cut = [_cut_corner(polygons[m], *corner, high) for m, corner in zip((k, j), corners)]
+            if any(c.is_empty for c in cut):  # a panel used up before they part: as no cut parting them
+                if problems is not None:
+                    problems.append(((panels[k].id, panels[j].id), _unparted(panels[k], panels[j], a, settings)))
+                continue
+            polygons[k], polygons[j] = cut
     out, cut_back = list(panels), np.zeros(len(panels))
     for k, panel in enumerate(panels):
         polygon = polygons[k]
@@ -383,6 +382,12 @@ def trim_at_folds(panels: list[Panel], loops: list, nodes_m: np.ndarray, seats: 
                              area_mm2=float(polygon.area), perimeter_mm=float(polygon.length),
                              outline_3d_m=np.asarray(panel.origin_m) + 1e-3 * outline @ np.asarray(panel.axes))
     return out, cut_back
+
+
+def _unparted(first: Panel, second: Panel, node: int, settings: PanelSettings) -> str:
+    return (f"panels {first.id} and {second.id}, which meet at node {node_id(node)} only, come within two "
+            f"clearances ({2 * settings.clearance_mm:g} mm) of each other resting on their joints, and no cut "
+            "of their corners there parts them without using one of them up")
 
 
 def _cut(polygon: Polygon, alpha: float, beta: float, gamma: float) -> Polygon:

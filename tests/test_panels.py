@@ -330,3 +330,25 @@ def test_panels_that_no_corner_cut_parts_are_reported_with_their_node():
     # side by side in one plane, their edges apart by 50 mm at the far ends: nothing to say
     _, _, cut_back, problems = run(0.0, (-0.05, -0.2))
     assert problems == [] and (cut_back == 0).all()
+
+
+def test_a_corner_cut_that_would_use_up_a_panel_is_not_made():
+    """A short panel crossed along its middle by a long one (both meet a third at that node only): the
+    cut of their corners that would part them takes the whole short panel first, so none is made
+    and the pair is a problem; the third pair, met after it, still finds the short panel whole
+    (a 1500-cell roof stopped here, measuring a panel already cut away)."""
+    from fabrication.panels import trim_at_folds
+
+    nodes = np.array([[0, 0, 0], [0.3, -0.05, 0], [0.3, 0.05, 0],             # short, flat
+                      [2, 0, 0.3], [2, 0, -0.3],                               # long, square through it
+                      [-2, -0.1, 0], [-2, 0.1, 0]], float)                     # away on the other side
+    grid = PolyMesh(nodes=nodes, faces=((0, 1, 2), (0, 3, 4), (0, 5, 6)))
+    settings = PanelSettings(clearance_mm=10.0, thickness_mm=10.0)
+    panels = flatten_panels(grid, settings)
+    up = np.array([np.cross(*p.axes) for p in panels])
+    problems: list = []
+    trimmed, cut_back = trim_at_folds(panels, list(grid.faces), nodes, (up, np.zeros((3, 3))), settings,
+                                      problems=problems)
+    assert [parts for parts, _ in problems] == [("P0001", "P0002")]
+    assert "no cut of their corners" in problems[0][1]
+    assert trimmed[0] is panels[0] and cut_back[0] == 0.0
