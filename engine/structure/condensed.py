@@ -169,7 +169,7 @@ class _SchurLU:
     def tiny_pivots(self) -> int:
         return count_tiny(self._diagonal(), TINY_PIVOT)
 
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
+    def solve(self, rhs: np.ndarray, refine: bool = True) -> np.ndarray:
         return self._lu.solve(rhs)
 
 
@@ -190,9 +190,11 @@ class _SchurLDLT:
         self.tiny_pivots = self._factor.tiny_pivots
         self.singular = self.tiny_pivots > 0
 
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
+    def solve(self, rhs: np.ndarray, refine: bool = True) -> np.ndarray:
+        """x with S x = rhs; ``refine`` False: with S's symmetric part (where the factor is an old
+        tangent's, as in a modified-Newton corrector, refining towards it gains nothing)."""
         first = self._factor.solve(rhs)
-        if self._skew is None:
+        if self._skew is None or not refine:
             return first
         x, change = first, np.inf
         for _ in range(REFINEMENTS):
@@ -346,11 +348,12 @@ class CondensedFactor:
         (SuperLU's, or those PARDISO perturbed): zero eigenvalues, a mechanism."""
         return count_tiny(self._internal_pivots(), TINY_PIVOT) + self._lu.tiny_pivots
 
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """x with K x = rhs on the free DOFs, for rhs (n_free,) or (n_free, r)."""
+    def solve(self, rhs: np.ndarray, refine: bool = True) -> np.ndarray:
+        """x with K x = rhs on the free DOFs, for rhs (n_free,) or (n_free, r). ``refine`` False:
+        a non-symmetric K factored by PARDISO is solved with its symmetric part's factor alone."""
         rhs = np.asarray(rhs, dtype=float)
         if self._beams is None:
-            return self._lu.solve(rhs)
+            return self._lu.solve(rhs, refine)
         m, g = self._beams
         columns = rhs.shape[1:]
         r = int(np.prod(columns)) if columns else 1
@@ -361,7 +364,7 @@ class CondensedFactor:
         end_forces = np.einsum("mij,mj->mi", self._V, f_i[:, :, 0])[:, :, None] if r == 1 else np.matmul(self._V, f_i)
         f_b = full[:nb] - self._scatter @ end_forces.reshape(12 * m, r)
         x_b = np.zeros((nb, r))
-        x_b[self._boundary] = self._lu.solve(f_b[self._boundary]).reshape(-1, r)
+        x_b[self._boundary] = self._lu.solve(f_b[self._boundary], refine).reshape(-1, r)
         if r == 1:                                      # einsum is faster than matmul on vectors
             x_i = (np.einsum("mij,mj->mi", self._inverse, f_i[:, :, 0])
                    - np.einsum("mij,mj->mi", self._W, x_b[self._end_dofs][:, :, 0]))[:, :, None]

@@ -490,7 +490,9 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
                 assert lu_i is not None and df is not None
                 last_error, reused = float(error), reused + 1
                 dr = np.zeros(6 * cr.n_all)
-                dr[free] = lu_i.solve(r[free])
+                # an old tangent's factor is only refined towards that old tangent: the symmetric
+                # part alone does as well for a corrector that iterates anyway
+                dr[free] = lu_i.solve(r[free], refine=fresh)
                 # cylindrical constraint |total + dr + dl df| = arc
                 a = df[free] @ df[free]
                 b = 2 * df[free] @ (total[free] + dr[free])
