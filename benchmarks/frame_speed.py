@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import resource
 import sys
 import time
@@ -25,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
 
 from engine.structure import beam_elements  # noqa: E402
 from engine.structure import frame as frame_module  # noqa: E402
@@ -314,7 +316,17 @@ def main() -> int:
     parser.add_argument("--superlu", action="store_true",
                         help="also run linear static, buckling and the path with SuperLU for every factor "
                              "(the library below engine.structure.solvers.PARDISO_FROM_DOFS), for comparison")
+    parser.add_argument("--difference-tangent", action="store_true",
+                        help="also follow the path with the element tangents by differences (the scheme before "
+                             "2026-12-05), for comparison")
+    parser.add_argument("--tangents", metavar="NODES,...",
+                        help="only time the element tangents, in closed form and by differences, on these model "
+                             "sizes, and the closed form's one-off cost in a fresh process")
     args = parser.parse_args()
+    if args.tangents:
+        for line in _tangent_lines([int(n) for n in args.tangents.split(",")], args.elements_per_beam):
+            print(line)
+        return 0
     frame, supports, loads = model(args.nodes, args.elements_per_beam)
     n_all = len(frame.nodes) + len(frame.beams) * (args.elements_per_beam - 1)
     print(f"honeycomb grid-shell: {len(frame.nodes)} nodes, {len(frame.beams)} beams, {args.elements_per_beam} "
@@ -367,9 +379,15 @@ def _analyses(frame, supports, loads, args, label: str) -> None:
     schemes = [("non-linear path", default)]
     if args.full_newton:
         schemes.append(("  full Newton", dataclasses.replace(default, reuse_factor=False)))
+    if args.difference_tangent:
+        schemes.append(("  by differences", default))
     for tolerance in (float(t) for t in (args.limit_tolerances or "").split(",") if t):
         schemes.append((f"  limit tol. {tolerance:g}", dataclasses.replace(default, limit_tolerance=tolerance)))
+    from engine.structure import corotational
+
+    closed_form_from = corotational.CLOSED_FORM_FROM
     for label, settings in schemes if args.steps > 0 else []:
+        corotational.CLOSED_FORM_FROM = 2**62 if label == "  by differences" else closed_form_from
         start = time.perf_counter()
         run = frame_module.nonlinear_static(frame, supports, loads, control=(control, 2), settings=settings)
         t_nonlinear = time.perf_counter() - start
@@ -380,6 +398,46 @@ def _analyses(frame, supports, loads, args, label: str) -> None:
         print(f"{label:<18} {t_nonlinear:7.2f} s   {len(run.path) - 1} steps ({int(run.iterations.sum())} "
               f"iterations, {run.factorisations} factorisations), largest load factor {run.path[:, 0].max():.3f}, "
               f"limit {limit}, {pivots}, converged {run.converged}")
+
+
+def _tangent_lines(sizes: list[int], elements_per_beam: int) -> list[str]:
+    """The element tangents at a deformed state (random translations of 10 mm and spins of 0.3
+    rad), by differences and in closed form, best of 3 each, with their largest difference
+    against the largest entry of each element's matrix; and the closed form's cost on its first
+    call in a fresh process (importing numba and loading the compiled kernel)."""
+    import subprocess
+
+    from engine.structure.corotational import CLOSED_FORM_FROM, _Corotational, _rotation_matrices
+
+    code = ("import time, numpy as np; from engine.structure import corotational as c; "
+            "t = time.perf_counter(); from engine.structure.corotational_tangent import element_tangents; "
+            "e = np.eye(3)[:, :, None]; element_tangents(np.zeros((3, 1)), np.ones((3, 1)), e, e, np.ones(1), "
+            "np.zeros((1, 12, 7))); print(time.perf_counter() - t)")
+    runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                           env={**os.environ, "PYTHONPATH": str(ROOT)}) for _ in range(2)]
+    lines = [f"closed form, first call in a fresh process (numba's import, the kernel loaded): "
+             f"{float(runs[1].stdout):.2f} s (the first run: {float(runs[0].stdout):.2f} s, compiled if not cached); "
+             f"used from {CLOSED_FORM_FROM} elements on"]
+    for nodes in sizes:
+        frame, supports, _ = model(nodes, elements_per_beam)
+        cr = _Corotational(frame, supports)
+        rng = np.random.default_rng(0)
+        x = cr.X + 0.01 * rng.standard_normal(cr.X.shape)
+        _, state = cr.internal_forces(x, _rotation_matrices(0.3 * rng.standard_normal((cr.n_all, 3))))
+        seconds = {}
+        for name in ("difference_tangent", "closed_form_tangent"):
+            times = []
+            for _ in range(3):
+                start = time.perf_counter()
+                getattr(cr, name)(state)
+                times.append(time.perf_counter() - start)
+            seconds[name] = min(times)
+        differences, closed = cr.difference_tangent(state), cr.closed_form_tangent(state)
+        error = float((np.abs(closed - differences).max(axis=(1, 2)) / np.abs(differences).max(axis=(1, 2))).max())
+        lines.append(f"{nodes:6d} nodes, {len(cr.L0):6d} elements: by differences "
+                     f"{seconds['difference_tangent']:.4f} s, closed form {seconds['closed_form_tangent']:.4f} s, "
+                     f"largest difference {error:.1e} of the element's largest entry")
+    return lines
 
 
 if __name__ == "__main__":

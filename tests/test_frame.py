@@ -26,6 +26,16 @@ def _factor_frames_with(library: str, monkeypatch) -> None:
     monkeypatch.setattr(solvers, "PARDISO_FROM_DOFS", 0 if library == "pardiso" else 10**12)
 
 
+@pytest.fixture(params=["differences", "closed form"])
+def tangent(request, monkeypatch) -> str:
+    """The path's element tangents by differences, or in closed form (the compiled kernel, which
+    the frames of these tests are too small to get by default)."""
+    from engine.structure import corotational
+
+    monkeypatch.setattr(corotational, "CLOSED_FORM_FROM", 0 if request.param == "closed form" else 2**62)
+    return request.param
+
+
 def _line(direction, length: float, n: int, up, **properties) -> FrameModel:
     d = np.asarray(direction, float) / np.linalg.norm(direction)
     nodes = np.outer(np.linspace(0.0, length, n + 1), d)
@@ -100,7 +110,7 @@ def test_euler_buckling_of_columns(ends, factor):
 
 
 @pytest.mark.parametrize("library", FRAME_LIBRARIES)
-def test_cantilever_rolls_into_a_circle(library, monkeypatch):
+def test_cantilever_rolls_into_a_circle(library, monkeypatch, tangent):
     """End moment 2 pi EI / L bends a cantilever into a full circle: the tip returns to the root.
     Its tangents are up to 6e-2 from symmetric: where PARDISO factors their symmetric part, the
     steps that do not converge on it are redone on the whole tangent."""
@@ -162,7 +172,7 @@ def _lee_frame(n: int = 10):
     return model, supports, loaded
 
 
-def test_lee_frame_limit_load():
+def test_lee_frame_limit_load(tangent):
     """Lee's frame (L 120, EI 1440, load 24 from the knee): P_max L^2 / EI = 18.5 (Schweizerhof &
     Wriggers 1986; Battini 2002 finds 18.55)."""
     model, supports, loaded = _lee_frame()
@@ -273,7 +283,7 @@ def test_end_release_makes_a_pin():
                    up=np.array([0.0, 0, 1]), releases=np.ones((n, 2, 6), bool))
 
 
-def test_deep_circular_arch_limit_load():
+def test_deep_circular_arch_limit_load(tangent):
     """Clamped-hinged deep circular arch (R 100, opening 215 degrees, EI 1e6, EA 1e8) under an apex
     load: limit load 897 = 8.97 EI / R^2 (DaDeppo & Schmidt 1975, inextensible closed-form
     solution; co-rotational beam results in the literature lie within about 1 % of it)."""
@@ -293,7 +303,7 @@ def test_deep_circular_arch_limit_load():
     assert run.negative_pivots[-1] >= 1, "one negative pivot past a limit point"
 
 
-def test_elastica_of_a_buckled_cantilever_column():
+def test_elastica_of_a_buckled_cantilever_column(tangent):
     """Post-buckling of a fixed-free column (Euler's elastica): at a tip rotation alpha the load is
     P / P_cr = (2 K(k) / pi)^2 and the tip deflection delta / L = 2 k / K(k), k = sin(alpha / 2),
     P_cr = pi^2 EI / (4 L^2) (Timoshenko & Gere, Theory of Elastic Stability, 2.7: 1.152 at 60 deg)."""
@@ -498,10 +508,11 @@ def test_a_kept_fill_ordering_gives_the_factor_of_a_fresh_one():
         assert reordered.negative_pivots == fresh.negative_pivots == {0.0: 0, 0.5 * first[0]: 0}.get(sigma, 2)
 
 
-def test_the_corotational_tangent_is_the_derivative_of_the_end_forces():
+@pytest.mark.parametrize("scheme", ["difference_tangent", "closed_form_tangent"])
+def test_the_corotational_tangent_is_the_derivative_of_the_end_forces(scheme):
     """The element tangent (forward differences, end a's translation columns taken as minus end
-    b's) against central differences of the end forces in every direction, at a deformed state
-    of a frame with a released beam end."""
+    b's; or in closed form) against central differences of the end forces in every direction, at
+    a deformed state of a frame with a released beam end."""
     from dataclasses import replace
 
     from engine.structure.corotational import _Corotational, _rotation_matrices
@@ -515,7 +526,7 @@ def test_the_corotational_tangent_is_the_derivative_of_the_end_forces():
     x = cr.X + 0.02 * rng.normal(size=cr.X.shape)
     triads = _rotation_matrices(0.2 * rng.normal(size=(cr.n_all, 3)))
     _, state = cr.internal_forces(x, triads)
-    K = cr.tangent(state)
+    K = getattr(cr, scheme)(state)
     xa, xb, Ra, Rb = state
     h = 1e-6
     for column in range(12):
@@ -533,6 +544,27 @@ def test_the_corotational_tangent_is_the_derivative_of_the_end_forces():
         central = (pair[1] - pair[-1]) / (2 * step)
         scale = np.abs(K).max(axis=(1, 2))
         assert np.all(np.abs(K[:, :, column].T - central).max(axis=0) < 1e-5 * scale), column
+
+
+def test_the_closed_form_tangent_falls_back_where_the_mean_z_runs_along_the_chord():
+    """An element whose nodal z axes both lie along its chord has its frame from local_axes, not
+    from the mean z: its tangent is the differences', the others' the closed form's."""
+    from engine.structure.corotational import _Corotational
+
+    model, supports, _ = _space_frame()
+    cr = _Corotational(model, supports)
+    _, state = cr.internal_forces(cr.X, np.tile(np.eye(3), (cr.n_all, 1, 1)))
+    xa, xb, Ra, Rb = (a.copy() for a in state)
+    e1 = (xb[:, 0] - xa[:, 0]) / np.linalg.norm(xb[:, 0] - xa[:, 0])
+    u = np.cross(e1, [0.0, 0.0, 1.0] if abs(e1[2]) < 0.9 else [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    along = np.c_[u, np.cross(e1, u), e1]                  # a rotation whose z is the chord
+    Ra[:, :, 0] = Rb[:, :, 0] = along
+    state = (xa, xb, Ra, Rb)
+    closed, differences = cr.closed_form_tangent(state), cr.difference_tangent(state)
+    assert np.array_equal(closed[0], differences[0])
+    scale = np.abs(differences).max(axis=(1, 2))
+    assert np.all(np.abs(closed - differences).max(axis=(1, 2)) < 1e-5 * scale)
 
 
 def test_buckling_factors_match_a_dense_eigensolver():
@@ -584,7 +616,7 @@ def test_buckling_without_a_rough_estimate_still_finds_every_factor(monkeypatch)
     assert fallbacks, "the fallback ran"
 
 
-def test_two_bar_toggle_snaps_through_at_its_closed_form_limit():
+def test_two_bar_toggle_snaps_through_at_its_closed_form_limit(tangent):
     """The pin-jointed two-bar toggle (von Mises truss), bars pinned at both ends, apex load: with
     the bar force N = EA (l - L0) / L0 of the co-rotational element, equilibrium of the apex is
     P(w) = -2 N(w) (h - w) / l(w), l = sqrt(b^2 + (h - w)^2); its maximum is the limit load."""
@@ -615,7 +647,7 @@ def test_two_bar_toggle_snaps_through_at_its_closed_form_limit():
     assert run.negative_pivots[-1] == 1, "one negative pivot past the limit point"
 
 
-def test_nonlinear_solution_is_in_equilibrium():
+def test_nonlinear_solution_is_in_equilibrium(tangent):
     """The converged large-displacement state balances the applied loads: the co-rotational
     internal forces of the returned displacements and rotations equal lambda F on the free DOFs
     to 1e-6 of |lambda F| (path tolerance 1e-8)."""
