@@ -508,6 +508,22 @@ def test_a_kept_fill_ordering_gives_the_factor_of_a_fresh_one():
         assert reordered.negative_pivots == fresh.negative_pivots == {0.0: 0, 0.5 * first[0]: 0}.get(sigma, 2)
 
 
+def test_rotation_matrices_and_vectors_match_scipy():
+    """Rodrigues and its log map against scipy's Rotation, from 1e-13 rad (the first-order branch)
+    to 3 rad."""
+    from scipy.spatial.transform import Rotation
+
+    from engine.structure.corotational import _rotation_matrices, _rotation_vectors
+
+    rng = np.random.default_rng(3)
+    axes = rng.normal(size=(600, 3))
+    axes /= np.linalg.norm(axes, axis=1)[:, None]
+    vectors = axes * np.geomspace(1e-13, 3.0, 600)[:, None]
+    R = _rotation_matrices(vectors)
+    assert np.abs(R - Rotation.from_rotvec(vectors).as_matrix()).max() < 1e-14
+    assert np.abs(_rotation_vectors(R) - vectors).max() < 1e-12
+
+
 @pytest.mark.parametrize("scheme", ["difference_tangent", "closed_form_tangent"])
 def test_the_corotational_tangent_is_the_derivative_of_the_end_forces(scheme):
     """The element tangent (forward differences, end a's translation columns taken as minus end

@@ -76,22 +76,19 @@ class NonlinearResult:
 
 
 def _rotation_matrices(vectors: np.ndarray) -> np.ndarray:
-    """Rodrigues: (k,3) rotation vectors to (k,3,3) matrices."""
-    angle = np.linalg.norm(vectors, axis=1)
-    safe = np.where(angle > 1e-12, angle, 1.0)
-    axis = vectors / safe[:, None]
-    K = np.zeros((len(vectors), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -axis[:, 2], axis[:, 1], -axis[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = axis[:, 2], -axis[:, 1], axis[:, 0]
-    s, c = np.sin(angle)[:, None, None], (1 - np.cos(angle))[:, None, None]
-    R = np.eye(3)[None] + s * K + c * (K @ K)
+    """Rodrigues: (k,3) rotation vectors to (k,3,3) matrices, I + sin(a)/a W + (1 - cos(a))/a^2 W^2
+    written out entry by entry (I + W below 1e-12 rad)."""
+    angle = np.sqrt(np.einsum("ki,ki->k", vectors, vectors))
     small = angle <= 1e-12
-    if np.any(small):
-        v = vectors[small]
-        W = np.zeros((len(v), 3, 3))
-        W[:, 0, 1], W[:, 0, 2], W[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-        W[:, 1, 0], W[:, 2, 0], W[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
-        R[small] = np.eye(3)[None] + W
+    safe = np.where(small, 1.0, angle)
+    s = np.where(small, 1.0, np.sin(angle) / safe)
+    c = np.where(small, 0.0, (1 - np.cos(angle)) / safe**2)
+    x, y, z = vectors.T
+    R = np.empty((len(vectors), 3, 3))
+    R[:, 0, 0], R[:, 1, 1], R[:, 2, 2] = 1 - c * (y * y + z * z), 1 - c * (x * x + z * z), 1 - c * (x * x + y * y)
+    R[:, 0, 1], R[:, 1, 0] = c * x * y - s * z, c * x * y + s * z
+    R[:, 0, 2], R[:, 2, 0] = c * x * z + s * y, c * x * z - s * y
+    R[:, 1, 2], R[:, 2, 1] = c * y * z - s * x, c * y * z + s * x
     return R
 
 
