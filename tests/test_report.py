@@ -300,3 +300,31 @@ def test_the_job_table_says_what_each_load_case_holds():
     assert load_case_text("wind", wind, 245.25) == "wind ([300, 0, 100] N/m^2 per true area)"
     snow = LoadCaseSpec(area_plan="1 kN/m^2", self_weight=1.35)
     assert load_case_text("snow", snow, 245.25) == "snow (beams' weight x 1.35, 1000 N/m^2 on plan)"
+
+
+def test_a_value_beside_its_limit_never_reads_as_equal_to_it_when_it_is_not():
+    """A cut of 359.6 mm against a limit of 360 mm is written with the digit that tells them apart
+    (360.0 beside it), on the page's findings table and in the terminal's summary; equal values and those 3 digits
+    already part keep 3 (an unseen 1500-cell dome's run said "360 mm (limit 360 mm)")."""
+    import io
+
+    from rich.console import Console
+
+    from engine.findings import Finding
+    from workflow.labels import format_against
+    from workflow.progress import Progress
+    from workflow.report import Table, _table_html
+
+    assert format_against(359.6, 360.0) == ("359.6", "360.0")
+    assert format_against(359.96, 360.0, text=True) == ("359.96", "360.00")
+    assert format_against(1.6, 1.0) == ("1.60", "1.00")
+    assert format_against(360.0, 360.0) == ("360", "360")
+    assert format_against(None, 1.0) == ("-", "1.00")
+    table = Table(name="findings", caption="", columns=["kind", "count", "worst", "limit", "unit"],
+                  rows=[["cut length", 1, np.float64(359.6), 360.0, "mm"]])
+    assert "<td>359.6</td><td>360.0</td>" in _table_html(table)
+    progress = Progress(enabled=True)
+    progress._console = Console(file=io.StringIO(), width=200)
+    finding = Finding(kind="cut_length", parts=["B4105"], measure=359.6, limit=360.0, unit="mm").to_dict()
+    progress.findings([finding])
+    assert "359.6 mm (limit 360.0 mm)" in progress._console.file.getvalue()

@@ -166,6 +166,22 @@ def format_value(value, digits: int = 3, *, text: bool = False) -> str:
     return str(value)
 
 
+def format_against(value, limit, digits: int = 3, *, text: bool = False) -> tuple[str, str]:
+    """A value and its limit as ``format_value`` writes them, with as many more significant digits
+    (up to 6) as it takes for a value that is not its limit not to read as equal to it: a cut of
+    359.6 mm against 360 mm, not 360 against 360."""
+    for more in range(digits, 7):
+        pair = format_value(value, more, text=text), format_value(limit, more, text=text)
+        if pair[0] != pair[1] or not _numbers(value, limit) or float(value) == float(limit):
+            return pair
+    return pair
+
+
+def _numbers(*values) -> bool:
+    return all(isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+               for v in values)
+
+
 def figure_rows(values: dict, keys: tuple[str, ...] | None = None) -> list[list]:
     """Rows [label, value in its unit, unit] of ``values`` (``keys`` in their order, else all),
     nested values left out."""

@@ -12,7 +12,7 @@ import sys
 import threading
 import time
 
-from .labels import format_value
+from .labels import format_against
 
 __all__ = ["Progress", "PLAIN_INTERVAL_S"]
 
@@ -139,8 +139,9 @@ class Progress:
                             "(failing checks and parts that cannot be built as drawn):")
         for row in rows[:limit]:
             unit = f" {row['unit']}" if row["unit"] else ""
-            worst = "" if row["worst"] is None else f": {format_value(row['worst'], text=True)}{unit}"
-            limit_text = "" if row["limit"] is None else f" (limit {format_value(row['limit'], text=True)}{unit})"
+            worst_text, limit_value = format_against(row["worst"], row["limit"], text=True)
+            worst = "" if row["worst"] is None else f": {worst_text}{unit}"
+            limit_text = "" if row["limit"] is None else f" (limit {limit_value}{unit})"
             parts = escape(", ".join(row["worst_parts"][:3]))
             self._console.print(f"  [red]{row['kind']}[/red] x{row['count']}{worst}{limit_text}"
                                 f"{' at ' + parts if parts else ''}")

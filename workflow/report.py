@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .labels import format_value
+from .labels import format_against, format_value
 
 __all__ = ["Figure", "Table", "Section", "Viewer", "render_report", "viewer_geometry"]
 
@@ -93,13 +93,21 @@ def _table_html(table: Table) -> str:
     head = "".join(f"<th>{html.escape(c)}</th>" for c in table.columns)
     body = []
     verdict_index = table.columns.index(table.verdict_column) if table.verdict_column in table.columns else None
+    # a value beside its limit gets the digits that tell them apart (labels.format_against)
+    paired = [(table.columns.index(name), table.columns.index("limit")) for name in ("value", "worst")
+              if name in table.columns and "limit" in table.columns]
     for row in table.rows:
+        texts = {}
+        for i, j in paired:
+            value, limit = (v.item() if isinstance(v, np.generic) else v for v in (row[i], row[j]))
+            texts[i], texts[j] = format_against(value, limit)
         cells = []
         for i, value in enumerate(row):
             css = ""
             if i == verdict_index and isinstance(value, (bool, np.bool_)):
                 css = ' class="pass"' if value else ' class="fail"'
-            cells.append(f"<td{css}>{html.escape(_format(value, verdict=i == verdict_index))}</td>")
+            cell = texts[i] if i in texts else _format(value, verdict=i == verdict_index)
+            cells.append(f"<td{css}>{html.escape(cell)}</td>")
         body.append("<tr>" + "".join(cells) + "</tr>")
     caption = f"<caption>{html.escape(table.caption)}</caption>" if table.caption else ""
     return (f'<table id="table-{html.escape(table.name)}">{caption}<thead><tr>{head}</tr></thead>'
