@@ -299,6 +299,28 @@ class PolyMesh:
         return _readonly(np.bincount(self.edges.ravel(), minlength=self.n_nodes))
 
     @cached_property
+    def corner_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every cell's corners in one array: (node of each corner, node of the next corner round
+        its cell, the cell of each corner), each (sum of the degrees,), cell by cell."""
+        degrees = self.face_degrees
+        node = np.concatenate(self.faces) if self.faces else np.zeros(0, dtype=np.int64)
+        start = np.repeat(np.cumsum(degrees) - degrees, degrees)
+        position = np.arange(len(node)) - start
+        following = node[start + (position + 1) % np.repeat(degrees, degrees)]
+        cell = np.repeat(np.arange(self.n_faces), degrees)
+        return _readonly(node), _readonly(following), _readonly(cell)
+
+    def face_vector_areas(self) -> np.ndarray:
+        """(n_faces, 3) vector areas (1/2 sum p_i x p_i+1) of the node loops: norm = area (m^2),
+        direction = normal."""
+        node, following, cell = self.corner_table
+        p, q = self.nodes[node], self.nodes[following]
+        crossed = np.stack([p[:, 1] * q[:, 2] - p[:, 2] * q[:, 1], p[:, 2] * q[:, 0] - p[:, 0] * q[:, 2],
+                            p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]], axis=1)
+        return 0.5 * np.stack([np.bincount(cell, weights=crossed[:, k], minlength=self.n_faces)
+                               for k in range(3)], axis=1)
+
+    @cached_property
     def face_boundary(self) -> np.ndarray:
         """(n_faces,) bool: the cell has an edge on the surface boundary (used by one face)."""
         directed = np.concatenate([np.stack([f, np.roll(f, -1)], axis=-1) for f in self.faces])
@@ -321,11 +343,7 @@ class PolyMesh:
 
     def face_areas(self) -> np.ndarray:
         """(n_faces,) vector areas' norms of the (possibly non-planar) node loops, m^2."""
-        out = np.zeros(self.n_faces)
-        for i, f in enumerate(self.faces):
-            p = self.nodes[f]
-            out[i] = 0.5 * np.linalg.norm(np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0))
-        return out
+        return np.linalg.norm(self.face_vector_areas(), axis=1)
 
     def replace_nodes(self, nodes: np.ndarray) -> "PolyMesh":
         """A copy with moved nodes and the same topology and flags (and the topology already
@@ -339,4 +357,4 @@ class PolyMesh:
 
 
 #: PolyMesh's cached properties that depend on its faces only (kept by replace_nodes)
-_TOPOLOGY = ("edges", "face_degrees", "valence", "face_boundary")
+_TOPOLOGY = ("edges", "face_degrees", "valence", "face_boundary", "corner_table")

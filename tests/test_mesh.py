@@ -62,3 +62,25 @@ def test_node_adjacency_and_neighbour_lists_name_each_beams_two_ends():
                 break
             linked = grown
         assert set(reached.tolist()) == linked
+
+
+def test_vector_areas_and_node_normals_over_all_corners_at_once():
+    """The cells' vector areas (1/2 sum p_i x p_i+1) and the nodes' normals summed from them,
+    taken over every corner at once, against a loop over the cells; kept by replace_nodes."""
+    from engine.structure.grid_model import node_normals
+
+    rng = np.random.default_rng(1)
+    nodes = rng.normal(size=(400, 3))
+    faces = tuple(rng.choice(400, size=rng.integers(3, 9), replace=False) for _ in range(150))
+    grid = PolyMesh(nodes=nodes, faces=faces)
+    looped = np.array([0.5 * np.cross(nodes[f], np.roll(nodes[f], -1, axis=0)).sum(axis=0) for f in faces])
+    assert np.allclose(grid.face_vector_areas(), looped, rtol=0, atol=1e-14)
+    assert np.allclose(grid.face_areas(), np.linalg.norm(looped, axis=1), rtol=0, atol=1e-14)
+    summed = np.zeros((400, 3))
+    for f, a in zip(faces, looped):
+        summed[f] += a
+    used = np.linalg.norm(summed, axis=1) > 1e-12
+    unit = summed[used] / np.linalg.norm(summed[used], axis=1)[:, None]
+    assert np.allclose(node_normals(grid)[used], unit, atol=1e-12)
+    assert np.allclose(node_normals(grid)[~used], [0.0, 0.0, 1.0])
+    assert np.allclose(grid.replace_nodes(2 * nodes).face_vector_areas(), 4 * looped, rtol=0, atol=1e-13)

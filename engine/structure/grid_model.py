@@ -38,20 +38,15 @@ class BeamProperties:
 
 def face_vector_areas(polymesh: PolyMesh) -> np.ndarray:
     """(n_faces, 3) vector areas (1/2 sum p_i x p_i+1) of the cells: norm = area, direction = normal."""
-    out = np.zeros((polymesh.n_faces, 3))
-    for i, face in enumerate(polymesh.faces):
-        p = polymesh.nodes[face]
-        out[i] = 0.5 * np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0)
-    return out
+    return polymesh.face_vector_areas()
 
 
 def node_normals(polymesh: PolyMesh, reference: TriMesh | None = None) -> np.ndarray:
     """(n_nodes, 3) unit normals: of the nearest reference-surface vertex where given, else
     the sum of the adjacent cells' vector areas; oriented like the cells (up or out)."""
-    acc = np.zeros((polymesh.n_nodes, 3))
     areas = face_vector_areas(polymesh)
-    for face, area in zip(polymesh.faces, areas):
-        acc[face] += area
+    node, _, cell = polymesh.corner_table
+    acc = np.stack([np.bincount(node, weights=areas[cell, k], minlength=polymesh.n_nodes) for k in range(3)], axis=1)
     if reference is not None:
         _, nearest = cKDTree(reference.vertices).query(polymesh.nodes)
         surface_normals = reference.vertex_normals[nearest]
