@@ -38,16 +38,14 @@ class PanelPiece:
 def _plane_coordinates(points: np.ndarray, plane: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(k,2) coordinates of points in their best-fit plane (``plane``: that plane if known)."""
     centroid, normal = best_fit_plane(points) if plane is None else plane
-    u = np.cross(normal, [1.0, 0.0, 0.0])
-    if np.linalg.norm(u) < 0.1:
-        u = np.cross(normal, [0.0, 1.0, 0.0])
-    u /= np.linalg.norm(u)
-    v = np.cross(normal, u)
-    return np.c_[(points - centroid) @ u, (points - centroid) @ v]
-
-
-def _signed_area(local: np.ndarray) -> float:
-    return 0.5 * float(np.sum(local[:, 0] * np.roll(local[:, 1], -1) - np.roll(local[:, 0], -1) * local[:, 1]))
+    n0, n1, n2 = (float(c) for c in normal)
+    u = np.array([0.0, n2, -n1])                      # normal x (1, 0, 0)
+    if n1 * n1 + n2 * n2 < 0.01:
+        u = np.array([-n2, 0.0, n0])                  # normal x (0, 1, 0)
+    u /= np.sqrt(u @ u)
+    v = np.array([n1 * u[2] - n2 * u[1], n2 * u[0] - n0 * u[2], n0 * u[1] - n1 * u[0]])
+    relative = points - centroid
+    return np.stack([relative @ u, relative @ v], axis=1)
 
 
 def piece_flatness(points: np.ndarray) -> tuple[float, bool]:
@@ -63,9 +61,11 @@ def _flatness(points: np.ndarray) -> tuple[float, bool, np.ndarray]:
     centroid, normal = plane
     distance = float(np.abs((points - centroid) @ normal).max())
     local = _plane_coordinates(points, plane)
-    edge = np.roll(local, -1, axis=0) - local
-    turn = edge[:, 0] * np.roll(edge[:, 1], -1) - edge[:, 1] * np.roll(edge[:, 0], -1)
-    area = _signed_area(local)
+    following = np.concatenate([local[1:], local[:1]])
+    edge = following - local
+    next_edge = np.concatenate([edge[1:], edge[:1]])
+    turn = edge[:, 0] * next_edge[:, 1] - edge[:, 1] * next_edge[:, 0]
+    area = 0.5 * float(np.sum(local[:, 0] * following[:, 1] - following[:, 0] * local[:, 1]))
     scale = float(np.einsum("ij,ij->", edge, edge)) / len(points)
     convex = bool(np.all(turn * np.sign(area) >= -1e-9 * scale))
     return distance, convex, local
