@@ -137,8 +137,7 @@ class _Corotational:
     def _kinematics(self, xa: np.ndarray, xb: np.ndarray, Ra: np.ndarray, Rb: np.ndarray):
         """The element frame and local deformations from the end positions (3, m) and the nodal
         triads times the initial element frame transposed, T R0^T (3, 3, m): the frame's rows
-        (e1, y, z) (3 of (3, m)), the local deformations d (12, m), the chord's length, and the
-        raw z (the mean z off the chord) with its norm, where the frame's derivative starts."""
+        (e1, y, z) (3 of (3, m)) and the local deformations d (12, m)."""
         chord = xb - xa
         length = np.sqrt(chord[0] ** 2 + chord[1] ** 2 + chord[2] ** 2)
         e1 = chord / length
@@ -150,7 +149,7 @@ class _Corotational:
         if np.any(bad):                                     # up along the chord: as local_axes
             z[:, bad] = local_axes(e1[:, bad].T, up[:, bad].T)[:, 2].T
             norm[bad] = 1.0
-        z = z / norm
+        z /= norm
         y = np.stack([z[1] * e1[2] - z[2] * e1[1], z[2] * e1[0] - z[0] * e1[2], z[0] * e1[1] - z[1] * e1[0]])
         R = (e1, y, z)                                      # rows of the element frame
         d = np.zeros((12, len(length)))
@@ -165,7 +164,7 @@ class _Corotational:
             d[offset] = (M[2][1] - M[1][2]) * factor
             d[offset + 1] = (M[0][2] - M[2][0]) * factor
             d[offset + 2] = (M[1][0] - M[0][1]) * factor
-        return R, d, length, up, np.where(bad, 0.0, norm)
+        return R, d
 
     def _local_forces(self, d: np.ndarray) -> np.ndarray:
         """K_local d (12, m), over the terms that meet the local deformations."""
@@ -181,7 +180,7 @@ class _Corotational:
     def _end_forces(self, xa: np.ndarray, xb: np.ndarray, Ra: np.ndarray, Rb: np.ndarray):
         """Element end forces (12, m) in global axes from the end positions (3, m) and the nodal
         triads times the initial element frame transposed, T R0^T (3, 3, m) (``internal_forces``)."""
-        R, d, *_ = self._kinematics(xa, xb, Ra, Rb)
+        R, d = self._kinematics(xa, xb, Ra, Rb)
         f_local = self._local_forces(d)
         f_global = np.empty_like(f_local)
         for block in range(0, 12, 3):
