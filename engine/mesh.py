@@ -323,11 +323,10 @@ class PolyMesh:
     @cached_property
     def face_boundary(self) -> np.ndarray:
         """(n_faces,) bool: the cell has an edge on the surface boundary (used by one face)."""
-        directed = np.concatenate([np.stack([f, np.roll(f, -1)], axis=-1) for f in self.faces])
-        key = np.sort(directed, axis=1)
+        node, following, owner = self.corner_table
+        key = np.sort(np.stack([node, following], axis=1), axis=1)
         _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
         once = counts[inverse.ravel()] == 1
-        owner = np.repeat(np.arange(self.n_faces), self.face_degrees)
         out = np.zeros(self.n_faces, dtype=bool)
         out[owner[once]] = True
         return _readonly(out)

@@ -18,8 +18,7 @@ from scipy.spatial import cKDTree
 from ..mesh import PolyMesh, TriMesh
 from .loads import GRAVITY, LoadCase
 
-__all__ = ["BeamProperties", "node_normals", "beam_up_vectors", "gridshell_loads", "support_restraints",
-           "face_vector_areas"]
+__all__ = ["BeamProperties", "node_normals", "beam_up_vectors", "gridshell_loads", "support_restraints"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -36,15 +35,10 @@ class BeamProperties:
     mass_per_length: float
 
 
-def face_vector_areas(polymesh: PolyMesh) -> np.ndarray:
-    """(n_faces, 3) vector areas (1/2 sum p_i x p_i+1) of the cells: norm = area, direction = normal."""
-    return polymesh.face_vector_areas()
-
-
 def node_normals(polymesh: PolyMesh, reference: TriMesh | None = None) -> np.ndarray:
     """(n_nodes, 3) unit normals: of the nearest reference-surface vertex where given, else
     the sum of the adjacent cells' vector areas; oriented like the cells (up or out)."""
-    areas = face_vector_areas(polymesh)
+    areas = polymesh.face_vector_areas()
     node, _, cell = polymesh.corner_table
     acc = np.stack([np.bincount(node, weights=areas[cell, k], minlength=polymesh.n_nodes) for k in range(3)], axis=1)
     if reference is not None:
@@ -89,7 +83,7 @@ def gridshell_loads(polymesh: PolyMesh, case: LoadCase, *, mass_per_length: floa
         np.add.at(loads[:, 2], e[:, 0], -0.5 * weight)
         np.add.at(loads[:, 2], e[:, 1], -0.5 * weight)
     if np.any(case.area_true) or np.any(case.area_plan):
-        vector_areas = face_vector_areas(polymesh)
+        vector_areas = polymesh.face_vector_areas()
         true_area = np.linalg.norm(vector_areas, axis=1)
         plan_area = np.abs(vector_areas[:, 2])
         resultants = true_area[:, None] * case.area_true + plan_area[:, None] * case.area_plan

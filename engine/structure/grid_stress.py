@@ -31,8 +31,8 @@ NEAREST_NODES = 4
 
 def beam_cell_counts(polymesh: PolyMesh) -> np.ndarray:
     """(n_beams,) number of cells along each beam (1 on the boundary, 2 inside), in ``polymesh.edges`` order."""
-    directed = np.concatenate([np.stack([f, np.roll(f, -1)], axis=-1) for f in polymesh.faces])
-    _, counts = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
+    node, following, _ = polymesh.corner_table
+    _, counts = np.unique(np.sort(np.stack([node, following], axis=1), axis=1), axis=0, return_counts=True)
     return counts
 
 
