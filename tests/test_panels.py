@@ -306,22 +306,28 @@ def test_panels_round_a_valley_node_keep_clear_of_each_other_also_where_they_mee
             assert distance > 10.0, (i, j, distance)
 
 
+def _trimmed_on_their_nodes(nodes: np.ndarray, faces: tuple) -> tuple:
+    """(panels, trimmed, cut back, problems) of the cells' panels (clearance and thickness 10 mm)
+    resting on their nodes, unlifted, trimmed at their folds with the problems collected."""
+    from fabrication.panels import trim_at_folds
+
+    grid = PolyMesh(nodes=nodes, faces=faces)
+    settings = PanelSettings(clearance_mm=10.0, thickness_mm=10.0)
+    panels = flatten_panels(grid, settings)
+    up = np.array([np.cross(*p.axes) for p in panels])
+    problems: list = []
+    trimmed, cut_back = trim_at_folds(panels, list(grid.faces), nodes, (up, np.zeros((len(panels), 3))), settings,
+                                      problems=problems)
+    return panels, trimmed, cut_back, problems
+
+
 def test_panels_that_no_corner_cut_parts_are_reported_with_their_node():
     """Two slivers 2 m long share a node only and cross each other 1-2 m from it: no cut of their
     corners at the node parts them, so they stay as they are and the pair is a problem naming both
     panels and the node; a pair side by side in one plane is not."""
-    from fabrication.panels import trim_at_folds
-
     def run(far_z: float, far_y: tuple[float, float] = (0.05, 0.15)):
         nodes = np.array([[0, 0, 0], [2, 0, 0], [2, 0.2, 0], [2, far_y[0], far_z], [2, far_y[1], -far_z]], float)
-        grid = PolyMesh(nodes=nodes, faces=((0, 1, 2), (0, 3, 4)))
-        settings = PanelSettings(clearance_mm=10.0, thickness_mm=10.0)
-        panels = flatten_panels(grid, settings)
-        up = np.array([np.cross(*p.axes) for p in panels])
-        problems: list = []
-        trimmed, cut_back = trim_at_folds(panels, list(grid.faces), nodes, (up, np.zeros((2, 3))), settings,
-                                          problems=problems)
-        return panels, trimmed, cut_back, problems
+        return _trimmed_on_their_nodes(nodes, ((0, 1, 2), (0, 3, 4)))
 
     panels, trimmed, cut_back, problems = run(0.3)
     assert problems == [(("P0001", "P0002"), problems[0][1])]
@@ -337,18 +343,10 @@ def test_a_corner_cut_that_would_use_up_a_panel_is_not_made():
     cut of their corners that would part them takes the whole short panel first, so none is made
     and the pair is a problem; the third pair, met after it, still finds the short panel whole
     (a 1500-cell roof stopped here, measuring a panel already cut away)."""
-    from fabrication.panels import trim_at_folds
-
     nodes = np.array([[0, 0, 0], [0.3, -0.05, 0], [0.3, 0.05, 0],             # short, flat
                       [2, 0, 0.3], [2, 0, -0.3],                               # long, square through it
                       [-2, -0.1, 0], [-2, 0.1, 0]], float)                     # away on the other side
-    grid = PolyMesh(nodes=nodes, faces=((0, 1, 2), (0, 3, 4), (0, 5, 6)))
-    settings = PanelSettings(clearance_mm=10.0, thickness_mm=10.0)
-    panels = flatten_panels(grid, settings)
-    up = np.array([np.cross(*p.axes) for p in panels])
-    problems: list = []
-    trimmed, cut_back = trim_at_folds(panels, list(grid.faces), nodes, (up, np.zeros((3, 3))), settings,
-                                      problems=problems)
+    panels, trimmed, cut_back, problems = _trimmed_on_their_nodes(nodes, ((0, 1, 2), (0, 3, 4), (0, 5, 6)))
     assert [parts for parts, _ in problems] == [("P0001", "P0002")]
     assert "no cut of their corners" in problems[0][1]
     assert trimmed[0] is panels[0] and cut_back[0] == 0.0
