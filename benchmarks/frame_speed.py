@@ -385,9 +385,9 @@ def _analyses(frame, supports, loads, args, label: str) -> None:
         schemes.append((f"  limit tol. {tolerance:g}", dataclasses.replace(default, limit_tolerance=tolerance)))
     from engine.structure import corotational
 
-    closed_form_from = corotational.CLOSED_FORM_FROM
+    closed_form_from = corotational.COMPILED_FROM
     for label, settings in schemes if args.steps > 0 else []:
-        corotational.CLOSED_FORM_FROM = 2**62 if label == "  by differences" else closed_form_from
+        corotational.COMPILED_FROM = 2**62 if label == "  by differences" else closed_form_from
         start = time.perf_counter()
         run = frame_module.nonlinear_static(frame, supports, loads, control=(control, 2), settings=settings)
         t_nonlinear = time.perf_counter() - start
@@ -407,17 +407,17 @@ def _tangent_lines(sizes: list[int], elements_per_beam: int) -> list[str]:
     call in a fresh process (importing numba and loading the compiled kernel)."""
     import subprocess
 
-    from engine.structure.corotational import CLOSED_FORM_FROM, _Corotational, _rotation_matrices
+    from engine.structure.corotational import COMPILED_FROM, _Corotational, _rotation_matrices
 
     code = ("import time, numpy as np; from engine.structure import corotational as c; "
-            "t = time.perf_counter(); from engine.structure.corotational_tangent import element_tangents; "
+            "t = time.perf_counter(); from engine.structure.corotational_kernels import element_tangents; "
             "e = np.eye(3)[:, :, None]; element_tangents(np.zeros((3, 1)), np.ones((3, 1)), e, e, np.ones(1), "
             "np.zeros((1, 12, 7))); print(time.perf_counter() - t)")
     runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                            env={**os.environ, "PYTHONPATH": str(ROOT)}) for _ in range(2)]
     lines = [f"closed form, first call in a fresh process (numba's import, the kernel loaded): "
              f"{float(runs[1].stdout):.2f} s (the first run: {float(runs[0].stdout):.2f} s, compiled if not cached); "
-             f"used from {CLOSED_FORM_FROM} elements on"]
+             f"used from {COMPILED_FROM} elements on"]
     for nodes in sizes:
         frame, supports, _ = model(nodes, elements_per_beam)
         cr = _Corotational(frame, supports)

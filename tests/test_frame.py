@@ -28,11 +28,12 @@ def _factor_frames_with(library: str, monkeypatch) -> None:
 
 @pytest.fixture(params=["differences", "closed form"])
 def tangent(request, monkeypatch) -> str:
-    """The path's element tangents by differences, or in closed form (the compiled kernel, which
-    the frames of these tests are too small to get by default)."""
+    """The path in numpy, its element tangents by differences; or with the compiled kernels, which
+    the frames of these tests are too small to get by default: the tangents in closed form, the
+    internal forces, the update of the triads and the internal blocks' elimination."""
     from engine.structure import corotational
 
-    monkeypatch.setattr(corotational, "CLOSED_FORM_FROM", 0 if request.param == "closed form" else 2**62)
+    monkeypatch.setattr(corotational, "COMPILED_FROM", 0 if request.param == "closed form" else 2**62)
     return request.param
 
 
@@ -445,12 +446,14 @@ def test_displacements_match_pyfe3d():
     assert np.allclose(ours, theirs.reshape(n, 6), rtol=0, atol=1e-6 * np.abs(ours).max())
 
 
+@pytest.mark.parametrize("compiled", [False, True], ids=["numpy", "compiled"])
 @pytest.mark.parametrize("library", FRAME_LIBRARIES)
-def test_condensed_factor_solves_as_a_plain_lu_and_keeps_the_inertia(library):
+def test_condensed_factor_solves_as_a_plain_lu_and_keeps_the_inertia(library, compiled):
     """The beams' internal nodes condensed out of the factor (engine.structure.condensed), S factored by
-    either library: the same solution as SuperLU on the assembled matrix, and the same number of
-    negative pivots on an indefinite K + sigma K_G (Sylvester's inertia, which the buckling shift
-    and the path's pivot count use)."""
+    either library, the internal blocks eliminated by numpy or by the compiled kernel: the same
+    solution as SuperLU on the assembled matrix, and the same number of negative pivots on an
+    indefinite K + sigma K_G (Sylvester's inertia, which the buckling shift and the path's pivot
+    count use)."""
     from dataclasses import replace
 
     import scipy.sparse.linalg as spla
@@ -458,6 +461,7 @@ def test_condensed_factor_solves_as_a_plain_lu_and_keeps_the_inertia(library):
     from engine.linalg import congruent
     from engine.structure import beam_elements, frame
     from engine.structure.condensed import CondensedFactor
+
 
     model, supports, loads = _space_frame()
     for k in (1, 2, 4):
@@ -471,13 +475,47 @@ def test_condensed_factor_solves_as_a_plain_lu_and_keeps_the_inertia(library):
         for sigma in (0.0, 0.5 * (first[1] + first[2])):       # positive definite; two factors below sigma
             elements = state.K_elements + sigma * K_G
             factor = CondensedFactor(elements, el.connectivity, len(el.nodes), el.n_original, free, k,
-                                     library=library)
+                                     library=library, compiled=compiled)
             assert factor.library == library
             K = beam_elements.assemble(elements, dofs, 6 * len(el.nodes))[free][:, free].tocsc()
             expected = spla.spsolve(K, rhs)
             assert np.abs(factor.solve(rhs) - expected).max() < 1e-9 * np.abs(expected).max()
             assert np.abs(factor.solve(rhs[:, 0]) - expected[:, 0]).max() < 1e-9 * np.abs(expected).max()
             assert factor.negative_pivots == (0 if sigma == 0 else 2)
+
+
+def test_the_compiled_block_elimination_gives_numpys_inverses_and_pivots():
+    """Block-tridiagonal blocks of 6 x 6 (three internal nodes, as a beam of four elements):
+    positive definite, indefinite and non-symmetric ones against numpy's inverse and the
+    vectorised elimination's pivots; a block whose first pivot is zero but which is regular is
+    inverted with row exchanges; a singular one is not finite."""
+    from engine.structure.block_inverse import inverse_and_pivots
+    from engine.structure.condensed import _block_pivots
+
+    rng = np.random.default_rng(2)
+    m, g = 40, 18
+    blocks = np.zeros((m, g, g))
+    for t in range(2):
+        coupling = rng.normal(size=(m, 6, 6))
+        blocks[:, 6 * t:6 * t + 6, 6 * t + 6:6 * t + 12] = coupling
+        blocks[:, 6 * t + 6:6 * t + 12, 6 * t:6 * t + 6] = np.transpose(coupling, (0, 2, 1))
+    for t in range(3):
+        a = rng.normal(size=(m, 6, 6))
+        blocks[:, 6 * t:6 * t + 6, 6 * t:6 * t + 6] = a @ np.transpose(a, (0, 2, 1)) + 8 * np.eye(6)
+    blocks[10:20] -= 9 * np.eye(g)                          # indefinite
+    blocks[20:30, 0, 1] += 0.7                              # not symmetric
+    blocks[30] = np.eye(g)[[1, 0, *range(2, g)]]            # a permutation: first pivot zero
+    blocks[31, 5] = blocks[31, :, 5] = 0.0                  # singular: a node's DOF held by nothing
+    inverse, pivots = inverse_and_pivots(blocks)
+    regular = np.r_[0:30, 32:m]
+    expected = np.linalg.inv(blocks[regular])
+    assert np.abs(inverse[regular] - expected).max() < 1e-12 * np.abs(expected).max()
+    assert np.array_equal(np.sign(pivots[regular]), np.sign(_block_pivots(blocks[regular])))
+    reference = _block_pivots(blocks[regular])                 # (rounded in another order: 2e-12)
+    assert np.abs(pivots[regular] - reference).max() < 1e-10 * np.abs(reference).max()
+    assert (pivots[10:20] < 0).any() and not (pivots[:10] < 0).any()
+    assert np.array_equal(inverse[30], blocks[30].T) and pivots[30, 0] == 0
+    assert not np.all(np.isfinite(inverse[31]))
 
 
 def test_a_kept_fill_ordering_gives_the_factor_of_a_fresh_one():
@@ -581,6 +619,61 @@ def test_the_closed_form_tangent_falls_back_where_the_mean_z_runs_along_the_chor
     assert np.array_equal(closed[0], differences[0])
     scale = np.abs(differences).max(axis=(1, 2))
     assert np.all(np.abs(closed - differences).max(axis=(1, 2)) < 1e-5 * scale)
+
+
+@pytest.mark.parametrize("spin_rad", [1e-7, 0.2, 2.5])
+def test_the_compiled_internal_forces_are_numpys(monkeypatch, spin_rad):
+    """The compiled element states and end forces against the numpy kernels they stand in for, at
+    deformed states of a frame with a released beam end (nodal spins from 1e-7 rad, where arccos
+    of the trace loses digits, to 2.5 rad); an element whose mean z runs along its chord is
+    flagged and left to numpy's frame."""
+    from dataclasses import replace
+
+    from engine.structure import corotational
+    from engine.structure.corotational import _Corotational, _rotation_matrices
+    from engine.structure.corotational_kernels import element_forces
+
+    model, supports, _ = _space_frame()
+    releases = np.zeros((len(model.beams), 2, 6), bool)
+    releases[3, 1, 4:] = True
+    cr = _Corotational(replace(model, releases=releases), supports)
+    rng = np.random.default_rng(7)
+    x = cr.X + 0.02 * rng.normal(size=cr.X.shape)
+    triads = _rotation_matrices(spin_rad * rng.normal(size=(cr.n_all, 3)))
+    monkeypatch.setattr(corotational, "COMPILED_FROM", 2**62)
+    expected, numpy_state = cr.internal_forces(x, triads)
+    monkeypatch.setattr(corotational, "COMPILED_FROM", 0)
+    forces, state = cr.internal_forces(x, triads)
+    for ours, theirs in zip(state, numpy_state):
+        assert np.array_equal(ours, theirs)
+    assert np.abs(forces - expected).max() < 1e-12 * np.abs(expected).max()
+
+    xa, xb, Ra, Rb = (a.copy() for a in state)
+    e1 = (xb[:, 0] - xa[:, 0]) / np.linalg.norm(xb[:, 0] - xa[:, 0])
+    u = np.cross(e1, [0.0, 0.0, 1.0] if abs(e1[2]) < 0.9 else [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    Ra[:, :, 0] = Rb[:, :, 0] = np.c_[u, np.cross(e1, u), e1]  # both nodal z along the chord
+    f, bad = element_forces(xa, xb, Ra, Rb, cr.L0, cr.K7)
+    assert bad.tolist() == [True] + [False] * (len(bad) - 1) and not f[:, 0].any()
+    reference = cr._end_forces(xa, xb, Ra, Rb)
+    assert np.abs(f[:, 1:] - reference[:, 1:]).max() < 1e-12 * np.abs(reference).max()
+
+
+def test_the_compiled_update_turns_the_triads_as_rodrigues(monkeypatch):
+    """A path's update of the nodes, compiled, against Rodrigues' matrices times the triads, from
+    no spin (the first-order branch) to 3 rad."""
+    from engine.structure import corotational
+
+    rng = np.random.default_rng(11)
+    x = rng.normal(size=(200, 3))
+    triads = corotational._rotation_matrices(rng.normal(size=(200, 3)))
+    du = rng.normal(size=(200, 6)) * np.geomspace(1e-14, 3.0, 200)[:, None]
+    du[:5] = 0.0
+    monkeypatch.setattr(corotational, "COMPILED_FROM", 0)
+    moved, turned = corotational._update(x, triads, du.ravel())
+    assert np.array_equal(moved, x + du[:, :3])
+    expected = np.einsum("kij,kjl->kil", corotational._rotation_matrices(du[:, 3:]), triads)
+    assert np.abs(turned - expected).max() < 1e-15 * 8
 
 
 def test_buckling_factors_match_a_dense_eigensolver():

@@ -295,19 +295,22 @@ def factor_free_stiffness(K_elements: np.ndarray, el: ElementMesh, free: np.ndar
 
 
 def condensed_factor(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray,
-                     ordering: FillOrdering | None = None, library: str = "auto") -> CondensedFactor:
+                     ordering: FillOrdering | None = None, library: str = "auto",
+                     compiled: bool = False) -> CondensedFactor:
     """The condensed factor (``engine.structure.condensed``) of element matrices on ``el``'s free DOFs;
-    ``library``: S's (engine.structure.solvers.library_for)."""
+    ``library``: S's (engine.structure.solvers.library_for); ``compiled``: CondensedFactor's."""
     return CondensedFactor(K_elements, el.connectivity, len(el.nodes), el.n_original, free,
-                           len(el.connectivity) // len(el.first), ordering=ordering, library=library)
+                           len(el.connectivity) // len(el.first), ordering=ordering, library=library,
+                           compiled=compiled)
 
 
 def factor_or_none(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray,
-                   ordering: FillOrdering | None = None, library: str = "auto") -> CondensedFactor | None:
+                   ordering: FillOrdering | None = None, library: str = "auto",
+                   compiled: bool = False) -> CondensedFactor | None:
     """The condensed factor, or None where the matrix is singular (an exactly zero pivot, or one
     PARDISO perturbed)."""
     try:
-        lu = condensed_factor(K_elements, el, free, ordering, library)
+        lu = condensed_factor(K_elements, el, free, ordering, library, compiled)
     except RuntimeError:
         return None
     return None if lu.singular else lu

@@ -42,11 +42,13 @@ log = logging.getLogger(__name__)
 #: rotations at b (9-11); its other local DOFs are zero by the element frame's definition.
 LOCAL_DEFORMATIONS = (3, 4, 5, 6, 9, 10, 11)
 
-#: From this many elements on, a path's tangents are taken in closed form by a compiled kernel
-#: (0.018 s against 0.060 s by differences at 11 640 elements, 0.046 against 0.147 s at 29 536);
-#: below, importing numba and loading the kernel (some 0.6 s a process) costs about what the
-#: differences would over a path's 30-odd tangents (``benchmarks/frame_speed.py --tangents``).
-CLOSED_FORM_FROM = 2000
+#: From this many elements on, a path's internal forces, tangents, triads' updates and the
+#: elimination of its beams' internal nodes are taken by compiled kernels (``corotational_kernels``,
+#: ``block_inverse``; tangents in closed form: 0.018 s against 0.060 s by differences at
+#: 11 640 elements, 0.046 against 0.147 s at 29 536); below, importing numba and loading the
+#: kernels (some 0.6 s a process) costs about what the differences would over a path's 30-odd
+#: tangents (``benchmarks/frame_speed.py --tangents``).
+COMPILED_FROM = 2000
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -200,25 +202,33 @@ class _Corotational:
             return np.stack([np.stack([T[i, 0] * R0[k, 0] + T[i, 1] * R0[k, 1] + T[i, 2] * R0[k, 2]
                                        for k in range(3)]) for i in range(3)])
 
-        state = (np.ascontiguousarray(x[a].T), np.ascontiguousarray(x[b].T), times_R0_T(triads[a]),
-                 times_R0_T(triads[b]))
-        f_global = self._end_forces(*state)
+        if len(self.L0) >= COMPILED_FROM:
+            from .corotational_kernels import element_forces, element_states  # numba: where it pays
+
+            state = element_states(x, triads, a, b, R0)
+            f_global, bad = element_forces(*state, self.L0, self.K7)
+            if np.any(bad):                                 # the frame by local_axes
+                f_global[:, bad] = self._end_forces(*state)[:, bad]
+        else:
+            state = (np.ascontiguousarray(x[a].T), np.ascontiguousarray(x[b].T), times_R0_T(triads[a]),
+                     times_R0_T(triads[b]))
+            f_global = self._end_forces(*state)
         out = np.bincount(self.scatter, weights=f_global.ravel(), minlength=6 * self.n_all)
         return out, state
 
     def tangent(self, state) -> np.ndarray:
         """Element tangent stiffnesses (m,12,12) in global axes: the derivative of the element
         end forces with respect to the end translations and spins (applied as in ``_update``); in
-        closed form from CLOSED_FORM_FROM elements on, by differences below (where loading the
+        closed form from COMPILED_FROM elements on, by differences below (where loading the
         compiled kernel costs more than it saves)."""
-        if len(self.L0) >= CLOSED_FORM_FROM:
+        if len(self.L0) >= COMPILED_FROM:
             return self.closed_form_tangent(state)
         return self.difference_tangent(state)
 
     def closed_form_tangent(self, state) -> np.ndarray:
-        """``tangent`` in closed form (``engine.structure.corotational_tangent``), by differences
+        """``tangent`` in closed form (``engine.structure.corotational_kernels``), by differences
         where the mean z runs along the chord."""
-        from .corotational_tangent import element_tangents  # numba: imported where it pays
+        from .corotational_kernels import element_tangents  # numba: imported where it pays
 
         xa, xb, Ra, Rb = state
         K, bad = element_tangents(xa, xb, Ra, Rb, self.L0, self.K7)
@@ -252,7 +262,13 @@ class _Corotational:
 
 
 def _update(x: np.ndarray, triads: np.ndarray, du: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and triads moved by the DOF increments du (6 n,): translations added, triads
+    turned by the spins (compiled from COMPILED_FROM nodes on)."""
     step = du.reshape(-1, 6)
+    if len(x) >= COMPILED_FROM:
+        from .corotational_kernels import spun_triads
+
+        return x + step[:, :3], spun_triads(step[:, 3:], triads)
     return x + step[:, :3], _rotation_matrices(step[:, 3:]) @ triads
 
 
@@ -354,7 +370,8 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
         whole tangent by SuperLU, where PARDISO would take its symmetric part (engine.structure.condensed)."""
         nonlocal factored
         factored += 1
-        return factor_or_none(cr.tangent(cache), cr.el, free, cr.ordering, "superlu" if exact else "auto")
+        return factor_or_none(cr.tangent(cache), cr.el, free, cr.ordering, "superlu" if exact else "auto",
+                              compiled=len(cr.L0) >= COMPILED_FROM)
     F_ref = np.zeros(6 * cr.n_all)
     F_ref[:6 * n] = loads.ravel()
     F_dead = np.zeros(6 * cr.n_all)
