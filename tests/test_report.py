@@ -302,6 +302,20 @@ def test_the_job_table_says_what_each_load_case_holds():
     assert load_case_text("snow", snow, 245.25) == "snow (beams' weight x 1.35, 1000 N/m^2 on plan)"
 
 
+def test_the_job_table_gives_a_section_as_its_designation_reads():
+    """A tube D x t, a hollow rectangle h x b x t (it read "4.8 mm x 120 mm x 72 mm"), a solid
+    rectangle h x b."""
+    from workflow.config import SectionConfig
+    from workflow.stages.report import section_text
+
+    assert section_text(SectionConfig(kind="circular_hollow", diameter="48.3 mm", thickness="2.5 mm")) == \
+        "circular_hollow 48.3 mm x 2.5 mm"
+    assert section_text(SectionConfig(kind="rectangular_hollow", height="120 mm", width="72 mm",
+                                      thickness="4.8 mm")) == "rectangular_hollow 120 mm x 72 mm x 4.8 mm"
+    assert section_text(SectionConfig(kind="solid_rectangle", height="200 mm", width="100 mm")) == \
+        "solid_rectangle 200 mm x 100 mm"
+
+
 def test_a_value_beside_its_limit_never_reads_as_equal_to_it_when_it_is_not():
     """A cut of 359.6 mm against a limit of 360 mm is written with the digit that tells them apart
     (360.0 beside it), on the page's findings table and in the terminal's summary; equal values and those 3 digits

@@ -290,7 +290,9 @@ class SectionConfig(_Section):
         return value
 
     def dimensions(self) -> dict[str, float]:
-        return {k: getattr(self, k) for k in ("diameter", "thickness", "height", "width")
+        """The section's dimensions (m) by name, in the order a designation reads them: a tube's
+        D x t, a rectangle's h x b (x t)."""
+        return {k: getattr(self, k) for k in ("diameter", "height", "width", "thickness")
                 if getattr(self, k) is not None}
 
     def size_key(self) -> str:

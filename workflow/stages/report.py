@@ -17,7 +17,7 @@ import numpy as np
 from engine.findings import findings_table
 from fabrication.files import atomic_path, write_bytes_atomic, write_text_atomic
 
-from ..config import Project
+from ..config import Project, SectionConfig
 from ..labels import column_label, figure_rows, in_unit, label_of
 from ..report import Figure, Section, Table, Viewer, figure_from_file, render_report
 from ..runner import StageContext
@@ -132,6 +132,12 @@ def findings_rows(findings: list[dict]) -> list[list]:
              ", ".join(r["worst_parts"]), r["message"], r["fix"]] for r in findings_table(findings)]
 
 
+def section_text(section: SectionConfig) -> str:
+    """The section as the job table gives it: its kind and dimensions in mm, in the order a
+    designation reads them (a tube's D x t, a rectangle's h x b x t)."""
+    return f"{section.kind} " + " x ".join(f"{1000 * v:g} mm" for v in section.dimensions().values())
+
+
 def load_case_text(name: str, case, panel_weight_N_per_m2: float) -> str:
     """A project load case in a few words: "dead (beams' weight, panels 245 N/m^2, 250 N/m^2 per
     true area)"; an area load that is not downward as [qx, qy, qz]."""
@@ -165,8 +171,7 @@ def _summary(project: Project, surface: SurfaceResult, polymesh, analysis: dict,
         "load cases": loads, "combinations": combos,
         "D (largest size ratio)": project.field.max_size_ratio,
         "A (largest aspect)": project.field.max_aspect,
-        "material / section": f"{project.material.name} / {project.section.kind} "
-                              + " x ".join(f"{1000 * v:g} mm" for v in project.section.dimensions().values())
+        "material / section": f"{project.material.name} / {section_text(project.section)}"
                               + ("" if not analysis.get("design") else
                                  f"; sized from {analysis['design']['catalogue']}: "
                                  + ", ".join(g["profile"] for g in analysis["design"]["groups"])),
