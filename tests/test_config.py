@@ -48,6 +48,31 @@ def test_units_convert_to_si(text, dimension, expected):
     assert to_si(text, dimension) == pytest.approx(expected)
 
 
+def test_units_convert_where_pints_cache_folder_cannot_be_used(monkeypatch):
+    """The registry keeps pint's parsed definitions in the user's cache folder; where that fails
+    (a read-only home, a broken cache file) the definitions are parsed instead."""
+    import pint
+
+    from workflow import units
+
+    made = []
+
+    class Registry(pint.UnitRegistry):
+        def __init__(self, *args, **kwargs):
+            made.append(kwargs.get("cache_folder"))
+            if kwargs.get("cache_folder"):
+                raise PermissionError("read-only cache folder")
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(pint, "UnitRegistry", Registry)
+    units._registry.cache_clear()
+    try:
+        assert units.to_si("50 mm", "length") == pytest.approx(0.05)
+        assert made == [":auto:", None]
+    finally:
+        units._registry.cache_clear()
+
+
 @pytest.mark.parametrize("text, dimension", [("5 kg", "length"), ("2 m", "stress"), ("fast", "length"),
                                              (True, "length")])
 def test_wrong_units_are_rejected(text, dimension):
