@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from engine.mesh import PolyMesh, unique_edges
 
@@ -34,6 +35,12 @@ def test_moved_nodes_keep_the_topology_and_measure_their_own_lengths():
     assert np.array_equal(moved.beam_lengths, np.linalg.norm(chords, axis=1))
     np.testing.assert_allclose(moved.beam_lengths, 2.0 * grid.beam_lengths)
     assert np.array_equal(moved.face_boundary, grid.face_boundary)
+    fresh = PolyMesh(nodes=2.0 * grid.nodes, faces=grid.faces)             # as if built afresh
+    for name in ("nodes", "boundary", "supports", "corners"):
+        assert np.array_equal(getattr(moved, name), getattr(fresh, name))
+    assert not moved.nodes.flags.writeable and moved.faces is grid.faces
+    with pytest.raises(ValueError, match="nodes must be"):
+        grid.replace_nodes(grid.nodes[:-1])
 
 
 def test_node_adjacency_and_neighbour_lists_name_each_beams_two_ends():
