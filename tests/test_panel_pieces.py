@@ -82,3 +82,25 @@ def test_no_sliver_is_cut_off_where_another_diagonal_will_do():
     plan = nodes.copy()
     plan[:, 2] = 0
     assert sum(_area(plan[p]) for p in pieces) == pytest.approx(_area(plan))
+
+
+def test_the_batched_flatness_is_each_loops_own():
+    """The flatness of many loops at once (one SVD per loop length) against piece_flatness of each:
+    triangles, planar convex and non-convex loops, warped ones, and planes facing every way."""
+    from engine.remeshing.panel_pieces import _flatness_of_loops
+
+    rng = np.random.default_rng(4)
+    nodes = rng.normal(size=(60, 3))
+    angles = np.linspace(0, 2 * np.pi, 7)[:-1]
+    for k, normal in enumerate(np.eye(3)):               # planar hexagons in the three planes
+        u = np.roll(normal, 1)
+        v = np.cross(normal, u)
+        nodes[6 * k:6 * k + 6] = np.outer(np.cos(angles), u) + np.outer(np.sin(angles), v)
+    nodes[18:24] = nodes[0:6] * [1.0, 1.0, 1.0]
+    nodes[19] *= 0.2                                     # non-convex, planar
+    loops = [np.arange(6 * k, 6 * k + 6) for k in range(4)] + [rng.permutation(60)[:n] for n in (3, 4, 5, 6, 7) * 8]
+    batched = _flatness_of_loops(nodes, loops)
+    for loop, (distance, convex) in zip(loops, batched):
+        expected = piece_flatness(nodes[loop])
+        assert distance == pytest.approx(expected[0], rel=1e-12, abs=1e-15) and convex == expected[1]
+    assert [c for _, c in batched[:4]] == [True, True, True, False]
