@@ -85,9 +85,10 @@ def test_no_sliver_is_cut_off_where_another_diagonal_will_do():
 
 
 def test_the_batched_flatness_is_each_loops_own():
-    """The flatness of many loops at once (one SVD per loop length) against piece_flatness of each:
-    triangles, planar convex and non-convex loops, warped ones, and planes facing every way."""
-    from engine.remeshing.panel_pieces import _flatness_of_loops
+    """The flatness of many loops at once (one SVD per loop length) against piece_flatness of each,
+    and whether a triangle is a sliver against _sliver: triangles, planar convex and non-convex
+    loops, warped ones, and planes facing every way."""
+    from engine.remeshing.panel_pieces import _flatness_of_loops, _sliver
 
     rng = np.random.default_rng(4)
     nodes = rng.normal(size=(60, 3))
@@ -96,11 +97,14 @@ def test_the_batched_flatness_is_each_loops_own():
         u = np.roll(normal, 1)
         v = np.cross(normal, u)
         nodes[6 * k:6 * k + 6] = np.outer(np.cos(angles), u) + np.outer(np.sin(angles), v)
-    nodes[18:24] = nodes[0:6] * [1.0, 1.0, 1.0]
+    nodes[18:24] = nodes[0:6]
     nodes[19] *= 0.2                                     # non-convex, planar
-    loops = [np.arange(6 * k, 6 * k + 6) for k in range(4)] + [rng.permutation(60)[:n] for n in (3, 4, 5, 6, 7) * 8]
+    loops = [np.arange(6 * k, 6 * k + 6) for k in range(4)] + [rng.permutation(59)[:n] for n in (3, 4, 5, 6, 7) * 8]
+    nodes[59] = 0.5 * (nodes[57] + nodes[58]) + 1e-3      # a sliver
+    loops.append(np.array([57, 58, 59]))
     batched = _flatness_of_loops(nodes, loops)
-    for loop, (distance, convex) in zip(loops, batched):
+    for loop, (distance, convex, thin) in zip(loops, batched):
         expected = piece_flatness(nodes[loop])
         assert distance == pytest.approx(expected[0], rel=1e-12, abs=1e-15) and convex == expected[1]
-    assert [c for _, c in batched[:4]] == [True, True, True, False]
+        assert thin == _sliver(nodes[loop])
+    assert [c for _, c, _ in batched[:4]] == [True, True, True, False] and batched[-1][2]

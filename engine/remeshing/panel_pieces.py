@@ -71,17 +71,23 @@ def _flatness(points: np.ndarray) -> tuple[float, bool, np.ndarray]:
     return distance, convex, local
 
 
-def _flatness_of_loops(nodes: np.ndarray, loops: list[np.ndarray]) -> list[tuple[float, bool]]:
-    """``piece_flatness`` of each node loop, the loops of one length at a time: one batched SVD
-    for the best-fit planes of all of them (a 1500-cell optimize stage made 17 000 single ones
-    over its non-planar cells' candidate diagonals)."""
-    out: list[tuple[float, bool]] = [(0.0, True)] * len(loops)
+def _flatness_of_loops(nodes: np.ndarray, loops: list[np.ndarray]) -> list[tuple[float, bool, bool]]:
+    """(``piece_flatness``, ``_sliver``) of each node loop, the loops of one length at a time: one
+    batched SVD for the best-fit planes of all of them (a 1500-cell optimize stage made 17 000
+    single ones over its non-planar cells' candidate diagonals, and measured 18 000 triangles)."""
+    out: list[tuple[float, bool, bool]] = [(0.0, True, False)] * len(loops)
     by_length: dict[int, list[int]] = {}
     for i, loop in enumerate(loops):
-        if len(loop) > 3:
-            by_length.setdefault(len(loop), []).append(i)
+        by_length.setdefault(len(loop), []).append(i)
     for k, members in by_length.items():
         points = nodes[np.stack([loops[i] for i in members])]                 # (m, k, 3)
+        if k == 3:                                                            # flat, convex; a sliver?
+            sides = np.roll(points, -1, axis=1) - points
+            longest = np.einsum("mij,mij->mi", sides, sides).max(axis=1)
+            twice_area = np.linalg.norm(np.cross(sides[:, 0], sides[:, 1]), axis=1)
+            for i, thin in zip(members, (twice_area < SLIVER * np.maximum(longest, 1e-300)).tolist()):
+                out[i] = (0.0, True, thin)
+            continue
         centroid = points.mean(axis=1)
         relative = points - centroid[:, None, :]
         normal = np.linalg.svd(relative, full_matrices=False)[2][:, -1]      # (m, 3)
@@ -101,7 +107,7 @@ def _flatness_of_loops(nodes: np.ndarray, loops: list[np.ndarray]) -> list[tuple
         scale = np.einsum("mkj,mkj->m", edge, edge) / k
         convex = np.all(turn * np.sign(area)[:, None] >= -1e-9 * scale[:, None], axis=1)
         for i, d, c in zip(members, distance.tolist(), convex.tolist()):
-            out[i] = (d, c)
+            out[i] = (d, c, False)
     return out
 
 
@@ -140,9 +146,9 @@ def planar_pieces(nodes: np.ndarray, loop: np.ndarray, tolerance: float) -> list
     measured = _flatness_of_loops(nodes, [part for parts in candidates for part in parts])
     for n, parts in enumerate(candidates):
         figures = measured[2 * n:2 * n + 2]
-        bad = sum(1 for d, c in figures if not (d <= tolerance and c))
-        worst = max(d if c else np.inf for d, c in figures)
-        slivers = sum(_sliver(nodes[p]) for p in parts)
+        bad = sum(1 for d, c, _ in figures if not (d <= tolerance and c))
+        worst = max(d if c else np.inf for d, c, _ in figures)
+        slivers = sum(thin for _, _, thin in figures)
         key = (slivers, bad, worst, abs(len(parts[0]) - len(parts[1])))
         if best is None or key < best[0]:
             best = (key, parts)
