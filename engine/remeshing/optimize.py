@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from dataclasses import field as dataclass_field
 from functools import partial
 from typing import Callable
 
@@ -361,6 +362,8 @@ class _Problem:
     grading: dict
     corners: np.ndarray
     fans: CellFans  # the cells, which no step of the iterations may fold
+    moving_cells: np.ndarray | None  # (cells,) bool, those with a node that moves (local problems)
+    fan_normals: dict = dataclass_field(default_factory=dict)  # "held": the surface normals at the cells at the start
     min_corner: float  # rad
     beam_length_limits: Callable[[PolyMesh], np.ndarray] | None
     system: _GlobalStep
@@ -456,8 +459,12 @@ def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, setti
     partners = mirror_partners(x, planes, PARTNER_REACH * float(polymesh.beam_lengths.mean())) if planes else None
     nearest_vertex = cKDTree(mesh.vertices) if field is not None and settings.follow_field else None
     areas, grading = _target_areas(groups, polymesh, x0, settings, field, nearest_vertex)
+    fans = CellFans(polymesh.faces)
+    moving_cells = None
     if local:
         groups, areas = _active_cells(groups, areas, fixed)
+        moving_cells = np.zeros(fans.n_cells, dtype=bool)
+        np.logical_or.at(moving_cells, fans.cell, ~fixed[fans.corners[:, 1]])
     return _Problem(settings=settings, given=given, polymesh=polymesh, new_beams=new_beams,
                     corner_splits=corner_splits, edge_splits=edge_splits,
                     with_end_game=planar_panels and settings.planarity_iterations > 0,
@@ -465,7 +472,7 @@ def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, setti
                     movable=interior | sliding, local=local, start=x, x0=x0, groups=groups, planes=planes,
                     partners=partners,
                     field=field, nearest_vertex=nearest_vertex, areas=areas, grading=grading,
-                    corners=face_corners(polymesh.faces), fans=CellFans(polymesh.faces),
+                    corners=face_corners(polymesh.faces), fans=fans, moving_cells=moving_cells,
                     min_corner=float(np.radians(settings.min_corner_angle_deg)),
                     beam_length_limits=beam_length_limits,
                     system=_global_step_system(settings, groups, polymesh.edges, n, interior, sliding, tangents),
@@ -501,8 +508,18 @@ def _hold_limits(p: _Problem, x: np.ndarray, sweeps: int = 3) -> np.ndarray:
 def _unfolded(p: _Problem, x: np.ndarray, new: np.ndarray) -> np.ndarray:
     """The step from x to ``new`` but for the nodes of the cells it would fold, which stay at x
     (crowded limits and the targets of the cells that collapses and flips left can turn a cell over
-    on the surface: engine.geometry.projections.unfolded)."""
-    return unfolded(x, new, p.fans, p.surface.closest_normals(p.fans.centroids(x))[1])
+    on the surface: engine.geometry.projections.unfolded). In a local problem the surface's normals
+    at the cells of held nodes only are kept from the first step: those cells do not move."""
+    centroids = p.fans.centroids(x)
+    if p.moving_cells is None:
+        return unfolded(x, new, p.fans, p.surface.closest_normals(centroids)[1])
+    up = p.fan_normals.get("held")
+    if up is None:
+        up = p.fan_normals["held"] = p.surface.closest_normals(centroids)[1]
+    else:
+        up = up.copy()
+        up[p.moving_cells] = p.surface.closest_normals(centroids[p.moving_cells])[1]
+    return unfolded(x, new, p.fans, up)
 
 
 def _local_step(p: _Problem, x: np.ndarray, t: float, f: float) -> tuple[np.ndarray, float]:
