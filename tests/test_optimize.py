@@ -572,6 +572,29 @@ def test_a_grading_compressed_for_the_joints_is_a_finding():
     assert "[section] height, width" in fix and "diameter" not in fix
 
 
+def test_a_local_optimisation_keeps_the_held_cells_normals_and_gives_the_same_grid(dome, monkeypatch):
+    """The fold check of a local optimisation finds the surface's normals at the cells that move
+    only (the others' are kept from the first step): the same nodes as finding them all at every
+    step."""
+    from engine.geometry.projections import unfolded
+    from engine.remeshing import optimize as optimize_module
+
+    surface, grid = dome
+    settings = OptimizeSettings(iterations=20, planar=False)
+    centre = np.argmin(np.linalg.norm(grid.nodes[:, :2] - [3.0, 2.0], axis=1))
+    held = np.linalg.norm(grid.nodes[:, :2] - grid.nodes[centre, :2], axis=1) >= 4.0
+    kept = optimize(grid, surface, None, settings, held=held).polymesh.nodes
+    moving = []
+
+    def every_normal(p, x, new):
+        moving.append(int(p.moving_cells.sum()))
+        return unfolded(x, new, p.fans, p.surface.closest_normals(p.fans.centroids(x))[1])
+
+    monkeypatch.setattr(optimize_module, "_unfolded", every_normal)
+    assert np.array_equal(kept, optimize(grid, surface, None, settings, held=held).polymesh.nodes)
+    assert 0 < moving[0] < grid.n_faces
+
+
 def test_held_nodes_stay_exactly_and_the_region_left_free_is_optimised(dome):
     """Optimising again round a local change: the held nodes do not move at all, the free region
     gains regularity as a whole optimisation would, and only the cells with a free node are worked
