@@ -36,7 +36,7 @@ def plot_gridshell(polymesh: PolyMesh, path: Path, *, color_by: str = "degree", 
         planarity_mm = 1000 * polymesh.face_planarity()
         norm = plt.Normalize(0.0, max(float(planarity_mm.max()), 1e-6))
         cmap = plt.get_cmap("plasma")
-        colours = [cmap(norm(v)) for v in planarity_mm]
+        colours = cmap(norm(planarity_mm))  # (cells, 4) RGBA, one call for every cell
         legend = None
         mappable = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
     else:
