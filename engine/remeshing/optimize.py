@@ -360,7 +360,7 @@ class _Problem:
     nearest_vertex: cKDTree | None
     areas: dict[int, np.ndarray | None]
     grading: dict
-    corners: np.ndarray
+    corners: np.ndarray  # (c, 3) the corners the limits may open (local: those with a far node that moves)
     fans: CellFans  # the cells, which no step of the iterations may fold
     moving_cells: np.ndarray | None  # (cells,) bool, those with a node that moves (local problems)
     fan_normals: dict = dataclass_field(default_factory=dict)  # "held": the surface normals at the cells at the start
@@ -460,11 +460,14 @@ def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, setti
     nearest_vertex = cKDTree(mesh.vertices) if field is not None and settings.follow_field else None
     areas, grading = _target_areas(groups, polymesh, x0, settings, field, nearest_vertex)
     fans = CellFans(polymesh.faces)
+    corners = face_corners(polymesh.faces)
     moving_cells = None
     if local:
         groups, areas = _active_cells(groups, areas, fixed)
         moving_cells = np.zeros(fans.n_cells, dtype=bool)
         np.logical_or.at(moving_cells, fans.cell, ~fixed[fans.corners[:, 1]])
+        movable = interior | sliding
+        corners = corners[movable[corners[:, 0]] | movable[corners[:, 2]]]  # the others cannot be opened
     return _Problem(settings=settings, given=given, polymesh=polymesh, new_beams=new_beams,
                     corner_splits=corner_splits, edge_splits=edge_splits,
                     with_end_game=planar_panels and settings.planarity_iterations > 0,
@@ -472,7 +475,7 @@ def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, setti
                     movable=interior | sliding, local=local, start=x, x0=x0, groups=groups, planes=planes,
                     partners=partners,
                     field=field, nearest_vertex=nearest_vertex, areas=areas, grading=grading,
-                    corners=face_corners(polymesh.faces), fans=fans, moving_cells=moving_cells,
+                    corners=corners, fans=fans, moving_cells=moving_cells,
                     min_corner=float(np.radians(settings.min_corner_angle_deg)),
                     beam_length_limits=beam_length_limits,
                     system=_global_step_system(settings, groups, polymesh.edges, n, interior, sliding, tangents),
