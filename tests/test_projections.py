@@ -186,3 +186,13 @@ def test_the_grids_figures_count_the_cells_that_overlap_a_neighbour():
     assert optimize_quality(PolyMesh(nodes=pushed, faces=faces), surface)["folded_cells"] == 2
     turned = (faces[0][::-1].copy(), faces[1][::-1].copy(), faces[2][::-1].copy(), faces[3])
     assert optimize_quality(PolyMesh(nodes=x, faces=turned), surface)["folded_cells"] == 1
+
+
+def test_face_corners_are_each_faces_previous_node_node_and_next_node():
+    """Against a loop over the faces, on loops of 3 to 9 nodes; faces of fewer than 3 nodes give none."""
+    rng = np.random.default_rng(8)
+    faces = [rng.permutation(50)[:k] for k in rng.integers(3, 10, size=40)]
+    expected = np.concatenate([np.stack([np.roll(f, 1), f, np.roll(f, -1)], axis=1) for f in faces])
+    corners = face_corners(faces[:20] + [np.array([1, 2])] + faces[20:])
+    assert corners.dtype == np.int64 and np.array_equal(corners, expected)
+    assert face_corners([]).shape == (0, 3) and face_corners([[0, 1]]).shape == (0, 3)

@@ -28,8 +28,14 @@ __all__ = ["lengthen_short_beams", "open_narrow_corners", "face_corners", "corne
 def face_corners(faces) -> np.ndarray:
     """(c,3) corners (previous node, node, next node) of every face of ``faces`` (a sequence of
     node loops), in face order."""
-    rows = [np.stack([np.roll(f, 1), f, np.roll(f, -1)], axis=1) for f in map(np.asarray, faces) if len(f) >= 3]
-    return np.concatenate(rows).astype(np.int64) if rows else np.zeros((0, 3), dtype=np.int64)
+    loops = [f for f in map(np.asarray, faces) if len(f) >= 3]
+    if not loops:
+        return np.zeros((0, 3), dtype=np.int64)
+    sides = np.array([len(f) for f in loops])
+    node = np.concatenate(loops).astype(np.int64)
+    start, size = np.repeat(np.cumsum(sides) - sides, sides), np.repeat(sides, sides)
+    at = np.arange(len(node)) - start                   # each corner's place in its face
+    return np.stack([node[start + (at - 1) % size], node, node[start + (at + 1) % size]], axis=1)
 
 
 def corner_angles(x: np.ndarray, corners: np.ndarray) -> np.ndarray:
