@@ -86,9 +86,17 @@ def test_no_sliver_is_cut_off_where_another_diagonal_will_do():
 
 def test_the_batched_flatness_is_each_loops_own():
     """The flatness of many loops at once (one SVD per loop length) against piece_flatness of each,
-    and whether a triangle is a sliver against _sliver: triangles, planar convex and non-convex
-    loops, warped ones, and planes facing every way."""
-    from engine.remeshing.panel_pieces import _flatness_of_loops, _sliver
+    and whether a triangle is a sliver against its height over its longest side (Heron's area):
+    triangles, planar convex and non-convex loops, warped ones, and planes facing every way."""
+    from engine.remeshing.panel_pieces import SLIVER, _flatness_of_loops
+
+    def sliver(points: np.ndarray) -> bool:
+        if len(points) != 3:
+            return False
+        a, b, c = np.linalg.norm(points - np.roll(points, -1, axis=0), axis=1)
+        half = 0.5 * (a + b + c)
+        area = np.sqrt(max(half * (half - a) * (half - b) * (half - c), 0.0))
+        return bool(2 * area / max(a, b, c) < SLIVER * max(a, b, c))
 
     rng = np.random.default_rng(4)
     nodes = rng.normal(size=(60, 3))
@@ -106,5 +114,5 @@ def test_the_batched_flatness_is_each_loops_own():
     for loop, (distance, convex, thin) in zip(loops, batched):
         expected = piece_flatness(nodes[loop])
         assert distance == pytest.approx(expected[0], rel=1e-12, abs=1e-15) and convex == expected[1]
-        assert thin == _sliver(nodes[loop])
+        assert thin == sliver(nodes[loop])
     assert [c for _, c, _ in batched[:4]] == [True, True, True, False] and batched[-1][2]

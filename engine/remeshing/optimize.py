@@ -459,20 +459,20 @@ def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, setti
     partners = mirror_partners(x, planes, PARTNER_REACH * float(polymesh.beam_lengths.mean())) if planes else None
     nearest_vertex = cKDTree(mesh.vertices) if field is not None and settings.follow_field else None
     areas, grading = _target_areas(groups, polymesh, x0, settings, field, nearest_vertex)
+    movable = interior | sliding
     fans = CellFans(polymesh.faces)
     corners = face_corners(polymesh.faces)
     moving_cells = None
     if local:
         groups, areas = _active_cells(groups, areas, fixed)
         moving_cells = np.zeros(fans.n_cells, dtype=bool)
-        np.logical_or.at(moving_cells, fans.cell, ~fixed[fans.corners[:, 1]])
-        movable = interior | sliding
+        np.logical_or.at(moving_cells, fans.cell, movable[fans.corners[:, 1]])
         corners = corners[movable[corners[:, 0]] | movable[corners[:, 2]]]  # the others cannot be opened
     return _Problem(settings=settings, given=given, polymesh=polymesh, new_beams=new_beams,
                     corner_splits=corner_splits, edge_splits=edge_splits,
                     with_end_game=planar_panels and settings.planarity_iterations > 0,
                     surface=surface, boundary=boundary, fixed=fixed, sliding=sliding, interior=interior,
-                    movable=interior | sliding, local=local, start=x, x0=x0, groups=groups, planes=planes,
+                    movable=movable, local=local, start=x, x0=x0, groups=groups, planes=planes,
                     partners=partners,
                     field=field, nearest_vertex=nearest_vertex, areas=areas, grading=grading,
                     corners=corners, fans=fans, moving_cells=moving_cells,

@@ -72,9 +72,10 @@ def _flatness(points: np.ndarray) -> tuple[float, bool, np.ndarray]:
 
 
 def _flatness_of_loops(nodes: np.ndarray, loops: list[np.ndarray]) -> list[tuple[float, bool, bool]]:
-    """(``piece_flatness``, ``_sliver``) of each node loop, the loops of one length at a time: one
-    batched SVD for the best-fit planes of all of them (a 1500-cell optimize stage made 17 000
-    single ones over its non-planar cells' candidate diagonals, and measured 18 000 triangles)."""
+    """(``piece_flatness``, whether it is a sliver: a triangle whose height over its longest side is
+    under SLIVER) of each node loop, the loops of one length at a time: one batched SVD for the
+    best-fit planes of all of them (a 1500-cell optimize stage made 17 000 single ones over its
+    non-planar cells' candidate diagonals, and measured 18 000 triangles one by one)."""
     out: list[tuple[float, bool, bool]] = [(0.0, True, False)] * len(loops)
     by_length: dict[int, list[int]] = {}
     for i, loop in enumerate(loops):
@@ -109,15 +110,6 @@ def _flatness_of_loops(nodes: np.ndarray, loops: list[np.ndarray]) -> list[tuple
         for i, d, c in zip(members, distance.tolist(), convex.tolist()):
             out[i] = (d, c, False)
     return out
-
-
-def _sliver(points: np.ndarray) -> bool:
-    """Whether a node loop is a triangle whose height over its longest side is under SLIVER."""
-    if len(points) != 3:
-        return False
-    sides = np.roll(points, -1, axis=0) - points
-    longest = float(np.max(np.einsum("ij,ij->i", sides, sides)))
-    return bool(np.linalg.norm(np.cross(sides[0], sides[1])) < SLIVER * max(longest, 1e-300))
 
 
 def planar_pieces(nodes: np.ndarray, loop: np.ndarray, tolerance: float) -> list[np.ndarray]:
