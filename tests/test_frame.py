@@ -703,26 +703,50 @@ def _against_the_dense_eigensolver() -> None:
     assert ours == pytest.approx(dense, rel=1e-8)
 
 
-def test_buckling_without_a_rough_estimate_still_finds_every_factor(monkeypatch):
-    """A rough first-factor run that does not converge falls back on Rayleigh quotients: the shift
-    then lies above lambda_1 and is halved until the factor has no negative pivot, and the factors
-    are those of the dense solver all the same."""
-    import scipy.sparse.linalg as spla
-
+def test_buckling_with_a_rough_estimate_above_the_first_factor_still_finds_every_factor(monkeypatch):
+    """A rough first factor that is far too high (twice lambda_1) puts the shift above lambda_1:
+    the shifted factor's negative pivots say so, the shift is halved until there are none, and
+    the factors are those of the dense solver all the same."""
     from engine.structure import frame
 
-    eigsh, fallbacks = spla.eigsh, []
+    rough, halvings = frame._rough_first_factor, []
+    monkeypatch.setattr(frame, "_rough_first_factor", lambda *a: 0.5 * rough(*a))
+    factor = frame.factor_or_none
 
-    def rough_fails(*args, **kwargs):
-        if kwargs.get("tol") == 1e-2:  # the rough run
-            raise spla.ArpackNoConvergence("no convergence", np.zeros(0), np.zeros((0, 0)))
-        return eigsh(*args, **kwargs)
+    def counted(*args, **kwargs):
+        shifted = factor(*args, **kwargs)
+        halvings.append(shifted.negative_pivots)
+        return shifted
 
-    monkeypatch.setattr(frame.spla, "eigsh", rough_fails)
-    rayleigh = frame._rayleigh
-    monkeypatch.setattr(frame, "_rayleigh", lambda *a: fallbacks.append(1) or rayleigh(*a))
+    monkeypatch.setattr(frame, "factor_or_none", counted)
     _against_the_dense_eigensolver()
-    assert fallbacks, "the fallback ran"
+    assert halvings[0] > 0 and halvings[-1] == 0, "the first shift lay above lambda_1 and was halved"
+
+
+def test_rough_first_factor_lies_just_above_the_first_factor():
+    """The few Lanczos steps' estimate is a Ritz value, so 1 / mu is never below the dense
+    lambda_1, and it stops within the 1/0.95 that the shift needs (the loads and their opposites,
+    mixed tension and compression, 3 elements per beam)."""
+    from dataclasses import replace
+
+    import scipy.linalg as sla
+
+    from engine.linalg import congruent
+    from engine.structure import beam_elements, frame
+
+    model, supports, loads = _space_frame()
+    model = replace(model, elements_per_beam=3)
+    for sign in (1.0, -1.0):
+        state = frame._solve_linear(model, supports, sign * loads)
+        el, free = state.el, state.free
+        K_G_elements = congruent(state.T, beam_elements.geometric_stiffness(state.L, state.local_forces[:, 6], el))
+        K_G = beam_elements.assemble(K_G_elements, beam_elements.element_dofs(el.connectivity), len(state.u))
+        minus_KG, K = (-K_G[free][:, free]).tocsr(), state.K[free][:, free].tocsr()
+        mu = sla.eigh(minus_KG.toarray(), K.toarray(), eigvals_only=True).max()
+        start = np.random.default_rng(0).standard_normal(len(free))
+        estimate = frame._rough_first_factor(minus_KG, K, state.lu.solve, start)
+        assert estimate <= mu * (1 + 1e-9)
+        assert estimate >= 0.95 * mu
 
 
 def test_two_bar_toggle_snaps_through_at_its_closed_form_limit(tangent):
