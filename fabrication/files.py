@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import io
 import itertools
 import os
 import re
@@ -20,8 +21,8 @@ from pathlib import Path
 
 from engine.errors import FabricationError
 
-__all__ = ["atomic_path", "atomic_folder", "write_text_atomic", "write_bytes_atomic", "save_dxf", "file_date",
-           "stamp_step", "compact_step_points", "write_assembly_step", "stamp_zip", "stamp_3dm"]
+__all__ = ["atomic_path", "atomic_folder", "write_text_atomic", "write_bytes_atomic", "save_dxf", "dxf_bytes",
+           "file_date", "stamp_step", "compact_step_points", "write_assembly_step", "stamp_zip", "stamp_3dm"]
 
 
 def _umask() -> int:
@@ -77,10 +78,15 @@ def atomic_folder(parent: str | os.PathLike, name: str) -> Path:
 
 
 def save_dxf(doc, target: str | os.PathLike) -> Path:
-    """Save an ezdxf document atomically with fixed metadata and a sorted CLASSES section: ezdxf
-    stamps the time and fresh GUIDs ($TDUPDATE, $VERSIONGUID, ...) into every file it writes, and
-    orders its classes as a set (by the process's hash seed), so the same drawing gave different
-    bytes on every run; here the same drawing gives the same file."""
+    """Save an ezdxf document atomically as ``dxf_bytes`` makes it."""
+    return write_bytes_atomic(target, dxf_bytes(doc))
+
+
+def dxf_bytes(doc) -> bytes:
+    """An ezdxf document's file, with fixed metadata and a sorted CLASSES section: ezdxf stamps
+    the time and fresh GUIDs ($TDUPDATE, $VERSIONGUID, ...) into every file it writes, and orders
+    its classes as a set (by the process's hash seed), so the same drawing gave different bytes
+    on every run; here the same drawing gives the same file."""
     from collections import OrderedDict
 
     import ezdxf
@@ -91,11 +97,11 @@ def save_dxf(doc, target: str | os.PathLike) -> Path:
     before = ezdxf.options.write_fixed_meta_data_for_testing
     ezdxf.options.write_fixed_meta_data_for_testing = True
     try:
-        with atomic_path(target) as tmp:
-            doc.saveas(tmp)
+        stream = io.StringIO()
+        doc.write(stream)
     finally:
         ezdxf.options.write_fixed_meta_data_for_testing = before
-    return Path(target)
+    return doc.encode(stream.getvalue())
 
 
 def file_date() -> _dt.datetime:

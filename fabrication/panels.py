@@ -31,7 +31,7 @@ from shapely.geometry import Polygon
 
 from engine.errors import InputError
 from engine.mesh import PolyMesh
-from fabrication.dxf import ENGRAVE_STYLE, cutting_layers, new_document, save_dxf
+from fabrication.dxf import ENGRAVE_STYLE, SharedDocument, cutting_layers
 from fabrication.files import write_text_atomic
 from fabrication.settings import GRAIN_DIRECTIONS, PanelSettings
 
@@ -560,12 +560,10 @@ def write_panel_dxfs(panels: list[Panel], folder: str | os.PathLike,
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
+    files = SharedDocument(cutting_layers(drill=settings.hole_diameter_mm > 0))
     for panel in panels:
-        doc = new_document(cutting_layers(drill=settings.hole_diameter_mm > 0))
-        add_panel(doc.modelspace(), panel, settings=settings, note=True)
-        target = folder / f"{panel.id}.dxf"
-        save_dxf(doc, target)
-        paths.append(target)
+        paths.append(files.save(folder / f"{panel.id}.dxf",
+                                lambda msp, panel=panel: add_panel(msp, panel, settings=settings, note=True)))
     return paths
 
 

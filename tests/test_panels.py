@@ -170,6 +170,48 @@ def test_panel_dxfs_reread(tmp_path):
         assert "acrylic" in notes and "3 mm" in notes and "planarity" in notes
 
 
+def test_panel_files_from_a_shared_document_are_those_of_fresh_documents(tmp_path, monkeypatch):
+    """Each panel file written from the shared document has the bytes of a fresh document with
+    the same panel saved on its own, in any order of writing, and ezdxf's audit finds nothing; a
+    drawing that adds a layer is written from a fresh document, and the files after it are
+    still those of fresh documents."""
+    from fabrication import dxf
+    from fabrication.dxf import SharedDocument, cutting_layers, new_document, save_dxf
+    from fabrication.panels import add_panel
+
+    settings = PanelSettings(clearance_mm=3, hole_diameter_mm=4, hole_inset_mm=10)
+    panels = flatten_panels(hex_polymesh(2, 3), settings)
+    layers = cutting_layers(drill=True)
+
+    def fresh(panel, path, extra: bool = False):
+        doc = new_document(layers)
+        add_panel(doc.modelspace(), panel, settings=settings, note=True)
+        if extra:
+            doc.layers.add("EXTRA")
+            doc.modelspace().add_point((0, 0), dxfattribs={"layer": "EXTRA"})
+        return save_dxf(doc, path).read_bytes()
+
+    def with_extra(msp, panel):
+        add_panel(msp, panel, settings=settings, note=True)
+        msp.doc.layers.add("EXTRA")
+        msp.add_point((0, 0), dxfattribs={"layer": "EXTRA"})
+
+    shared = SharedDocument(layers)
+    made = []
+    monkeypatch.setattr(dxf, "new_document", lambda *a, **k: made.append(1) or new_document(*a, **k))
+    for k, panel in enumerate(panels[::-1]):
+        written = shared.save(tmp_path / "shared" / f"{panel.id}.dxf",
+                              lambda msp, panel=panel: add_panel(msp, panel, settings=settings, note=True))
+        assert written.read_bytes() == fresh(panel, tmp_path / "fresh" / f"{panel.id}.dxf")
+        assert not ezdxf.readfile(written).audit().has_errors
+        if k == 1:
+            odd = shared.save(tmp_path / "shared" / "odd.dxf", lambda msp, panel=panel: with_extra(msp, panel))
+            assert odd.read_bytes() == fresh(panel, tmp_path / "fresh" / "odd.dxf", extra=True)
+            assert "EXTRA" in {layer.dxf.name for layer in ezdxf.readfile(odd).layers}
+            assert len(made) == 2, "the odd drawing, and the shared document made again"
+    assert len(made) == 2, "every other file came from the shared document"
+
+
 def test_panels_without_fixings_have_no_drill_layer(tmp_path):
     """No holes asked for: no DRILL layer, not an empty one (issue 17)."""
     mesh = hex_polymesh(1, 2)
