@@ -38,7 +38,7 @@ from fabrication.drawings import beam_id, node_id, panel_id
 from fabrication.files import atomic_path, write_text_atomic
 
 __all__ = ["AssemblyStep", "AssemblySequence", "plan_assembly", "write_assembly", "partial_frame_deflection",
-           "step_groups", "step_image_name", "MAX_STEP_IMAGES"]
+           "deflections_without_props", "step_groups", "step_image_name", "MAX_STEP_IMAGES"]
 
 GRAVITY = 9.81  # m/s^2
 CANDIDATES_PER_STEP = 4
@@ -142,14 +142,11 @@ def _per_beam(value, beams: np.ndarray):
     return value if value.ndim == 0 else value[beams]
 
 
-def partial_frame_deflection(model: _Model, beams: np.ndarray, panels: np.ndarray,
-                             props: list[int]) -> tuple[float, np.ndarray]:
-    """Largest translation (m) of the partial frame made of ``beams`` (indices into
-    ``polymesh.edges``) under its own weight and the weight of ``panels`` (face indices),
-    held by the supports it touches (``support_flags``) and fully fixed ``props``; and the
-    (n_nodes,) translation magnitude per grid-shell node (0 where not built). Beam weight is
-    lumped half to each end. Raises ``engine.errors.MechanismError`` for a mechanism."""
-    from engine.structure.frame import FrameModel, linear_static
+def _partial_frame(model: _Model, beams: np.ndarray, panels: np.ndarray, props: list[int]):
+    """(frame, supports, loads, used): the partial frame of ``beams`` under its own weight and that
+    of ``panels``, on the supports it touches and fully fixed ``props``; ``used`` (k,) are its
+    nodes' grid-shell indices, in the frame's order."""
+    from engine.structure.frame import FrameModel
     from engine.structure.supports import Supports
 
     pm = model.polymesh
@@ -175,12 +172,73 @@ def partial_frame_deflection(model: _Model, beams: np.ndarray, panels: np.ndarra
     frame = FrameModel(nodes=pm.nodes[used], beams=local, E=_per_beam(b["E"], beams), G=_per_beam(b["G"], beams),
                        A=_per_beam(b["A"], beams), Iy=_per_beam(b["Iy"], beams), Iz=_per_beam(b["Iz"], beams),
                        J=_per_beam(b["J"], beams), up=model.up[beams], elements_per_beam=1)
+    return frame, supports, loads, used
+
+
+def partial_frame_deflection(model: _Model, beams: np.ndarray, panels: np.ndarray,
+                             props: list[int]) -> tuple[float, np.ndarray]:
+    """Largest translation (m) of the partial frame made of ``beams`` (indices into
+    ``polymesh.edges``) under its own weight and the weight of ``panels`` (face indices),
+    held by the supports it touches (``support_flags``) and fully fixed ``props``; and the
+    (n_nodes,) translation magnitude per grid-shell node (0 where not built). Beam weight is
+    lumped half to each end. Raises ``engine.errors.MechanismError`` for a mechanism."""
+    from engine.structure.frame import linear_static
+
+    frame, supports, loads, used = _partial_frame(model, beams, panels, props)
     model.n_analyses += 1
     result = linear_static(frame, supports, loads)
     translation = np.linalg.norm(result.displacements[:, :3], axis=1)
-    full = np.zeros(pm.n_nodes)
+    full = np.zeros(model.polymesh.n_nodes)
     full[used] = translation
     return float(translation.max()), full
+
+
+def deflections_without_props(model: _Model, beams: np.ndarray, panels: np.ndarray, props: list[int],
+                              trials: list[list[int]]) -> list[float | None]:
+    """``partial_frame_deflection``'s largest translation (m) of one partial frame held by each
+    of ``trials`` (subsets of ``props``) instead of ``props``; None where it is a mechanism.
+
+    The stiffness is factored once, with every prop held. Releasing a set D of prop DOFs adds
+    them back through the Schur complement S = K_DD - K_DF K_FF^-1 K_FD: u_D = S^-1 (f_D - K_DF
+    u0) with u0 = K_FF^-1 f_F, and u_F = u0 - K_FF^-1 K_FD u_D (6 solves per prop, shared by
+    the trials, instead of a factorisation per trial). S not positive definite (an eigenvalue
+    under TINY_PIVOT of K's largest diagonal entry) is a mechanism, as the factor's tiny pivots
+    say in the direct analysis. Raises MechanismError where the frame with every prop held is
+    one."""
+    from engine.structure.condensed import TINY_PIVOT
+    from engine.structure.frame import factor_stiffness
+
+    frame, supports, loads, used = _partial_frame(model, beams, panels, props)
+    stiffness = factor_stiffness(frame, supports)
+    model.n_analyses += 1
+    position = {int(node): k for k, node in enumerate(used)}
+    supported = set(model.supports.tolist())
+    # a prop's DOFs that a permanent support does not hold (props stand on unsupported nodes)
+    own = {p: 6 * position[p] + np.flatnonzero(~model.support_flags if p in supported else _FIXED)
+           for p in dict.fromkeys(props) if p in position}
+    D = np.concatenate([np.zeros(0, np.int64), *own.values()])
+    K = stiffness.K.tocsr()
+    free, f = stiffness.free, loads.ravel()
+    u0 = stiffness.lu.solve(f[free])
+    K_FD = K[free][:, D].toarray()
+    X = stiffness.lu.solve(K_FD) if len(D) else K_FD
+    K_DD = K[D][:, D].toarray()
+    scale = float(np.abs(K.diagonal()).max())
+    start = np.cumsum([0] + [len(d) for d in own.values()])
+    out: list[float | None] = []
+    for trial in trials:
+        freed = np.concatenate([np.zeros(0, np.int64)] + [np.arange(start[k], start[k + 1])
+                                                         for k, p in enumerate(own) if p not in trial])
+        S = K_DD[np.ix_(freed, freed)] - K_FD[:, freed].T @ X[:, freed]
+        if len(freed) and np.linalg.eigvalsh(0.5 * (S + S.T))[0] <= TINY_PIVOT * scale:
+            out.append(None)
+            continue
+        u_D = np.linalg.solve(S, f[D[freed]] - K_FD[:, freed].T @ u0) if len(freed) else np.zeros(0)
+        u = np.zeros(len(f))
+        u[free] = u0 - X[:, freed] @ u_D
+        u[D[freed]] = u_D
+        out.append(float(np.linalg.norm(u.reshape(-1, 6)[:, :3], axis=1).max()))
+    return out
 
 
 def _dangling_end(model: _Model, beams: np.ndarray, props: list[int]) -> int:
@@ -363,13 +421,11 @@ def plan_assembly(polymesh: PolyMesh, support_nodes: np.ndarray, beam: dict, *, 
         props = props + added
         if added or not props:
             return deflection
-        beams_now, panels_now = np.flatnonzero(growth.beams), np.flatnonzero(growth.panels)
-        for trial in [[]] + [[p for p in props if p != q] for q in props[:3]]:
-            try:
-                value, _ = partial_frame_deflection(model, beams_now, panels_now, trial)
-            except MechanismError:
-                continue
-            if value <= limit:
+        trials = [[]] + [[p for p in props if p != q] for q in props[:3]]
+        values = deflections_without_props(model, np.flatnonzero(growth.beams), np.flatnonzero(growth.panels),
+                                           props, trials)
+        for trial, value in zip(trials, values):
+            if value is not None and value <= limit:
                 props = trial
                 return value
         return deflection
