@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import json
+from pathlib import Path
 
 import pytest
 
@@ -154,10 +155,29 @@ def test_the_stages_take_what_their_run_functions_ask_for():
 
     names = [s.name for s in STAGES]
     for index, stage in enumerate(STAGES):
-        parameters = list(inspect.signature(stage.run).parameters)
+        run, load = stage.run.target(), stage.load.target()  # the registry imports them when called
+        assert run.__module__ == load.__module__ == f"workflow.stages.{stage.name}"
+        parameters = list(inspect.signature(run).parameters)
         assert parameters == [*stage.inputs, "project", "ctx"], stage.name
         assert set(stage.inputs) <= set(stage.depends) <= set(names[:index]), stage.name
-        assert list(inspect.signature(stage.load).parameters) == ["folder", "project"], stage.name
+        assert list(inspect.signature(load).parameters) == ["folder", "project"], stage.name
+
+
+def test_the_stage_registry_imports_no_stage_until_it_runs():
+    """A run whose stages are all cached loads none of the stages' libraries: the registry imports
+    no stage module, nor pandas, OCP or matplotlib, until a stage's run, load or external digest
+    is called."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "from workflow.stages import STAGES\n"
+            "assert [s.name for s in STAGES][0] == 'surface'\n"
+            "print(sorted(m for m in sys.modules if m.startswith('workflow.stages.') or m.split('.')[0] in "
+            "('pandas', 'OCP', 'build123d', 'matplotlib')))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).resolve().parents[1])
+    assert out.stdout.strip() == "[]", out.stdout
 
 
 def test_manifest_records_artifacts_config_and_versions(tmp_path):

@@ -26,7 +26,7 @@ from .fabrication import FabricationResult
 from .optimize import OptimizedGrid
 from .surface import SurfaceResult
 
-__all__ = ["ReportResult", "run", "load", "published"]
+__all__ = ["ReportResult", "run", "load"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -34,9 +34,6 @@ class ReportResult:
     """The report stage's result: where its page is (``OUT/report.html``)."""
 
     path: Path
-
-#: Files this stage writes outside its own folder (checked by the runner like its artifacts).
-published = ("report.html",)
 
 FIGURES = {
     "surface": [("01-surface/surface.png", "The surface and its supports (red)")],
