@@ -308,7 +308,12 @@ def _draw_plan(ax, window, plan: np.ndarray, beams: np.ndarray, supports: np.nda
 
     ax.set_xlim(window[0], window[2])
     ax.set_ylim(window[1], window[3])
-    ax.add_collection(LineCollection(plan[beams], colors="k", linewidths=0.6))
+    # only the beams whose box meets the window: the PDF writer draws every segment of a collection
+    # as its own path, clipped or not (a large roof's 26 tiles drew all its beams on each sheet)
+    ends = plan[beams]
+    seen = ((ends[:, :, 0].max(axis=1) >= window[0]) & (ends[:, :, 0].min(axis=1) <= window[2])
+            & (ends[:, :, 1].max(axis=1) >= window[1]) & (ends[:, :, 1].min(axis=1) <= window[3]))
+    ax.add_collection(LineCollection(ends[seen], colors="k", linewidths=0.6))
     texts, points, anchor, placement, colours = labels
     leaders = np.flatnonzero(placement.leader)
     if len(leaders):
@@ -448,12 +453,13 @@ def _tile_sheet(tile: dict, number: int, count: int, plan, beams, supports, colo
     ax.add_patch(_outline(tile["core"], "tab:red"))
     _scale_bar(ax, tile["scale"])
     # the key plan: every tile, this one filled
-    from matplotlib.collections import LineCollection
-
     key = fig.add_axes((0.04, 0.01, 0.16, 0.10))
     key.axis("off")
     key.set_aspect("equal")
-    key.add_collection(LineCollection(plan[beams], colors="0.7", linewidths=0.2))
+    # one path for the whole key plan (as a collection, each beam was a path of its own on every sheet)
+    lines = np.full((len(beams), 3, 2), np.nan)
+    lines[:, :2] = plan[beams]
+    key.plot(lines[:, :, 0].ravel(), lines[:, :, 1].ravel(), color="0.7", linewidth=0.2, solid_capstyle="butt")
     for k, core in enumerate(cores):
         box = _outline(core, "tab:red" if k + 2 == number else "0.4")
         if k + 2 == number:
