@@ -422,8 +422,11 @@ def plan_assembly(polymesh: PolyMesh, support_nodes: np.ndarray, beam: dict, *, 
         if added or not props:
             return deflection
         trials = [[]] + [[p for p in props if p != q] for q in props[:3]]
-        values = deflections_without_props(model, np.flatnonzero(growth.beams), np.flatnonzero(growth.panels),
-                                           props, trials)
+        try:
+            values = deflections_without_props(model, np.flatnonzero(growth.beams), np.flatnonzero(growth.panels),
+                                               props, trials)
+        except MechanismError:  # pragma: no cover - the state with every prop was analysed standing
+            return deflection
         for trial, value in zip(trials, values):
             if value is not None and value <= limit:
                 props = trial

@@ -114,14 +114,16 @@ class SharedDocument:
 
     def __init__(self, layers: Iterable[str]) -> None:
         self._layers = tuple(layers)
+        self._make()
+
+    def _make(self) -> None:
+        """The shared document, its file's text split round the handle seed and the entities."""
         self._doc = new_document(self._layers)
-        stream = dxf_bytes(self._doc).decode(self._doc.output_encoding)
+        text = dxf_bytes(self._doc).decode(self._doc.output_encoding)
         self._seed = str(self._doc.entitydb.handles)
-        seed_line = f"  9\n$HANDSEED\n  5\n{self._seed}\n"
-        head, entities, tail = stream.partition(self._ENTITIES)
-        before_seed, found, after_seed = head.partition(seed_line)
-        empty = "  0\nENDSEC\n"
-        if not (entities and found and tail.startswith(empty)):
+        head, entities, tail = text.partition(self._ENTITIES)
+        before_seed, found, after_seed = head.partition(f"  9\n$HANDSEED\n  5\n{self._seed}\n")
+        if not (entities and found and tail.startswith("  0\nENDSEC\n")):
             raise RuntimeError("ezdxf's file layout changed: SharedDocument cannot find the entities or $HANDSEED")
         self._parts = (before_seed, after_seed + self._ENTITIES, tail)
         self._size = len(self._doc.entitydb)
@@ -132,19 +134,22 @@ class SharedDocument:
 
         doc = self._doc
         msp = doc.modelspace()
-        draw(msp)
-        if len(doc.entitydb) != self._size + len(msp) or len(doc.paperspace()):
-            self.__init__(self._layers)  # type: ignore[misc]  # the document gained more than entities
-            fresh = new_document(self._layers)
-            draw(fresh.modelspace())
-            return save_dxf(fresh, target)
+        text = None
         try:
-            stream = io.StringIO()
-            msp.entity_space.export_dxf(TagWriter(stream, write_handles=True, dxfversion=doc.dxfversion))
-            before_seed, after_seed, tail = self._parts
-            text = f"{before_seed}  9\n$HANDSEED\n  5\n{doc.entitydb.handles}\n{after_seed}{stream.getvalue()}{tail}"
-            return write_bytes_atomic(target, doc.encode(text))
+            draw(msp)
+            if len(doc.entitydb) == self._size + len(msp) and not len(doc.paperspace()):
+                stream = io.StringIO()
+                msp.entity_space.export_dxf(TagWriter(stream, write_handles=True, dxfversion=doc.dxfversion))
+                before_seed, after_seed, tail = self._parts
+                text = (f"{before_seed}  9\n$HANDSEED\n  5\n{doc.entitydb.handles}\n{after_seed}"
+                        f"{stream.getvalue()}{tail}")
         finally:
             msp.delete_all_entities()
             doc.entitydb.purge()  # deleted entities stay in the database until purged
             doc.entitydb.handles.reset(self._seed)
+        if text is None:  # the drawing added more than entities: this file from a fresh document
+            self._make()
+            fresh = new_document(self._layers)
+            draw(fresh.modelspace())
+            return save_dxf(fresh, target)
+        return write_bytes_atomic(target, doc.encode(text))
