@@ -683,24 +683,39 @@ def test_buckling_factors_match_a_dense_eigensolver():
 
 
 def _against_the_dense_eigensolver() -> None:
+    model, supports, loads = _space_frame_of_three_elements()
+    ours = linear_buckling(model, supports, loads, n_modes=6).factors
+    _, minus_KG, K = _free_stiffnesses(model, supports, loads)
+    mu = _dense_mu(minus_KG, K)
+    dense = np.sort(1.0 / mu[mu > 1e-12 * np.abs(mu).max()])[:6]
+    assert len(ours) == 6
+    assert ours == pytest.approx(dense, rel=1e-8)
+
+
+def _space_frame_of_three_elements():
     from dataclasses import replace
 
-    import scipy.linalg as sla
+    model, supports, loads = _space_frame()
+    return replace(model, elements_per_beam=3), supports, loads
 
+
+def _free_stiffnesses(model, supports, loads):
+    """(the linear state, -K_G, K) on the free DOFs (CSR), K_G from the linear axial forces."""
     from engine.linalg import congruent
     from engine.structure import beam_elements, frame
 
-    model, supports, loads = _space_frame()
-    model = replace(model, elements_per_beam=3)
-    ours = linear_buckling(model, supports, loads, n_modes=6).factors
     state = frame._solve_linear(model, supports, loads)
     el, free = state.el, state.free
     K_G_elements = congruent(state.T, beam_elements.geometric_stiffness(state.L, state.local_forces[:, 6], el))
     K_G = beam_elements.assemble(K_G_elements, beam_elements.element_dofs(el.connectivity), len(state.u))
-    mu = sla.eigh(-K_G[free][:, free].toarray(), state.K[free][:, free].toarray(), eigvals_only=True)
-    dense = np.sort(1.0 / mu[mu > 1e-12 * np.abs(mu).max()])[:6]
-    assert len(ours) == 6
-    assert ours == pytest.approx(dense, rel=1e-8)
+    return state, (-K_G[free][:, free]).tocsr(), state.K[free][:, free].tocsr()
+
+
+def _dense_mu(minus_KG, K) -> np.ndarray:
+    """Every mu of -K_G phi = mu K phi, by scipy's dense symmetric solver."""
+    import scipy.linalg as sla
+
+    return sla.eigh(minus_KG.toarray(), K.toarray(), eigvals_only=True)
 
 
 def test_buckling_with_a_rough_estimate_above_the_first_factor_still_finds_every_factor(monkeypatch):
@@ -727,23 +742,13 @@ def test_rough_first_factor_lies_just_above_the_first_factor():
     """The few Lanczos steps' estimate is a Ritz value, so 1 / mu is never below the dense
     lambda_1, and it stops within the 1/0.95 that the shift needs (the loads and their opposites,
     mixed tension and compression, 3 elements per beam)."""
-    from dataclasses import replace
+    from engine.structure import frame
 
-    import scipy.linalg as sla
-
-    from engine.linalg import congruent
-    from engine.structure import beam_elements, frame
-
-    model, supports, loads = _space_frame()
-    model = replace(model, elements_per_beam=3)
+    model, supports, loads = _space_frame_of_three_elements()
     for sign in (1.0, -1.0):
-        state = frame._solve_linear(model, supports, sign * loads)
-        el, free = state.el, state.free
-        K_G_elements = congruent(state.T, beam_elements.geometric_stiffness(state.L, state.local_forces[:, 6], el))
-        K_G = beam_elements.assemble(K_G_elements, beam_elements.element_dofs(el.connectivity), len(state.u))
-        minus_KG, K = (-K_G[free][:, free]).tocsr(), state.K[free][:, free].tocsr()
-        mu = sla.eigh(minus_KG.toarray(), K.toarray(), eigvals_only=True).max()
-        start = np.random.default_rng(0).standard_normal(len(free))
+        state, minus_KG, K = _free_stiffnesses(model, supports, sign * loads)
+        mu = _dense_mu(minus_KG, K).max()
+        start = np.random.default_rng(0).standard_normal(K.shape[0])
         estimate = frame._rough_first_factor(minus_KG, K, state.lu.solve, start)
         assert estimate <= mu * (1 + 1e-9)
         assert estimate >= 0.95 * mu
