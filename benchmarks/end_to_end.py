@@ -3,7 +3,8 @@
 
 Targets: the default job cold under 1 minute, cached under 2 s (issue 16; issue 7 had 2 min and
 5 s); the large job's analysis under 60 s, the whole job under 5 minutes and peak memory under
-4 GiB (issue 16). Each run is a separate `gridshell run` process, so the figures include start-up
+4 GiB (issue 16); the default job's whole output under 60 MB (issue 17: the bytes of its files;
+`du -sb` adds a few kB for the folders). Each run is a separate `gridshell run` process, so the figures include start-up
 and imports, as a user sees them; peak memory is the largest resident set of the run and of the
 worker processes it waited for. The load average is printed before and after the cold run.
 
@@ -93,6 +94,9 @@ def main() -> int:
         optimize = json.loads((out / "05-optimize" / "optimize.json").read_text()).get("after", {})
         print(f"large job: {optimize.get('n_nodes')} nodes, {optimize.get('n_beams')} beams; analysis {analysis:.1f} s "
               f"(target 60 s), whole job {cold:.1f} s (target 300 s), peak {cold_peak / 1024:.2f} GiB (target 4 GiB)")
+    if not args.large:
+        size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
+        print(f"whole output: {size / 1e6:.2f} MB (target under 60 MB)")
     print("cached run statuses: " + ", ".join(f"{k}={v[0]}" for k, v in stages.items()))
     report = out / "report.html"
     print(f"report: {report if report.is_file() else 'missing'}")

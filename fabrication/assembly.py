@@ -35,7 +35,7 @@ import numpy as np
 from engine.errors import InputError, MechanismError
 from engine.mesh import PolyMesh
 from fabrication.drawings import beam_id, node_id, panel_id
-from fabrication.files import atomic_path, write_text_atomic
+from fabrication.files import save_figure_png, write_text_atomic
 
 __all__ = ["AssemblyStep", "AssemblySequence", "plan_assembly", "write_assembly", "partial_frame_deflection",
            "deflections_without_props", "step_groups", "step_image_name", "MAX_STEP_IMAGES"]
@@ -623,8 +623,7 @@ class _StepCanvas:
         deflection = f"{max(analysed) * 1e3:.2f} mm" if analysed else "not analysed"
         self.ax.set_title(f"{text}\nprops: {props} | "
                           f"largest deflection {deflection}", fontsize=9)
-        with atomic_path(target) as tmp:
-            self.figure.savefig(tmp, dpi=100, format="png")
+        save_figure_png(self.figure, target, dpi=100)
 
 
 def _strip(sequence: AssemblySequence, polymesh: PolyMesh, target: Path) -> None:
@@ -641,5 +640,4 @@ def _strip(sequence: AssemblySequence, polymesh: PolyMesh, target: Path) -> None
         _draw_state(fig.add_subplot(rows, cols, j + 1), sequence, polymesh, int(k))
     fig.suptitle(f"{len(picks)} of the {n} steps: built (dark), added in the step (red), supports (blue), "
                  "temporary props (orange)", fontsize=10)
-    with atomic_path(target) as tmp:
-        fig.savefig(tmp, dpi=100, format="png", bbox_inches="tight")
+    save_figure_png(fig, target, dpi=100, bbox_inches="tight")

@@ -47,7 +47,7 @@ from shapely.geometry import MultiPoint, box
 
 from engine.errors import InputError
 from fabrication.dxf import cutting_layers, new_document, save_dxf
-from fabrication.files import atomic_path
+from fabrication.files import save_figure_png
 from fabrication.settings import SheetSettings
 
 from .ids import sheet_id
@@ -597,6 +597,4 @@ def write_contact_sheet(groups: list[tuple[SheetNesting, list["Panel"], int]], p
                      f"{100 * nesting.sheet_utilisation[k]:.0f} % used{grain}",
                      fontsize=max(5.0, min(9.0, 30.0 / cols)))
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    return Path(path)
+    return save_figure_png(fig, path, dpi=110)

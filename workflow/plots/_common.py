@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fabrication.files import atomic_path
+from fabrication.files import save_figure_png
 
 __all__ = ["pyplot", "save_png", "frame_3d"]
 
@@ -22,10 +22,9 @@ def pyplot():
 
 
 def save_png(fig, path: Path, dpi: int = 130) -> Path:
-    """Save ``fig`` as PNG atomically and close it."""
+    """Save ``fig`` as a palette PNG (fabrication.files.figure_png) atomically and close it."""
     plt = pyplot()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=dpi)
+    save_figure_png(fig, path, dpi=dpi)
     plt.close(fig)
     return Path(path)
 

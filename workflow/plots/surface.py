@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from engine.mesh import TriMesh
-from fabrication.files import atomic_path
+from fabrication.files import save_figure_png
 
 from ._common import frame_3d
 
@@ -49,7 +49,6 @@ def plot_surface(mesh: TriMesh, support_nodes: np.ndarray, path: Path, *, title:
     fig.suptitle(title or f"{mesh.name}: {mesh.n_vertices} vertices, {mesh.n_faces} triangles, "
                  f"{len(mesh.boundary_loops)} boundary loop(s)")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
+    save_figure_png(fig, path)
     plt.close(fig)
     return Path(path)

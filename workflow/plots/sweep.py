@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import base64
 import html
-import io
 
 import numpy as np
+
+from fabrication.files import figure_png
 
 from ..labels import format_value
 from ._common import pyplot
@@ -34,10 +35,9 @@ def pareto_front(mass: np.ndarray, factor: np.ndarray) -> np.ndarray:
 
 def _png(fig) -> str:
     plt = pyplot()
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=110)
+    data = figure_png(fig, dpi=110)
     plt.close(fig)
-    return base64.b64encode(buffer.getvalue()).decode("ascii")
+    return base64.b64encode(data).decode("ascii")
 
 
 def _numeric(values) -> bool:
