@@ -560,13 +560,37 @@ def write_sheets_picture(nesting: SheetNesting, panels: list["Panel"], path: str
     return write_contact_sheet([(nesting, panels, first_number)], path, max_sheets=max_sheets)
 
 
+#: The contact sheet's resolution (dots per inch).
+CONTACT_SHEET_DPI = 110
+
+
+def label_place(outline: np.ndarray, size_pt: tuple[float, float], px_per_mm: float,
+                dpi: float) -> tuple[float, float, float] | None:
+    """(x, y, turn): where a label of ``size_pt`` (width, height in points) drawn at ``px_per_mm``
+    pixels per mm goes on the part of ``outline`` ((k, 2) mm): centred on the part's centroid,
+    level where its box lies inside the part, else upright (turn 90 degrees, a slender part) where
+    that does; None where neither does."""
+    part = shapely.Polygon(outline)
+    centre = part.centroid
+    half_w, half_h = 0.5 * size_pt[0] * dpi / 72.0 / px_per_mm, 0.5 * size_pt[1] * dpi / 72.0 / px_per_mm
+    for turn, (dx, dy) in ((0.0, (half_w, half_h)), (90.0, (half_h, half_w))):
+        if part.contains(box(centre.x - dx, centre.y - dy, centre.x + dx, centre.y + dy)):
+            return float(centre.x), float(centre.y), turn
+    return None
+
+
 def write_contact_sheet(groups: list[tuple[SheetNesting, list["Panel"], int]], path: str | os.PathLike, *,
                         max_sheets: int | None = None, columns: int = 4) -> Path:
     """A PNG contact sheet of every sheet of every stock size (``groups``: nesting, its panels and
-    the number of its first sheet), ``columns`` sheets a row, each with its parts, ids and use."""
+    the number of its first sheet), ``columns`` sheets a row, each with its parts, its use and the
+    ids of the parts large enough on the picture to hold theirs (``label_place``; the title says
+    how many are only in the sheet's DXF)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.collections import PolyCollection
     from matplotlib.figure import Figure
+    from matplotlib.font_manager import FontProperties
     from matplotlib.patches import Rectangle
+    from matplotlib.textpath import TextToPath
 
     sheets = [(nesting, panels, first + k, k) for nesting, panels, first in groups for k in range(nesting.n_sheets)]
     sheets = sheets[:max_sheets] if max_sheets is not None else sheets
@@ -575,26 +599,38 @@ def write_contact_sheet(groups: list[tuple[SheetNesting, list["Panel"], int]], p
     rows = -(-count // cols)
     aspect = max((n.settings.height_mm / n.settings.width_mm for n, *_ in sheets), default=0.5)
     cell = 13.0 / cols
-    fig = Figure(figsize=(cell * cols, rows * (cell * aspect + 0.45) + 0.3))
+    fig = Figure(figsize=(cell * cols, rows * (cell * aspect + 0.45) + 0.3), dpi=CONTACT_SHEET_DPI)
     FigureCanvasAgg(fig)
     axes = fig.subplots(rows, cols, squeeze=False).ravel()
     label_size = max(3.0, min(6.0, 24.0 / cols))
+    font, measure = FontProperties(size=label_size), TextToPath()
     for ax in axes:
         ax.set_axis_off()
     for ax, (nesting, panels, number, k) in zip(axes, sheets):
         s = nesting.settings
         ax.add_patch(Rectangle((0, 0), s.width_mm, s.height_mm, fill=False, color="k", lw=0.6))
-        for i in nesting.sheets[k]:
-            outline = nesting.placed_outline(i, panels[i].outline_mm)
-            ax.fill(outline[:, 0], outline[:, 1], color="#9ecae1", ec="#08519c", lw=0.4)
-            centre = outline.mean(axis=0)
-            ax.text(centre[0], centre[1], panels[i].id, fontsize=label_size, ha="center", va="center")
+        outlines = [nesting.placed_outline(i, panels[i].outline_mm) for i in nesting.sheets[k]]
+        # one collection for the sheet's parts (a patch per part took most of a large roof's picture)
+        ax.add_collection(PolyCollection(outlines, facecolors="#9ecae1", edgecolors="#08519c", linewidths=0.4))
         ax.set_xlim(-10, s.width_mm + 10)
         ax.set_ylim(-10, s.height_mm + 10)
         ax.set_aspect("equal")
+        # the scale before the layout, which only enlarges the axes: a label that fits now fits then
+        ax.apply_aspect()
+        px_per_mm = ax.get_window_extent().width / (s.width_mm + 20)
+        hidden = 0
+        for i, outline in zip(nesting.sheets[k], outlines):
+            width, height, _ = measure.get_text_width_height_descent(panels[i].id, font, ismath=False)
+            place = label_place(outline, (width, height), px_per_mm, CONTACT_SHEET_DPI)
+            if place is not None:
+                ax.text(place[0], place[1], panels[i].id, fontsize=label_size, ha="center", va="center",
+                        rotation=place[2], rotation_mode="anchor", in_layout=False)
+            else:
+                hidden += 1
         grain = ", grain \u2192" if _with_grain(panels, nesting.sheets[k]) else ""
+        small = f"\n{hidden} of its ids too small to show here: see its DXF" if hidden else ""
         ax.set_title(f"{sheet_id(number - 1)} ({s.width_mm:g} x {s.height_mm:g} mm): {len(nesting.sheets[k])} parts, "
-                     f"{100 * nesting.sheet_utilisation[k]:.0f} % used{grain}",
+                     f"{100 * nesting.sheet_utilisation[k]:.0f} % used{grain}{small}",
                      fontsize=max(5.0, min(9.0, 30.0 / cols)))
     fig.tight_layout()
-    return save_figure_png(fig, path, dpi=110)
+    return save_figure_png(fig, path, dpi=CONTACT_SHEET_DPI)

@@ -247,6 +247,38 @@ def test_the_contact_sheet_shows_every_sheet_of_every_stock_size(tmp_path, monke
     assert labels == sorted(p.id for p in panels)
 
 
+def test_the_contact_sheet_shows_the_ids_that_fit_and_counts_the_others(tmp_path, monkeypatch):
+    """On a jumbo sheet of small parts and a few large ones, the large parts carry their ids and the
+    small ones, whose ids would run over their neighbours, do not: measured on the picture as
+    drawn (matplotlib's own extents of the text), every id lies inside its own part and no two
+    overlap; the title counts the others. A slender part carries its id upright."""
+    from matplotlib.figure import Figure
+
+    from fabrication.nesting_sheets import write_contact_sheet
+
+    panels = flatten_panels(_rectangles([(900, 700)] * 4 + [(60, 60)] * 300 + [(90, 1200)]),
+                            PanelSettings(clearance_mm=0))
+    nesting = nest_sheets(panels, SheetSettings(width_mm=6000, height_mm=3210))
+    assert nesting.n_sheets == 1
+    figures = []
+    savefig = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig", lambda self, *a, **k: (figures.append(self), savefig(self, *a, **k))[1])
+    write_contact_sheet([(nesting, panels, 1)], tmp_path / "sheets.png")
+    fig = figures[-1]
+    ax = next(a for a in fig.axes if a.get_title())
+    renderer = fig.canvas.get_renderer()
+    by_id = {p.id: nesting.placed_outline(k, p.outline_mm) for k, p in enumerate(panels)}
+    shown = {t.get_text(): t.get_window_extent(renderer) for t in ax.texts}
+    assert sorted(shown) == sorted(p.id for p in panels[:4] + panels[-1:])
+    assert {t.get_text(): t.get_rotation() for t in ax.texts}[panels[-1].id] == 90.0
+    assert ax.get_title().endswith("\n300 of its ids too small to show here: see its DXF")
+    for name, label in shown.items():
+        corners = ax.transData.inverted().transform(label.corners())
+        assert Polygon(by_id[name]).contains(Polygon(corners[[0, 1, 3, 2]])), name
+    boxes = list(shown.values())
+    assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
+
+
 def test_the_default_jobs_panels_fill_at_least_seventy_percent_of_their_sheets():
     """Issue 17's target on the mock-up's own 158 panels (triangles and quadrilaterals of its split
     cells, tests/data/mockup_panels.json) on its 1000 x 600 mm sheets: at least 70 % of the sheets
