@@ -240,29 +240,39 @@ def cylinder_reach_mm(start: float, end: float, axis_along: float, radius: float
     return max(start, end) + radius * math.sqrt(max(0.0, 1.0 - axis_along * axis_along))
 
 
-def joint_reach_mm(geometry: JointGeometry, settings: JointSettings, direction: np.ndarray) -> float:
+def joint_reach_mm(geometry: JointGeometry, settings: JointSettings, direction: np.ndarray) -> float | np.ndarray:
     """How far the joint's solid reaches from its node along the unit ``direction`` (mm): its hub and
     its sleeves (printed sockets) or fin plates (steel), with the dimensions build_joint_and_blank
-    gives them. What a panel resting on the joint clears."""
+    gives them. What a panel resting on the joint clears. ``direction`` (3,) gives a float; (m, 3)
+    directions give (m,) reaches."""
     n = np.asarray(direction, dtype=float)
+    many = n.ndim == 2
+    n = np.atleast_2d(n)
     size = geometry.beam_size_mm
     hub_radius, height = joint_hub_radius_mm(settings, size), geometry_hub_height_mm(settings, geometry)
-    along = float(geometry.axis @ n)
-    reach = cylinder_reach_mm(-0.5 * height * along, 0.5 * height * along, along, hub_radius)
-    setback = geometry_setback_mm(settings, geometry)
-    for d, own in zip(geometry.directions, geometry.sizes_mm):
-        rise = float(d @ n)
+    along = n @ geometry.axis
+    # the hub: a cylinder from -height / 2 to height / 2 along the axis (cylinder_reach_mm)
+    reach = 0.5 * height * np.abs(along) + hub_radius * np.sqrt(np.maximum(0.0, 1.0 - along * along))
+    d = geometry.directions
+    if len(d):
+        setback = geometry_setback_mm(settings, geometry)
+        rise = n @ d.T  # (m, k)
         if settings.kind == "steel":
-            side = _perpendicular(d, geometry.axis)
+            side = _perpendiculars(d, geometry.axis)
             up = np.cross(d, side)
             end = setback + joint_sleeve_mm(settings, size)
             plate = joint_plate_height_mm(settings, size)
-            reach = max(reach, max(0.5 * hub_radius * rise, end * rise) + 0.5 * plate * abs(float(up @ n))
-                        + settings.plate_thickness_mm * abs(float(side @ n)))  # either side of its plane
+            # each plate: its end along the beam, half its height across, its thickness either side
+            plates = (np.maximum(0.5 * hub_radius * rise, end * rise) + 0.5 * plate * np.abs(n @ up.T)
+                      + settings.plate_thickness_mm * np.abs(n @ side.T))
         else:
+            own = geometry.sizes_mm
             outer = 0.5 * own + settings.clearance_mm + settings.wall_mm
-            reach = max(reach, cylinder_reach_mm(0.0, (setback + joint_sleeve_mm(settings, own)) * rise, rise, outer))
-    return float(reach)
+            ends = np.array([setback + joint_sleeve_mm(settings, float(s)) for s in own]) * rise
+            # each sleeve: a cylinder from the node to its end (cylinder_reach_mm)
+            plates = np.maximum(0.0, ends) + outer * np.sqrt(np.maximum(0.0, 1.0 - rise * rise))
+        reach = np.maximum(reach, plates.max(axis=1))
+    return reach if many else float(reach[0])
 
 
 @dataclass(frozen=True)
@@ -520,10 +530,20 @@ def _turned_shape(shape, rotation: np.ndarray):
 
 
 def _perpendicular(direction: np.ndarray, axis: np.ndarray) -> np.ndarray:
-    side = np.cross(axis, direction)
-    if np.linalg.norm(side) < 1e-6:
-        side = np.cross([1.0, 0.0, 0.0] if abs(direction[0]) < 0.9 else [0.0, 1.0, 0.0], direction)
-    return side / np.linalg.norm(side)
+    """The unit normal of a steel joint's fin plate along ``direction``: square to it and to the
+    node's ``axis`` (square to a fixed axis where the two are parallel)."""
+    return _perpendiculars(np.asarray(direction, dtype=float)[None, :], axis)[0]
+
+
+def _perpendiculars(directions: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """``_perpendicular`` of each of the (k, 3) ``directions``."""
+    d = np.asarray(directions, dtype=float)
+    side = np.cross(axis, d)
+    parallel = np.linalg.norm(side, axis=1) < 1e-6
+    if parallel.any():
+        fixed = np.where(np.abs(d[parallel, :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        side[parallel] = np.cross(fixed, d[parallel])
+    return side / np.linalg.norm(side, axis=1)[:, None]
 
 
 def _upright(direction: np.ndarray, axis: np.ndarray) -> np.ndarray:

@@ -226,14 +226,26 @@ def panel_seats(panels: list[Panel], loops: list, geometries: dict, joint_settin
 
     up = np.zeros((len(panels), 3))
     lift = np.zeros(len(panels))
+    corners = [[int(i) for i in loops[panel.face] if int(i) in geometries] for panel in panels]
+    for k, panel in enumerate(panels):
+        normal = np.cross(panel.axes[0], panel.axes[1])
+        if corners[k] and sum(float(geometries[i].axis @ normal) for i in corners[k]) < 0:
+            normal = -normal
+        up[k] = normal
+    # each joint's reach along the normals of all the panels at it, in one call
+    at_node: dict[int, list[int]] = {}
+    for k, nodes in enumerate(corners):
+        for i in nodes:
+            at_node.setdefault(i, []).append(k)
+    joint_reach: dict[tuple[int, int], float] = {}
+    for i, members in at_node.items():
+        for k, r in zip(members, np.atleast_1d(joint_reach_mm(geometries[i], joint_settings, up[members]))):
+            joint_reach[k, i] = float(r)
     for k, panel in enumerate(panels):
         loop = [int(i) for i in loops[panel.face]]
-        normal = np.cross(panel.axes[0], panel.axes[1])
-        joints = [geometries[i] for i in loop if i in geometries]
-        if joints and sum(float(g.axis @ normal) for g in joints) < 0:
-            normal = -normal
+        normal = up[k]
         base = 1e3 * np.asarray(panel.origin_m) @ normal
-        reach = [float(g.position_mm @ normal) - base + joint_reach_mm(g, joint_settings, normal) for g in joints]
+        reach = [float(geometries[i].position_mm @ normal) - base + joint_reach[k, i] for i in corners[k]]
         for a, b in zip(loop, loop[1:] + loop[:1]):
             radius = beam_radii_mm.get((min(a, b), max(a, b)))
             if radius is None or a not in geometries or b not in geometries:
@@ -250,7 +262,7 @@ def panel_seats(panels: list[Panel], loops: list, geometries: dict, joint_settin
             else:
                 along = float((pb - pa) @ normal / np.linalg.norm(pb - pa))
                 reach.append(cylinder_reach_mm(start, end, along, radius))
-        up[k], lift[k] = normal, max(reach, default=0.0)
+        lift[k] = max(reach, default=0.0)
     shift = lift[:, None] * up
     cell = np.arange(len(panels)) if cells is None else np.asarray(cells)
     for c in np.unique(cell):

@@ -1320,3 +1320,32 @@ def test_a_timber_beams_knife_plates_and_their_hub_stay_within_its_depth():
     assert high - low == pytest.approx(1.25 * 120.0, abs=0.5) and high < 100.0 and reach == pytest.approx(high, abs=1.0)
     low, high, reach = extent_along_axis(None)
     assert high - low == pytest.approx(2.5 * 200.0, abs=0.5) and high > 200.0
+
+
+@pytest.mark.parametrize("kind", ["socket", "steel"])
+def test_a_joints_reach_is_its_solids_extent_along_each_direction(kind):
+    """joint_reach_mm against the built solid (OCCT's, its triangulation read at 0.01 mm): along
+    random directions a printed socket reaches exactly as far as its hub and sleeves (within the
+    chord), a steel node no less far than its plates and by at most a plate's thickness more (its
+    rule keeps a thickness either side of each plate's plane). One call for all directions gives
+    the calls for each."""
+    from fabrication.joints import JointGeometry, JointSettings, _tessellate, build_joint, joint_reach_mm
+
+    rng = np.random.default_rng(7)
+    directions = np.array([[1.0, 0.0, 0.15], [-0.45, 0.8, -0.1], [-0.5, -0.85, 0.3]])
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    geometry = JointGeometry(node=0, position_mm=np.zeros(3), directions=directions,
+                             axis=np.array([0.05, -0.1, 1.0]) / np.linalg.norm([0.05, -0.1, 1.0]),
+                             beam_size_mm=48.3 if kind == "steel" else 20.0)
+    settings = JointSettings(kind=kind, engrave=False)
+    vertices, _ = _tessellate(build_joint(geometry, settings)[0].wrapped, 0.01, 0.1, relative=False)
+    looks = rng.normal(size=(40, 3))
+    looks /= np.linalg.norm(looks, axis=1)[:, None]
+    reach = joint_reach_mm(geometry, settings, looks)
+    assert reach.shape == (40,)
+    np.testing.assert_allclose(reach, [joint_reach_mm(geometry, settings, n) for n in looks], rtol=1e-12)
+    extent = (vertices @ looks.T).max(axis=0)
+    if kind == "socket":
+        np.testing.assert_allclose(reach, extent, atol=0.02)
+    else:
+        assert np.all(reach >= extent - 0.02) and np.all(reach <= extent + settings.plate_thickness_mm + 1e-9)
