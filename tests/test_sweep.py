@@ -347,3 +347,51 @@ def test_a_failing_task_is_a_row_and_fails_only_the_points_below_it(tmp_path):
                      parameters={"remesh.seed": [1, 2]})
     row = _row(Point(number=2, values={"remesh.seed": 2}, project=project, folder=child.home), below, spec)
     assert row["status"] == "failed" and row["message"] == failed["message"] and row["lambda_NL_worst"] is None
+
+
+def test_a_task_run_twice_waits_for_the_other_and_reads_its_stages(tmp_path, monkeypatch):
+    """Dask runs a task again when it takes its worker for lost (a paused or cut-off worker goes on
+    with it): the second run waits while the first holds the point's folder, then finds the stages
+    in the cache and reports ok, where it had failed the point with "in use by another run". A
+    folder held for longer than the wait fails the point with that message."""
+    import threading
+
+    from workflow import sweep as sweep_module
+    from workflow.outdir import run_lock
+    from workflow.runner import run_project
+    from workflow.sweep import Task, run_task
+
+    project = load_project(ROOT / "templates" / "mockup.toml")
+    names = [s.name for s in STAGES][:2]
+    home = tmp_path / "points" / "0001"
+    run_project(project, home, STAGES, until=names[-1])  # the first run's stages, done
+    task = Task(id=0, first=0, last=1, points=[1], home=home, project=project, parent=None)
+    monkeypatch.setattr(sweep_module, "TASK_LOCK_POLL_S", 0.05)
+    held, release = threading.Event(), threading.Event()
+
+    def first_run_still_holding():
+        with run_lock(home):
+            held.set()
+            release.wait(10)
+
+    holder = threading.Thread(target=first_run_still_holding)
+    holder.start()
+    held.wait(10)
+    threading.Timer(0.5, release.set).start()
+    result = run_task(task, names)
+    holder.join()
+    assert result["status"] == "ok" and result["seconds"] >= 0.4, result
+    manifest = json.loads((home / "manifest.json").read_text())
+    assert [s["status"] for s in manifest["stages"][:2]] == ["cached", "cached"]
+
+    monkeypatch.setattr(sweep_module, "TASK_LOCK_WAIT_S", 0.2)
+    release.clear()
+    holder = threading.Thread(target=first_run_still_holding)
+    holder.start()
+    held.wait(10)
+    try:
+        result = run_task(task, names)
+    finally:
+        release.set()
+        holder.join()
+    assert result["status"] == "failed" and "in use by another gridshell run" in result["message"]

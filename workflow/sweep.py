@@ -284,24 +284,40 @@ def seed(target: Path, source: Path, names: list[str], project) -> None:
              "stages": ordered}, indent=2))
 
 
+#: How long a task waits (s) for its folder while another process runs it: Dask runs a task again
+#: when it takes a worker for lost (a pause, a network split) although that worker goes on with it.
+TASK_LOCK_WAIT_S = 3600.0
+TASK_LOCK_POLL_S = 2.0
+
+
 def run_task(task: Task, names: list[str], parent: dict | None = None) -> dict:
     """Run one task (on a Dask worker or here): seed its folder from the parent's, run its stages.
-    Returns {"status": "ok" | "failed", "message", "home", "seconds"}; never raises."""
+    Returns {"status": "ok" | "failed", "message", "home", "seconds"}; never raises. Where another
+    process holds the folder (the same task run twice), it waits for it, up to TASK_LOCK_WAIT_S,
+    and then finds its stages in the cache."""
     started = time.perf_counter()
     if parent is not None and parent["status"] != "ok":
         return {**parent, "seconds": 0.0}
     try:
         from threadpoolctl import threadpool_limits
 
+        from .outdir import RunInProgress
         from .progress import Progress
         from .runner import run_project
         from .stages import STAGES
 
-        if parent is not None:
-            seed(task.home, Path(parent["home"]), names[:task.first], task.project)
-        with threadpool_limits(1):
-            summary = run_project(task.project, task.home, STAGES, until=names[task.last],
-                                  progress=Progress(enabled=False))
+        while True:
+            try:
+                if parent is not None:
+                    seed(task.home, Path(parent["home"]), names[:task.first], task.project)
+                with threadpool_limits(1):
+                    summary = run_project(task.project, task.home, STAGES, until=names[task.last],
+                                          progress=Progress(enabled=False))
+                break
+            except RunInProgress:
+                if time.perf_counter() - started > TASK_LOCK_WAIT_S:
+                    raise
+                time.sleep(TASK_LOCK_POLL_S)
         if summary.message:
             raise GridshellError(summary.message)
     except BaseException as exc:  # noqa: BLE001 - a failing point is a row, not the end of the sweep
