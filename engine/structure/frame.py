@@ -240,7 +240,7 @@ def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_
     modes = np.zeros((len(factors), len(state.u)))
     modes[:, free] = vectors.T
     energy = _beam_energy_shares(state.stiffness, modes[0]) if len(factors) else None
-    modes = modes.reshape(len(factors), -1, 6)[:, :el.n_original]
+    modes = modes.reshape(len(factors), len(state.u) // 6, 6)[:, :el.n_original]  # no factor: (0, n, 6)
     peak = np.linalg.norm(modes[:, :, :3], axis=2).max(axis=1)
     modes = modes / np.where(peak > 0, peak, 1.0)[:, None, None]
     return BucklingResult(factors=factors, modes=_signed_modes(modes), beam_energy=energy)
