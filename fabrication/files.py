@@ -86,8 +86,9 @@ def figure_png(fig, **savefig) -> bytes:
     """A matplotlib figure as an 8-bit palette PNG: rendered by Agg (``savefig``'s keywords: dpi,
     bbox_inches...), laid on white, and reduced to PNG_COLOURS colours by median cut without
     dithering. The plots are flat colours, anti-aliased edges and colour maps, so the palette loses
-    nothing one sees (the largest channel step on the default job's 84 pictures is 1/14 of the
-    range, on single edge pixels) and the file is a third of matplotlib's RGBA PNG."""
+    nothing one sees (on the default job's 84 pictures a channel is off by 0.14 of a level on
+    average and by at most 18 of 255 levels at 99.9 % of the pixels), and the file is a third of
+    matplotlib's RGBA PNG."""
     from PIL import Image
 
     buffer = io.BytesIO()
