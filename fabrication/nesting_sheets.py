@@ -617,7 +617,7 @@ def write_contact_sheet(groups: list[tuple[SheetNesting, list["Panel"], int]], p
         ax.set_aspect("equal")
         # the scale before the layout, which only enlarges the axes: a label that fits now fits then
         ax.apply_aspect()
-        px_per_mm = ax.get_window_extent().width / (s.width_mm + 20)
+        px_per_mm = ax.get_window_extent().width / np.ptp(ax.get_xlim())
         hidden = 0
         for i, outline in zip(nesting.sheets[k], outlines):
             width, height, _ = measure.get_text_width_height_descent(panels[i].id, font, ismath=False)

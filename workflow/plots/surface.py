@@ -7,9 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from engine.mesh import TriMesh
-from fabrication.files import save_figure_png
 
-from ._common import frame_3d
+from ._common import frame_3d, save_png
 
 __all__ = ["plot_surface"]
 
@@ -49,6 +48,4 @@ def plot_surface(mesh: TriMesh, support_nodes: np.ndarray, path: Path, *, title:
     fig.suptitle(title or f"{mesh.name}: {mesh.n_vertices} vertices, {mesh.n_faces} triangles, "
                  f"{len(mesh.boundary_loops)} boundary loop(s)")
     fig.tight_layout()
-    save_figure_png(fig, path)
-    plt.close(fig)
-    return Path(path)
+    return save_png(fig, path, dpi=110)
