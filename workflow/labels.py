@@ -55,6 +55,7 @@ LABELS: dict[str, tuple[str, str, float]] = {
     "planarity_p95_rel": ("planarity error (95th percentile) / mean beam", "%", 100.0),
     "closeness_max_rel": ("largest distance to the surface / diagonal", "%", 100.0),
     "closeness_mean_rel": ("mean distance to the surface / diagonal", "%", 100.0),
+    "closeness_max_beam_rel": ("largest distance to the surface / mean beam", "%", 100.0),
     "regularity": ("irregularity (spread of the sides, un-stretched)", "%", 100.0),
     "nonconvex_faces": ("non-convex cells", "", 1.0),
     "folded_cells": ("cells folded over (overlapping a neighbour)", "", 1.0),

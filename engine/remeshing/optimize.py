@@ -13,7 +13,9 @@ compressed monotonically over the whole grid only as far as the joints' shortest
 toward their neighbours' sizes in noise, and the joints' projections lengthened the small cells'
 beams at their neighbours' expense: both lost grading (issue 13); (planarity)
 the nodes projected onto the best-fit plane. Per node: (closeness) the nearest point of the
-reference surface; (fairness) the given position plus the mean of its neighbours' displacements
+reference surface, or the node itself within a band of it (planar panels only: the band lets nodes
+leave the surface as far as planar cells need, and no farther, :func:`closeness_bounds`);
+(fairness) the given position plus the mean of its neighbours' displacements
 (interior nodes): the displacement is smoothed, not the grid, so fairness does not even out the
 cell sizes either.
 
@@ -32,7 +34,8 @@ Constraints: corners and supports are fixed (their DOFs are eliminated); a free 
 moves along the tangent of the surface's boundary polyline at its start position (one DOF) and is
 projected back onto the polyline after each step (exact on straight boundary edges). After each
 step, too, the fabrication limits are projections (:mod:`engine.geometry.projections`): narrow corners
-open to ``min_corner_angle_deg``, short beams lengthen to their buildable length.
+open to ``min_corner_angle_deg``, short beams lengthen to their buildable length, both moving nodes
+along the surface only (its tangent plane at each node).
 
 For planar panels (``planar``) two more steps, both reported in the quality record:
 
@@ -195,6 +198,14 @@ FINAL_HOLD_ROUNDS = 3
 FINAL_PLANARITY = 1.0
 #: Closeness band of the end game, relative to the diagonal (below the hard limit CLOSENESS_LIMIT).
 END_BAND = 0.004
+#: The band, the end game's band and the hard limit relative to the grid's mean beam: each bound is
+#: the smaller of its share of the diagonal and its share of the mean beam. A planar cell of side r
+#: on a surface of radius R stands off it by about r^2 / 2R, some 6 % of r on the 2.4 m mock-up's
+#: 60 cells; bounds from the diagonal alone let a grid of small cells crumple in a band several
+#: times their depth (Hall at 1500 cells: nodes 148 mm off the surface with 0.39 m beams).
+BAND_PER_BEAM = 0.05
+END_BAND_PER_BEAM = 0.08
+LIMIT_PER_BEAM = 0.09
 #: A boundary cell is split where the plane its boundary nodes force on it is farther than this
 #: share of the end game's band from one of its inner nodes (engine.remeshing.boundary_splits).
 SPLIT_HOLD = 0.5
@@ -205,6 +216,28 @@ SPLIT_STRAIGHTNESS = 0.5
 REPAIR_ROUNDS = 2
 
 
+@dataclass(frozen=True, kw_only=True)
+class ClosenessBounds:
+    """How far nodes may stand off the surface (m): ``band``, within which a node of the iterations
+    is its own closeness target (free to leave the surface for planarity); ``end_band``, the end
+    game's band; ``limit``, the hard limit after both."""
+
+    band: float
+    end_band: float
+    limit: float
+
+
+def closeness_bounds(diagonal: float, mean_beam: float, *, planar: bool) -> ClosenessBounds:
+    """The closeness bounds of a grid of mean beam ``mean_beam`` (m) on a surface of bounding-box
+    diagonal ``diagonal`` (m): each the smaller of its share of the diagonal and of the mean beam
+    (CLOSENESS_BAND, END_BAND, CLOSENESS_LIMIT; BAND_PER_BEAM, END_BAND_PER_BEAM, LIMIT_PER_BEAM).
+    Without planar panels the iterations' band is 0: nothing asks a node to leave the surface."""
+    limit = min(CLOSENESS_LIMIT * diagonal, LIMIT_PER_BEAM * mean_beam)
+    end_band = min(END_BAND * diagonal, END_BAND_PER_BEAM * mean_beam)
+    band = min(CLOSENESS_BAND * diagonal, BAND_PER_BEAM * mean_beam) if planar else 0.0
+    return ClosenessBounds(band=band, end_band=end_band, limit=limit)
+
+
 # ----------------------------------------------------------------------------- quality
 
 def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *,
@@ -213,8 +246,9 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *,
     from a cell's best-fit plane), planarity_max_rel, planarity_p95_rel (to the mean beam length),
     regularity (mean over cells of std/mean of edge lengths after un-stretching the cell's own
     anisotropy), closeness_max_rel, closeness_mean_rel (node distance to the surface / bounding-box
-    diagonal, with a mesh), shortest_beam_m, mean_beam_length_m, smallest_angle_deg,
-    nonconvex_faces (cells with a reflex corner in their best-fit plane); with a surface also
+    diagonal, with a mesh; closeness_max_beam_rel: the largest to the mean beam length),
+    shortest_beam_m, mean_beam_length_m, smallest_angle_deg, nonconvex_faces (cells with a reflex
+    corner in their best-fit plane); with a surface also
     folded_cells (cells that, seen along the surface's normal, cross themselves or are turned over,
     so that they overlap a neighbour: engine.geometry.projections.folded_cells)."""
     x = np.asarray(polymesh.nodes, dtype=float)
@@ -263,6 +297,7 @@ def optimize_quality(polymesh: PolyMesh, mesh: TriMesh | None = None, *,
         distance = surface.closest(x)[1]
         out["closeness_max_rel"] = float(distance.max() / surface.diagonal)
         out["closeness_mean_rel"] = float(distance.mean() / surface.diagonal)
+        out["closeness_max_beam_rel"] = float(distance.max() / scale)
         fans = CellFans(polymesh.faces)
         out["folded_cells"] = int(len(folded_cells(x, fans, surface.closest_normals(fans.centroids(x))[1])))
     return out
@@ -368,7 +403,7 @@ class _Problem:
     beam_length_limits: Callable[[PolyMesh], np.ndarray] | None
     system: _GlobalStep
     mean_length: float  # of the grid as given, m
-    band: float  # the closeness band of the iterations, m
+    closeness: ClosenessBounds
 
 
 def _target_areas(groups: dict[int, np.ndarray], grid: PolyMesh, x0: np.ndarray, settings: OptimizeSettings,
@@ -430,11 +465,13 @@ def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, setti
     global step (over the cells that have a node to move only, where nodes are held)."""
     planar_panels = settings.planar and settings.planarity_weight > 0 and settings.iterations > 0
     given = polymesh
+    mean_length = max(before["mean_beam_length_m"], 1e-300)
+    closeness = closeness_bounds(surface.diagonal, mean_length, planar=planar_panels)
     new_beams = np.zeros((0, 2), dtype=np.int64)
     corner_splits = edge_splits = 0
     if planar_panels and settings.split_cells:
         tolerance = settings.planarity_tolerance * before["mean_beam_length_m"]
-        splits = split_boundary_cells(polymesh, hold=SPLIT_HOLD * END_BAND * surface.diagonal,
+        splits = split_boundary_cells(polymesh, hold=SPLIT_HOLD * closeness.end_band,
                                       straightness=SPLIT_STRAIGHTNESS * tolerance)
         polymesh, new_beams = splits.polymesh, splits.new_beams
         corner_splits, edge_splits = splits.corner_splits, splits.edge_splits
@@ -479,7 +516,7 @@ def _set_up(polymesh: PolyMesh, mesh: TriMesh, field: GuidingField | None, setti
                     min_corner=float(np.radians(settings.min_corner_angle_deg)),
                     beam_length_limits=beam_length_limits,
                     system=_global_step_system(settings, groups, polymesh.edges, n, interior, sliding, tangents),
-                    mean_length=max(before["mean_beam_length_m"], 1e-300), band=CLOSENESS_BAND * surface.diagonal)
+                    mean_length=mean_length, closeness=closeness)
 
 
 # ----------------------------------------------------------------------------- (b) local/global iterations
@@ -495,7 +532,12 @@ def _symmetric(p: _Problem, x: np.ndarray) -> np.ndarray:
 
 
 def _hold_limits(p: _Problem, x: np.ndarray, sweeps: int = 3) -> np.ndarray:
-    """x with narrow corners opened and short beams lengthened, boundary nodes back on the boundary."""
+    """x with narrow corners opened and short beams lengthened along the surface, boundary nodes back
+    on the boundary. The moves keep only their part along the surface's tangent plane at each node:
+    where the surface has no room for the beams the joints take, a move out of it would lengthen
+    them by crumpling the grid, and the regularity targets, taken in each cell's own plane, keep a
+    crumple once made."""
+    given = x
     if p.min_corner > 0:
         x = open_narrow_corners(x, p.corners, p.min_corner, p.movable, sweeps=sweeps)
     minimum = p.settings.min_beam_length
@@ -503,6 +545,11 @@ def _hold_limits(p: _Problem, x: np.ndarray, sweeps: int = 3) -> np.ndarray:
         minimum = np.maximum(minimum, p.beam_length_limits(p.polymesh.replace_nodes(x)))
     if np.any(np.asarray(minimum) > 0):
         x = lengthen_short_beams(x, p.polymesh.edges, minimum, p.movable, sweeps=sweeps)
+    moved = np.flatnonzero(np.any(x != given, axis=1))
+    if len(moved):
+        normal = p.surface.closest_normals(given[moved])[1]
+        step = x[moved] - given[moved]
+        x[moved] = given[moved] + step - np.einsum("ij,ij->i", step, normal)[:, None] * normal
     if p.sliding.any():
         x[p.sliding] = p.boundary.closest(x[p.sliding])[0]
     return x
@@ -539,9 +586,9 @@ def _local_step(p: _Problem, x: np.ndarray, t: float, f: float) -> tuple[np.ndar
             target += t * stacked_targets(p.groups, {k: planar_targets(cells) for k, cells in points.items()})
     if p.local:  # the held nodes' targets do not count: their DOFs are not solved for
         node_target = x.copy()
-        node_target[p.movable] = into_band(x[p.movable], *p.surface.closest(x[p.movable]), p.band)
+        node_target[p.movable] = into_band(x[p.movable], *p.surface.closest(x[p.movable]), p.closeness.band)
     else:
-        node_target = into_band(x, *p.surface.closest(x), p.band)
+        node_target = into_band(x, *p.surface.closest(x), p.closeness.band)
     if f > 0:
         # keep_grading: a smooth displacement, so that sizes keep their grading; else the grid
         smooth = p.x0 + s.neighbours @ (x - p.x0) if settings.keep_grading else s.neighbours @ x
@@ -689,8 +736,8 @@ def _end_game(p: _Problem, x: np.ndarray, progress: Callable[[str, float | None]
     for attempt in range(REPAIR_ROUNDS + 1 if p.with_end_game else 0):
         # the tolerance on the grid as split (new beams change the mean beam length)
         tolerance = settings.planarity_tolerance * float(polymesh.beam_lengths.mean())
-        end_settings = PlanariseSettings(tolerance=tolerance, band=END_BAND * surface.diagonal,
-                                         limit=CLOSENESS_LIMIT * surface.diagonal,
+        end_settings = PlanariseSettings(tolerance=tolerance, band=p.closeness.end_band,
+                                         limit=p.closeness.limit,
                                          regularity_weight=SHAPE_SCALE * settings.regularity_weight,
                                          closeness_weight=settings.closeness_weight,
                                          iterations=settings.planarity_iterations,
@@ -745,7 +792,7 @@ def _within_closeness_limit(p: _Problem, x: np.ndarray) -> tuple[np.ndarray, boo
     """(x with the nodes beyond the hard closeness limit brought back to it: the band is a soft
     constraint, whether that left the reals: then x as it was). With symmetry planes the nodes are
     made symmetric after, and the two are repeated (CLOSENESS_ROUNDS at most) until both hold."""
-    limit = CLOSENESS_LIMIT * p.surface.diagonal
+    limit = p.closeness.limit
     banded = x.copy()
     for _ in range(CLOSENESS_ROUNDS if p.partners is not None else 1):
         banded[p.movable] = into_band(banded[p.movable], *p.surface.closest(banded[p.movable]), limit)

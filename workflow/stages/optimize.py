@@ -17,7 +17,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from engine.findings import Finding
-from engine.geometry.projections import CellFans, folded_cells
+from engine.geometry.projections import CellFans, folded_cells, unfolded
 from engine.geometry.symmetry import symmetrised_grid, symmetry_record
 from engine.mesh import PolyMesh, neighbour_lists, node_adjacency
 from engine.remeshing.collapse import (
@@ -73,7 +73,7 @@ LAST_RESORT_ROUNDS = 5
 REOPTIMISED_RINGS = 3
 
 __all__ = ["OptimizedGrid", "run", "load", "optimize_settings", "panel_pieces_of", "write_panels_obj",
-           "read_panels_obj"]
+           "read_panels_obj", "onto_surface"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -192,6 +192,7 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: RemeshedGrid, proje
                  f"optimising {when}")
         # round the changes only (with symmetry planes all of it: the mirror pairs move together)
         held = None if settings.symmetry_planes else ~changed_region(result.polymesh, grid)
+        grid = onto_surface(grid, changed_region(result.polymesh, grid, rings=0), surface)
         again, _ = _optimised(grid, surface, field, dataclasses.replace(settings, split_cells=False), limits, ctx,
                               held=held)
         return dataclasses.replace(result, polymesh=again.polymesh, quality={
@@ -263,6 +264,21 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: RemeshedGrid, proje
     plot_gridshell(result.polymesh, ctx.folder / "degree.png", color_by="degree",
                    title=f"{project.project.name}: optimised grid-shell, cells by number of sides")
     return OptimizedGrid(polymesh=result.polymesh, pieces=pieces)
+
+
+def onto_surface(grid: PolyMesh, nodes: np.ndarray, surface: SurfaceResult) -> PolyMesh:
+    """``grid`` with its interior ``nodes`` ((n_nodes,) bool) at their closest points on the surface,
+    but for the nodes of cells that the move would fold: a flip turns its beam across in the plane
+    of its cells and a collapse merges at the midpoint, both off a curved surface, and the optimiser
+    pulls nodes back only as strongly as its closeness weight."""
+    free = np.asarray(nodes, dtype=bool) & ~(grid.boundary | grid.supports | grid.corners)
+    if not free.any():
+        return grid
+    closest = ClosestSurfacePoints(surface.mesh)
+    x = np.array(grid.nodes, dtype=float)
+    x[free] = closest.closest(x[free])[0]
+    fans = CellFans(grid.faces)
+    return grid.replace_nodes(unfolded(grid.nodes, x, fans, closest.closest_normals(fans.centroids(grid.nodes))[1]))
 
 
 def without_unbuildable_beams(result: OptimizeResult, project: Project, surface: SurfaceResult,
