@@ -215,7 +215,7 @@ GRID_KEYS = ("hexagon_share_interior", "valence3_share_interior", "size_correlat
              "achieved_max_aspect", "n_nodes", "n_beams", "n_faces", "total_length_m", "mean_beam_length_m",
              "shortest_beam_m", "smallest_angle_deg")
 OPTIMIZE_KEYS = ("nonconvex_faces", "folded_cells", "regularity", "planarity_max_m", "planarity_p95_m",
-                 "planarity_max_rel", "closeness_max_rel", "closeness_mean_rel")
+                 "planarity_max_rel", "closeness_max_rel", "closeness_mean_rel", "closeness_max_beam_rel")
 
 
 def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
