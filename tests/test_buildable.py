@@ -591,3 +591,40 @@ def test_nodes_that_collapses_and_flips_moved_go_back_onto_the_surface():
     assert np.allclose(snapped.nodes[interior[:5]], grid.nodes[interior[:5]], atol=1e-12)
     kept = ~moved | grid.boundary
     assert np.array_equal(snapped.nodes[kept], lifted[kept])
+
+
+def test_collapses_and_flips_judged_along_the_surfaces_normals_either_way_round():
+    """With the surface's normals given (engine.remeshing.collapse.Normals), a collapse or flip is
+    judged against them at each cell instead of the cells' summed normal: on a flat honeycomb, whose
+    surface normal is the summed one, the dozen short beams go the same way, and the same again with
+    the normals turned over (the cells then turn the other way about them, which the judgement
+    allows for). The arc's thin triangle of the test above still takes the second end's place."""
+    grid = _honeycomb(8, 8)
+    rng = np.random.default_rng(3)
+    x = grid.nodes.copy()
+    interior = np.flatnonzero(~grid.boundary[grid.edges].any(axis=1))
+    moved = set()
+    for beam in rng.choice(interior, 12, replace=False):
+        a, b = grid.edges[beam]
+        if a in moved or b in moved:
+            continue
+        x[b] = x[a] + 0.1 * (x[b] - x[a])
+        moved.update((a, b))
+    grid = grid.replace_nodes(x)
+    required = lambda g: np.full(len(g.edges), 0.5)  # noqa: E731
+    plain, report = collapse_short_beams(grid, required)
+    for sign in (1.0, -1.0):
+        along, report_along = collapse_short_beams(grid, required,
+                                                   normals=lambda p, s=sign: np.tile([0.0, 0.0, s], (len(p), 1)))
+        assert np.array_equal(along.nodes, plain.nodes) and [f.tolist() for f in along.faces] == [
+            f.tolist() for f in plain.faces]
+        assert report_along.to_dict() == report.to_dict()
+    arc = [np.radians(100), np.radians(90), np.radians(60)]
+    nodes = np.array([[np.cos(t), np.sin(t), 0.0] for t in arc] + [[0.25, 0.925, 0.0], [0.0, 0.5, 0.0]])
+    thin = PolyMesh(nodes=nodes, faces=(np.array([0, 4, 3, 1]), np.array([3, 2, 1]), np.array([4, 2, 3])),
+                    boundary=np.array([True, True, True, False, True]))
+    beam = int(np.flatnonzero((np.sort(thin.edges, axis=1) == [0, 1]).all(axis=1))[0])
+    for sign in (1.0, -1.0):
+        merged, count = collapse_beams(thin, np.array([beam]),
+                                       normals=lambda p, s=sign: np.tile([0.0, 0.0, s], (len(p), 1)))
+        assert count == 1 and np.any(np.all(np.isclose(merged.nodes, nodes[1]), axis=1)), "not at the midpoint"

@@ -40,9 +40,11 @@ import numpy as np
 from ..geometry.projections import CellFans
 from ..mesh import PolyMesh, neighbour_lists
 
-__all__ = ["CollapseReport", "collapse_beams", "flip_beams", "flip_defects", "collapse_short_beams", "remove_beams",
-           "remove_short_beams", "open_narrow_joints", "dissolve_kinks", "MAX_VALENCE"]
+__all__ = ["CollapseReport", "Normals", "collapse_beams", "flip_beams", "flip_defects", "collapse_short_beams",
+           "remove_beams", "remove_short_beams", "open_narrow_joints", "dissolve_kinks", "MAX_VALENCE"]
 
+#: The surface's unit normals (p, 3) at points (p, 3): what a collapse or flip may fold no cell along.
+Normals = Callable[[np.ndarray], np.ndarray]
 #: Most beams a merged node may have (a joint with more is crowded, its angles small).
 MAX_VALENCE = 5
 #: Most beams a merged node on the boundary may have: two of them run along the boundary, so the
@@ -90,7 +92,8 @@ def _rank(polymesh: PolyMesh) -> np.ndarray:
     return np.select([polymesh.corners, polymesh.supports, polymesh.boundary], [3, 2, 1], 0)
 
 
-def collapse_beams(polymesh: PolyMesh, beams: np.ndarray, *, merge_corners: bool = False) -> tuple[PolyMesh, int]:
+def collapse_beams(polymesh: PolyMesh, beams: np.ndarray, *, merge_corners: bool = False,
+                   normals: Normals | None = None) -> tuple[PolyMesh, int]:
     """Collapse, in the order given, those of ``beams`` (indices into ``polymesh.edges``) that can be
     collapsed validly and touch no node near an earlier collapse of this call. Returns the new grid
     (unused nodes dropped, the others renumbered in order) and the number collapsed.
@@ -98,7 +101,8 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray, *, merge_corners: bool
     ``merge_corners``: two corners may merge along a boundary beam where one of them holds that
     beam and one other only (a corner of the outline with no inner beam): it goes, and the other
     corner stays where it is. For the last resort, where two corners lie closer than a beam can be
-    built: the outline is cut at the corner by less than that beam."""
+    built: the outline is cut at the corner by less than that beam. ``normals``: the surface's unit
+    normals at points, along which a collapse may fold no cell (None: the cells' summed normal)."""
     edges = polymesh.edges
     n = polymesh.n_nodes
     faces, node_faces = _cells_at_nodes(polymesh)
@@ -163,7 +167,7 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray, *, merge_corners: bool
         for loop in before:
             loop = [keep if v == drop else v for v in loop]
             after.append([v for j, v in enumerate(loop) if v != loop[j - 1]])
-        chosen = _first_unfolding(x, before, after, [{keep: np.array(p, dtype=float)} for p in places])
+        chosen = _first_unfolding(x, before, after, [{keep: np.array(p, dtype=float)} for p in places], normals)
         if chosen is None:
             continue
         x[keep] = chosen[keep]
@@ -197,28 +201,33 @@ def collapse_beams(polymesh: PolyMesh, beams: np.ndarray, *, merge_corners: bool
 
 
 def _folded_count(x: np.ndarray, fans: CellFans, up: np.ndarray) -> int:
-    """How many of the cells of ``fans`` are folded at x seen along ``up`` ((3,) unit): they do not
-    turn once about it, or their vector area turns against it (the optimiser's own test)."""
-    along = np.broadcast_to(up, (fans.n_cells, 3))
-    return int(np.count_nonzero((fans.windings(x, along) != 1) | (fans.normals(x) @ up <= 0)))
+    """How many of the cells of ``fans`` are folded at x seen along ``up`` ((cells, 3) unit): they do
+    not turn once about it, or their vector area turns against it (the optimiser's own test)."""
+    return int(np.count_nonzero((fans.windings(x, up) != 1) | (np.einsum("ij,ij->i", fans.normals(x), up) <= 0)))
 
 
 def _first_unfolding(x: np.ndarray, before: list[list[int]], after: list[list[int]],
-                     candidates: list[dict[int, np.ndarray]]) -> dict[int, np.ndarray] | None:
+                     candidates: list[dict[int, np.ndarray]], normals: Normals | None = None
+                     ) -> dict[int, np.ndarray] | None:
     """The first of ``candidates`` (new places of some nodes) at which the cells ``after`` (node
-    loops) fold no more than the cells ``before`` did at x, or None. The cells are seen along their
-    summed vector area at x (engine.remeshing.collapse knows no surface)."""
+    loops) fold no more than the cells ``before`` did at x, or None. The cells are seen along the
+    surface's ``normals`` at their centroids at x, or without them along their summed vector area."""
     before, after = ([loop for loop in loops if len(loop) >= 3] for loops in (before, after))
-    fans = CellFans(before)
-    up = fans.normals(x).sum(axis=0)
-    up /= max(float(np.linalg.norm(up)), 1e-300)
-    folded_before = _folded_count(x, fans, up)
-    after_fans = CellFans(after)
+    fans, after_fans = CellFans(before), CellFans(after)
+    if normals is None:
+        up = fans.normals(x).sum(axis=0)
+        up /= max(float(np.linalg.norm(up)), 1e-300)
+        up_before, up_after = (np.broadcast_to(up, (f.n_cells, 3)) for f in (fans, after_fans))
+    else:
+        up_before, up_after = normals(fans.centroids(x)), normals(after_fans.centroids(x))
+        if np.einsum("ij,ij->", fans.normals(x), up_before) < 0:  # the cells turn the other way about them
+            up_before, up_after = -up_before, -up_after
+    folded_before = _folded_count(x, fans, up_before)
     trial = x.copy()
     for places in candidates:
         for node, place in places.items():
             trial[node] = place
-        if _folded_count(trial, after_fans, up) <= folded_before:
+        if _folded_count(trial, after_fans, up_after) <= folded_before:
             return places
     return None
 
@@ -250,7 +259,8 @@ def _insert_between(loop: list[int], a: int, b: int, new: int) -> None:
     loop.insert(len(loop) if (i, j) == (0, len(loop) - 1) else j, new)
 
 
-def flip_beams(polymesh: PolyMesh, beams: np.ndarray, lengths: np.ndarray) -> tuple[PolyMesh, int, np.ndarray]:
+def flip_beams(polymesh: PolyMesh, beams: np.ndarray, lengths: np.ndarray, *,
+               normals: Normals | None = None) -> tuple[PolyMesh, int, np.ndarray]:
     """Flip (T1), in the order given, those of ``beams`` that join two interior three-beam nodes,
     whose two cells and two end cells have the sides of FLIP_SIDES, where the four cells around
     the beam are distinct and the two end cells share no node, touching no node near an earlier
@@ -297,7 +307,7 @@ def flip_beams(polymesh: PolyMesh, beams: np.ndarray, lengths: np.ndarray) -> tu
         across /= max(np.linalg.norm(across), 1e-300)
         halves = [0.5 * share * float(lengths[beam]) for share in FLIP_SHARES]
         chosen = _first_unfolding(x, [faces[i] for i in around], loops,
-                                  [{p: centre - half * across, q: centre + half * across} for half in halves])
+                                  [{p: centre - half * across, q: centre + half * across} for half in halves], normals)
         if chosen is None:  # every share folds the four cells
             continue
         x[p], x[q] = chosen[p], chosen[q]
@@ -352,11 +362,14 @@ def flip_defects(polymesh: PolyMesh) -> tuple[PolyMesh, int]:
 
 
 def collapse_short_beams(polymesh: PolyMesh, required: Callable[[PolyMesh], np.ndarray], *,
-                         max_passes: int = 50, flip: bool = True) -> tuple[PolyMesh, CollapseReport]:
+                         max_passes: int = 50, flip: bool = True,
+                         normals: Normals | None = None) -> tuple[PolyMesh, CollapseReport]:
     """Remove beams shorter than ``required(grid)`` ((n_beams,) m, evaluated on the grid as it is at
     each pass), shortest relative to its requirement first, until none is left or none can go:
     each pass flips those that can be flipped (``flip``, :func:`flip_beams`, at FLIP_MARGIN times
-    their requirement), then collapses the others. A beam once flipped is not flipped again."""
+    their requirement), then collapses the others. A beam once flipped is not flipped again.
+    ``normals``: the surface's, along which no flip or collapse may fold a cell (None: each one's
+    cells' summed normal)."""
     total, flips, passes, left = 0, 0, 0, None
     done_flips: set[tuple[int, int]] = set()
     for passes in range(1, max_passes + 1):
@@ -371,12 +384,12 @@ def collapse_short_beams(polymesh: PolyMesh, required: Callable[[PolyMesh], np.n
         if flip:
             pairs = [tuple(sorted(map(int, polymesh.edges[b]))) for b in order]
             candidates = np.array([b for b, e in zip(order, pairs) if e not in done_flips], dtype=np.int64)
-            polymesh, done, new = flip_beams(polymesh, candidates, FLIP_MARGIN * need)
+            polymesh, done, new = flip_beams(polymesh, candidates, FLIP_MARGIN * need, normals=normals)
             flips += done
             done_flips.update((min(e), max(e)) for e in (tuple(map(int, polymesh.edges[b])) for b in new))
         if done:  # the next pass sees the flipped grid, and collapses what could not be flipped
             continue
-        polymesh, done = collapse_beams(polymesh, order)
+        polymesh, done = collapse_beams(polymesh, order, normals=normals)
         total += done
         if not done:  # the grid is unchanged: these are the beams left
             left = short

@@ -180,7 +180,12 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: RemeshedGrid, proje
         settings = dataclasses.replace(settings, min_beam_length=0.0)
         result = optimize(polymesh, surface.mesh, field, settings, progress=ctx.step)
     # fabrication limits: collapse what the optimiser made too short, then optimise again
-    grid, buildable = buildable_grid(result.polymesh, project)
+    closest = ClosestSurfacePoints(surface.mesh)
+
+    def normals(points: np.ndarray) -> np.ndarray:
+        return closest.closest_normals(points)[1]
+
+    grid, buildable = buildable_grid(result.polymesh, project, normals=normals)
     rounds, collapsed, flipped = 0, buildable["collapsed_beams"], buildable["flipped_beams"]
 
     def changed(record: dict) -> int:
@@ -201,7 +206,7 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: RemeshedGrid, proje
     while changed(buildable) and rounds < BUILDABLE_ROUNDS:
         rounds += 1
         result = reoptimised(result, grid, buildable, f"again ({rounds})")
-        grid, buildable = buildable_grid(result.polymesh, project)
+        grid, buildable = buildable_grid(result.polymesh, project, normals=normals)
         collapsed += buildable["collapsed_beams"]
         flipped += buildable["flipped_beams"]
     if changed(buildable):

@@ -21,7 +21,7 @@ import numpy as np
 from engine.findings import Finding
 from engine.geometry.symmetry import symmetrised_grid, symmetry_record
 from engine.mesh import PolyMesh
-from engine.remeshing.collapse import CollapseReport, collapse_short_beams
+from engine.remeshing.collapse import CollapseReport, Normals, collapse_short_beams
 from engine.remeshing.field import GuidingField, guiding_field
 from engine.remeshing.grid_quality import polymesh_quality
 from engine.remeshing.grids import LATTICES, GridKind, isotropic_field
@@ -230,19 +230,22 @@ def buildable_as_remeshed(project: Project) -> Callable[[PolyMesh], PolyMesh]:
     return lambda grid: buildable_grid(grid, project, share=REMESH_SHARE)[0]
 
 
-def buildable_grid(polymesh: PolyMesh, project: Project, share: float = 1.0) -> tuple[PolyMesh, dict]:
+def buildable_grid(polymesh: PolyMesh, project: Project, share: float = 1.0, *,
+                   normals: Normals | None = None) -> tuple[PolyMesh, dict]:
     """(grid, record): ``polymesh`` with every beam shorter than ``share`` times what its joints and
     the shortest cut take flipped or collapsed where a valid flip or collapse exists
     (engine.remeshing.collapse); the record (JSON-ready) has the limits, the collapses and flips, the
     shortest beam and the smallest angle between two beams at a node. When more than
-    MAX_COLLAPSE_SHARE of the beams are short, nothing is changed and ``too_fine`` is set."""
+    MAX_COLLAPSE_SHARE of the beams are short, nothing is changed and ``too_fine`` is set. ``normals``:
+    the surface's unit normals at points, along which no flip or collapse may fold a cell."""
     limits = build_limits_of(project)
     short = short_beams(polymesh, project)
     too_fine = bool(short.mean() > MAX_COLLAPSE_SHARE) if len(short) else False
     if too_fine:
         grid, report = polymesh, CollapseReport(collapsed=0, passes=0, left=np.flatnonzero(short))
     else:
-        grid, report = collapse_short_beams(polymesh, lambda g: share * required_beam_lengths_m(g, limits))
+        grid, report = collapse_short_beams(polymesh, lambda g: share * required_beam_lengths_m(g, limits),
+                                            normals=normals)
     record = {**limits.to_dict(), **report.to_dict(), "too_fine": too_fine, "removed_under_share": share,
               "short_share_before": float(short.mean()) if len(short) else 0.0,
               **grid_figures(grid)}
