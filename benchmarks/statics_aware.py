@@ -61,18 +61,28 @@ COLUMNS = ("name", "cells", "hexagons", "valence3", "nonconvex", "worst_corner_d
            "short_left", "missed", "status")
 
 
-def panel_figures(path: Path) -> tuple[float, float, float, float]:
-    """(share of non-convex panels, largest corner in degrees, largest planarity / mean beam, mean
-    beam m) of a panels.obj."""
+def obj_loops(path: Path) -> tuple[np.ndarray, list[list[int]]]:
+    """(nodes (n, 3), face loops of 0-based node ids) of an OBJ file the stages wrote."""
     nodes, loops = [], []
     for line in path.read_text(encoding="ascii").splitlines():
         if line.startswith("v "):
             nodes.append([float(t) for t in line.split()[1:4]])
         elif line.startswith("f "):
             loops.append([int(t) - 1 for t in line.split()[1:]])
-    x = np.array(nodes)
+    return np.array(nodes), loops
+
+
+def mean_edge(x: np.ndarray, loops: list[list[int]]) -> float:
+    """The mean length of the loops' edges, each counted once (m)."""
     edges = {tuple(sorted((a, b))) for loop in loops for a, b in zip(loop, loop[1:] + loop[:1])}
-    mean_beam = float(np.mean([np.linalg.norm(x[a] - x[b]) for a, b in edges]))
+    return float(np.mean([np.linalg.norm(x[a] - x[b]) for a, b in edges]))
+
+
+def panel_figures(path: Path) -> tuple[float, float, float, float]:
+    """(share of non-convex panels, largest corner in degrees, largest planarity / mean beam, mean
+    beam m) of a panels.obj."""
+    x, loops = obj_loops(path)
+    mean_beam = mean_edge(x, loops)
     nonconvex, worst, planarity = 0, 0.0, 0.0
     for loop in loops:
         p = x[loop]
@@ -95,16 +105,7 @@ def closeness_to_beam(run_dir: Path) -> float:
     crumpled within the closeness band stands off by a large share of its beams."""
     import trimesh
 
-    nodes, edges = [], set()
-    for line in (run_dir / "05-optimize" / "gridshell.obj").read_text(encoding="ascii").splitlines():
-        if line.startswith("v "):
-            nodes.append([float(t) for t in line.split()[1:4]])
-        elif line.startswith("f ") or line.startswith("l "):
-            loop = [int(t.split("/")[0]) - 1 for t in line.split()[1:]]
-            pairs = zip(loop, loop[1:] + loop[:1]) if line.startswith("f ") else zip(loop, loop[1:])
-            edges.update(tuple(sorted(e)) for e in pairs)
-    x = np.array(nodes)
-    beams = np.array(sorted(edges))
+    x, loops = obj_loops(run_dir / "05-optimize" / "gridshell.obj")  # its beams are the cells' edges
     surface = trimesh.load(run_dir / "01-surface" / "surface.ply", process=False, force="mesh")
     triangles = surface.triangles
     distance = np.zeros(len(x))
@@ -115,7 +116,7 @@ def closeness_to_beam(run_dir: Path) -> float:
                                                   np.repeat(part, len(triangles), axis=0))
         gap = np.linalg.norm(closest - np.repeat(part, len(triangles), axis=0), axis=1)
         distance[start:start + chunk] = gap.reshape(len(part), len(triangles)).min(axis=1)
-    return float(distance.max() / np.linalg.norm(x[beams[:, 1]] - x[beams[:, 0]], axis=1).mean())
+    return float(distance.max() / mean_edge(x, loops))
 
 
 def roofs(n_generated: int, out: Path, first_seed: int = 0,

@@ -128,21 +128,25 @@ def test_collapse_keeps_a_valid_mesh_and_merges_to_the_midpoint():
     assert np.isclose(result.total_length, grid.total_length - lengths[beam] - old + new)
 
 
-def test_short_beams_collapse_until_none_is_shorter_than_required():
+def _shortened_honeycomb() -> PolyMesh:
+    """An 8 x 8 honeycomb with a dozen interior beams shortened to a tenth (one end moved towards
+    the other)."""
     grid = _honeycomb(8, 8)
     rng = np.random.default_rng(3)
     x = grid.nodes.copy()
-    # shorten a dozen interior beams to a tenth by moving one end towards the other
     interior = np.flatnonzero(~grid.boundary[grid.edges].any(axis=1))
-    chosen = rng.choice(interior, 12, replace=False)
     moved = set()
-    for beam in chosen:
+    for beam in rng.choice(interior, 12, replace=False):
         a, b = grid.edges[beam]
         if a in moved or b in moved:
             continue
         x[b] = x[a] + 0.1 * (x[b] - x[a])
         moved.update((a, b))
-    grid = grid.replace_nodes(x)
+    return grid.replace_nodes(x)
+
+
+def test_short_beams_collapse_until_none_is_shorter_than_required():
+    grid = _shortened_honeycomb()
     required = lambda g: np.full(len(g.edges), 0.5)  # noqa: E731
     result, report = collapse_short_beams(grid, required)
     _check_valid(result)
@@ -570,9 +574,8 @@ def test_nodes_that_collapses_and_flips_moved_go_back_onto_the_surface():
     back only as strongly as its closeness weight (a 1500-cell roof kept nodes 116 mm off after its
     flips). onto_surface puts the nodes it is given at their closest surface points, here a plane at
     z = 0; boundary nodes, supports and the nodes not given stay where they are."""
-    from types import SimpleNamespace
-
     from engine.mesh import TriMesh
+    from engine.remeshing.local_global import ClosestSurfacePoints
     from workflow.stages.optimize import onto_surface
 
     grid = _honeycomb(6, 6)
@@ -587,7 +590,7 @@ def test_nodes_that_collapses_and_flips_moved_go_back_onto_the_surface():
     lifted[moved, 2] = 0.3
     lifted[interior[5], 2] = 0.2  # off the surface, but not given
     off = grid.replace_nodes(lifted)
-    snapped = onto_surface(off, moved, SimpleNamespace(mesh=plane))
+    snapped = onto_surface(off, moved, ClosestSurfacePoints(plane))
     assert np.allclose(snapped.nodes[interior[:5]], grid.nodes[interior[:5]], atol=1e-12)
     kept = ~moved | grid.boundary
     assert np.array_equal(snapped.nodes[kept], lifted[kept])
@@ -599,18 +602,7 @@ def test_collapses_and_flips_judged_along_the_surfaces_normals_either_way_round(
     surface normal is the summed one, the dozen short beams go the same way, and the same again with
     the normals turned over (the cells then turn the other way about them, which the judgement
     allows for). The arc's thin triangle of the test above still takes the second end's place."""
-    grid = _honeycomb(8, 8)
-    rng = np.random.default_rng(3)
-    x = grid.nodes.copy()
-    interior = np.flatnonzero(~grid.boundary[grid.edges].any(axis=1))
-    moved = set()
-    for beam in rng.choice(interior, 12, replace=False):
-        a, b = grid.edges[beam]
-        if a in moved or b in moved:
-            continue
-        x[b] = x[a] + 0.1 * (x[b] - x[a])
-        moved.update((a, b))
-    grid = grid.replace_nodes(x)
+    grid = _shortened_honeycomb()
     required = lambda g: np.full(len(g.edges), 0.5)  # noqa: E731
     plain, report = collapse_short_beams(grid, required)
     for sign in (1.0, -1.0):

@@ -197,7 +197,7 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: RemeshedGrid, proje
                  f"optimising {when}")
         # round the changes only (with symmetry planes all of it: the mirror pairs move together)
         held = None if settings.symmetry_planes else ~changed_region(result.polymesh, grid)
-        grid = onto_surface(grid, changed_region(result.polymesh, grid, rings=0), surface)
+        grid = onto_surface(grid, changed_region(result.polymesh, grid, rings=0), closest)
         again, _ = _optimised(grid, surface, field, dataclasses.replace(settings, split_cells=False), limits, ctx,
                               held=held)
         return dataclasses.replace(result, polymesh=again.polymesh, quality={
@@ -271,15 +271,14 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: RemeshedGrid, proje
     return OptimizedGrid(polymesh=result.polymesh, pieces=pieces)
 
 
-def onto_surface(grid: PolyMesh, nodes: np.ndarray, surface: SurfaceResult) -> PolyMesh:
-    """``grid`` with its interior ``nodes`` ((n_nodes,) bool) at their closest points on the surface,
+def onto_surface(grid: PolyMesh, nodes: np.ndarray, closest: ClosestSurfacePoints) -> PolyMesh:
+    """``grid`` with its interior ``nodes`` ((n_nodes,) bool) at their ``closest`` points on the surface,
     but for the nodes of cells that the move would fold: a flip turns its beam across in the plane
     of its cells and a collapse merges at the midpoint, both off a curved surface, and the optimiser
     pulls nodes back only as strongly as its closeness weight."""
     free = np.asarray(nodes, dtype=bool) & ~(grid.boundary | grid.supports | grid.corners)
     if not free.any():
         return grid
-    closest = ClosestSurfacePoints(surface.mesh)
     x = np.array(grid.nodes, dtype=float)
     x[free] = closest.closest(x[free])[0]
     fans = CellFans(grid.faces)
