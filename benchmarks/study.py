@@ -26,8 +26,11 @@ non-linear load factor of the imperfection protocol (lambda_NL_worst), the linea
 and the size rank correlation of the optimised grid with the field, and the largest deviation of
 L_tot from its row's target, after a table of verdicts (design against reference, at how many
 surface and length pairs it is higher). OUT/study.csv has every point, OUT/study_summary.csv the
-table rows; OUT/spacing.png and OUT/designs.png plot them. Sweeps already run are read from their
-cache, so a rerun only adds what is missing (a new surface, seed or question).
+table rows; OUT/spacing.png and OUT/designs.png plot them. Last, a table per roof (OUT/study_roofs.csv,
+plotted in OUT/roofs.png): what the roof is (span, rise, curvature, supports, the shell's membrane
+forces and eccentricity, the field's aspect) beside the default design's load factor over the quad
+grid's and over the control's, to say where the claim holds and why. Sweeps already run are read
+from their cache, so a rerun only adds what is missing (a new surface, seed or question).
 """  # noqa: E501 (Markdown table rows, which cannot be wrapped)
 
 from __future__ import annotations
@@ -295,6 +298,83 @@ def verdicts(lines: list[dict]) -> str:
     return "\n".join(out)
 
 
+def roof_descriptors(surface_dir: Path) -> dict | None:
+    """What a roof is, from the shared stages of its spacing sweep (the first point's surface, shell
+    and field; None before they exist): plan span (m, the larger side of the plan's box), rise over
+    span, the share of its area that is anticlastic (negative angle defect at the vertex), the share
+    of its boundary nodes supported, the shares of its area where the shell's principal membrane
+    forces are both compressive and of opposite signs (a force within 2 % of the roof's median
+    largest magnitude counts as zero), the median eccentricity |M| / |N| of the shell's moments (mm)
+    and the field's mean aspect."""
+    import trimesh
+
+    points = sorted((surface_dir / "spacing" / "voronoi" / "out" / "points").glob("*/02-shell/shell.npz"))
+    if not points:
+        return None
+    point = points[0].parents[1]
+    mesh = trimesh.load(point / "01-surface" / "surface.ply", process=False)
+    shell = np.load(point / "02-shell" / "shell.npz")
+    field = json.loads((point / "03-field" / "field.json").read_text(encoding="utf-8"))
+    supported = {int(k) for k in json.loads((point / "01-surface" / "supports.json").read_text(
+        encoding="utf-8"))["supports"]}
+    lower, upper = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    span = float(max(upper[:2] - lower[:2]))
+    areas = mesh.area_faces
+    vertex_area = np.bincount(mesh.faces.ravel(), weights=np.repeat(areas / 3, 3), minlength=len(mesh.vertices))
+    boundary = np.zeros(len(mesh.vertices), bool)
+    edges = mesh.edges_sorted
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    boundary[unique[counts == 1].ravel()] = True
+    interior = ~boundary
+    anticlastic = interior & (mesh.vertex_defects < -1e-9)
+    forces = shell["face_principal_forces"]                       # (m, 2) N/m, N1 >= N2
+    magnitude = np.abs(forces).max(axis=1)
+    zero = 0.02 * float(np.median(magnitude))
+    biaxial = (forces < -zero).all(axis=1)
+    mixed = (forces.max(axis=1) > zero) & (forces.min(axis=1) < -zero)
+    moments = np.linalg.norm(shell["face_moments"], axis=1)
+    membrane = np.linalg.norm(shell["face_membrane_forces"], axis=1)
+    eccentricity = np.median(moments / np.maximum(membrane, 1e-9 * membrane.max()))
+    return {"span_m": span, "rise_to_span": float(upper[2] - lower[2]) / span, "area_m2": float(areas.sum()),
+            "anticlastic_share": float(vertex_area[anticlastic].sum() / vertex_area[interior].sum()),
+            "supported_share": len(supported & set(np.flatnonzero(boundary))) / max(int(boundary.sum()), 1),
+            "biaxial_compression_share": float(areas[biaxial].sum() / areas.sum()),
+            "mixed_share": float(areas[mixed].sum() / areas.sum()),
+            "eccentricity_mm": 1e3 * float(eccentricity), "field_mean_aspect": field.get("mean_aspect")}
+
+
+def roof_table(lines: list[dict], out: Path) -> tuple[str, list[dict]]:
+    """One row per roof: its descriptors (``roof_descriptors``) and, per L_tot, the default design's
+    lambda_NL_worst over the quad grid's at 0 degrees and over the isotropic control's (medians over
+    the seeds). Markdown and the rows."""
+    best = {(r["surface"], r["L_tot_m"], r["design"]): r["lambda_NL_worst"] for r in lines
+            if r["question"] == "spacing" and r["lambda_NL_worst"]}
+    rows = []
+    for surface in sorted({r["surface"] for r in lines if r["question"] == "spacing"}, key=str.lower):
+        roof = roof_descriptors(out / surface) or {}
+        lengths = sorted({length for (s, length, _) in best if s == surface})
+        ratios = {ref: [best[(surface, n, "Voro(2,2)")] / best[(surface, n, ref)] if best.get((surface, n, ref))
+                        and best.get((surface, n, "Voro(2,2)")) else None for n in lengths]
+                  for ref in ("quad 0", "isotropic CVT")}
+        rows.append({"surface": surface, **roof, "voronoi_over_quad": ratios["quad 0"],
+                     "voronoi_over_control": ratios["isotropic CVT"]})
+    head = ("| roof | span m | rise / span | anticlastic | supported edge | biaxial compression | mixed signs "
+            "| eccentricity mm | field aspect | Voro(2,2) / quad 0 | Voro(2,2) / control |")
+    text = [head, "|" + "---|" * 11]
+
+    def share(row: dict, key: str) -> str:
+        return "-" if row.get(key) is None else f"{100 * row[key]:.0f} %"
+
+    for r in rows:
+        text.append(f"| {r['surface']} | {_fmt(r.get('span_m'), 1)} | {_fmt(r.get('rise_to_span'))} | "
+                    f"{share(r, 'anticlastic_share')} | {share(r, 'supported_share')} | "
+                    f"{share(r, 'biaxial_compression_share')} | {share(r, 'mixed_share')} | "
+                    f"{_fmt(r.get('eccentricity_mm'), 0)} | {_fmt(r.get('field_mean_aspect'))} | "
+                    f"{', '.join(_fmt(v) for v in r['voronoi_over_quad'])} | "
+                    f"{', '.join(_fmt(v) for v in r['voronoi_over_control'])} |")
+    return "\n".join(text), rows
+
+
 def plot_study(lines: list[dict], out: Path) -> list[Path]:
     """OUT/spacing.png: lambda_NL_worst against L_tot per design, one panel per surface (medians over
     the seeds, the seeds' range as a band); OUT/designs.png: each design's lambda_NL_worst over the
@@ -336,27 +416,70 @@ def plot_study(lines: list[dict], out: Path) -> list[Path]:
                    if r["design"] == "isotropic CVT" and r["lambda_NL_worst"]}
         order = [v[0] for v in VERDICTS] + [r["design"] for r in others]
         designs = [d for d in dict.fromkeys(order) if d != "isotropic CVT" and any(r["design"] == d for r in others)]
-        surfaces = sorted({r["surface"] for r in others})
-        figure, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(designs) + 2), 4.2))
-        width = 0.8 / max(len(surfaces), 1)
+        surfaces = sorted({r["surface"] for r in others}, key=str.lower)
+        figure, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(designs) + 2), 4.6))
+        colours = plt.get_cmap("tab20")
+        offsets = np.linspace(-0.3, 0.3, len(surfaces)) if len(surfaces) > 1 else np.zeros(1)
+        medians = []
         for k, surface in enumerate(surfaces):
-            ratios = []
-            for design in designs:
+            for j, design in enumerate(designs):
                 match = [r["lambda_NL_worst"] / control[(surface, r["L_tot_m"])] for r in others
                          if r["surface"] == surface and r["design"] == design and r["lambda_NL_worst"]
                          and control.get((surface, r["L_tot_m"]))]
-                ratios.append(match[0] if match else np.nan)
-            ax.bar(np.arange(len(designs)) + (k - (len(surfaces) - 1) / 2) * width, ratios, width, label=surface)
-        ax.axhline(1.0, color="k", lw=0.8)
+                if match:
+                    ax.plot(j + offsets[k], match[0], "o", ms=5, color=colours(k % 20),
+                            label=surface if j == next(i for i, d in enumerate(designs) if any(
+                                r["surface"] == surface and r["design"] == d for r in others)) else None)
+        for j, design in enumerate(designs):
+            ratios = [r["lambda_NL_worst"] / control[(r["surface"], r["L_tot_m"])] for r in others
+                      if r["design"] == design and r["lambda_NL_worst"] and control.get((r["surface"], r["L_tot_m"]))]
+            if ratios:
+                medians.append(ax.hlines(np.median(ratios), j - 0.38, j + 0.38, color="k", lw=2))
+        ax.axhline(1.0, color="grey", lw=0.8, ls="--")
         ax.set_xticks(np.arange(len(designs)), designs, rotation=35, ha="right", fontsize=8)
         ax.set_ylabel("lambda_NL worst / isotropic CVT's")
-        ax.set_title("Voronoi designs against the isotropic CVT of the same length (middle L_tot)", fontsize=10)
-        ax.legend(fontsize=7)
+        ax.set_title("Voronoi designs against the isotropic CVT of the same length (middle L_tot);\n"
+                     "a dot per roof, the bar their median", fontsize=10)
+        ax.legend(fontsize=7, ncol=2 if len(surfaces) > 6 else 1, loc="best")
         figure.tight_layout()
         written.append(out / "designs.png")
         figure.savefig(written[-1], dpi=110)
         plt.close(figure)
     return written
+
+
+def plot_roofs(rows: list[dict], out: Path) -> Path | None:
+    """OUT/roofs.png: the default design's lambda_NL_worst over the quad grid's (median over the
+    lengths) against what each roof is: rise over span, the share of its area under membrane forces
+    of mixed signs, and the shell's eccentricity."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    points = [(r, _median(r["voronoi_over_quad"])) for r in rows if r.get("span_m") is not None]
+    points = [(r, y) for r, y in points if y is not None]
+    if not points:
+        return None
+    panels = (("rise_to_span", "rise / span", 1.0), ("mixed_share", "area under forces of mixed signs (%)", 100.0),
+              ("eccentricity_mm", "shell eccentricity |M| / |N| (mm, median)", 1.0))
+    figure, axes = plt.subplots(1, 3, figsize=(13, 4.0))
+    for ax, (key, label, scale) in zip(axes, panels):
+        for row, ratio in points:
+            ax.plot(scale * row[key], ratio, "o", color="C0" if ratio > 1 else "C3")
+            ax.annotate(row["surface"], (scale * row[key], ratio), fontsize=7, xytext=(3, 3),
+                        textcoords="offset points")
+        ax.axhline(1.0, color="grey", lw=0.8, ls="--")
+        ax.set_xlabel(label)
+        ax.set_ylabel("Voro(2,2) / quad 0, lambda_NL worst")
+        ax.grid(alpha=0.3)
+    figure.suptitle("Where the statics-aware Voronoi grid beats the quad grid of the same length "
+                    "(median over the three lengths)", fontsize=10)
+    figure.tight_layout()
+    path = out / "roofs.png"
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+    return path
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -418,10 +541,15 @@ def main(argv: list[str] | None = None) -> int:
     unique = {(r["surface"], r["L_tot_m"], r["design"]): r for r in lines}  # the shared rows once
     text = "### verdicts (median over the seeds of lambda_NL_worst)\n\n" + verdicts(list(unique.values()))
     text += "\n\n" + "\n\n".join(f"### {q}\n\n{markdown(lines, q)}" for q in asked)
+    roofs_text, roofs = roof_table(lines, out)
+    if roofs:
+        text += "\n\n### roofs\n\n" + roofs_text
+        pd.DataFrame(roofs).to_csv(out / "study_roofs.csv", index=False)
     (out / "study.md").write_text(text + "\n", encoding="utf-8")
     pd.DataFrame(lines).to_csv(out / "study_summary.csv", index=False)
-    for path in plot_study(lines, out):
-        print(f"plot: {path}")
+    for path in [*plot_study(lines, out), plot_roofs(roofs, out)]:
+        if path is not None:
+            print(f"plot: {path}")
     print(text)
     print(f"\n{len(rows)} points, {sum(r.get('status') == 'ok' for r in rows)} ok, "
           f"{time.perf_counter() - started:.0f} s; {out / 'study.md'}")
