@@ -1,0 +1,73 @@
+"""What the study says of each roof (``benchmarks/study.py``, ``roof_descriptors``): checked on
+surfaces whose curvature and proportions are known in closed form, with shell results made up so
+that their shares are known by construction."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+
+def _roof(folder: Path, height, forces_of) -> None:
+    """A 10 m x 6 m grid of triangles z = height(x, y) with the stages' files where the study reads
+    them (its spacing sweep's first point); ``forces_of(centroids)``: principal forces (m, 2)."""
+    import trimesh
+
+    xs, ys = np.linspace(-5, 5, 21), np.linspace(-3, 3, 13)
+    x, y = np.meshgrid(xs, ys, indexing="ij")
+    vertices = np.column_stack([x.ravel(), y.ravel(), height(x.ravel(), y.ravel())])
+    index = np.arange(len(vertices)).reshape(len(xs), len(ys))
+    a, b, c, d = index[:-1, :-1].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel(), index[:-1, 1:].ravel()
+    faces = np.vstack([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    point = folder / "spacing" / "voronoi" / "out" / "points" / "0001"
+    for stage in ("01-surface", "02-shell", "03-field"):
+        (point / stage).mkdir(parents=True)
+    trimesh.Trimesh(vertices, faces, process=False).export(point / "01-surface" / "surface.ply")
+    edge = np.flatnonzero(np.isclose(np.abs(vertices[:, 0]), 5.0))           # the two short sides
+    supports = {str(i): [1, 1, 1, 0, 0, 0] for i in edge}
+    (point / "01-surface" / "supports.json").write_text(json.dumps({"supports": supports}))
+    centroids = vertices[faces].mean(axis=1)
+    forces = forces_of(centroids)
+    membrane = np.column_stack([forces, np.zeros(len(faces))])
+    np.savez(point / "02-shell" / "shell.npz", face_principal_forces=forces, face_membrane_forces=membrane,
+             face_moments=0.05 * membrane)                                  # |M| / |N| = 50 mm everywhere
+    (point / "03-field" / "field.json").write_text(json.dumps({"mean_aspect": 1.5}))
+
+
+def test_a_hypar_is_anticlastic_and_a_dome_synclastic_with_their_rise_span_and_forces(tmp_path):
+    from study import roof_descriptors
+
+    def mixed_left(c):                    # x < 0: tension and compression; x > 0: both compressive
+        return np.where((c[:, 0] < 0)[:, None], [[2.0, -3.0]], [[-1.0, -4.0]])
+
+    _roof(tmp_path / "hypar", lambda x, y: 0.04 * x * y, mixed_left)
+    _roof(tmp_path / "dome", lambda x, y: 2.5 * (1 - (x / 5) ** 2 / 2 - (y / 3) ** 2 / 2), mixed_left)
+    hypar, dome = roof_descriptors(tmp_path / "hypar"), roof_descriptors(tmp_path / "dome")
+    assert hypar["anticlastic_share"] == pytest.approx(1.0)          # K = -c^2 / (1 + ...)^2 < 0
+    assert dome["anticlastic_share"] == pytest.approx(0.0)
+    assert hypar["span_m"] == pytest.approx(10.0)
+    assert hypar["rise_to_span"] == pytest.approx(0.04 * 2 * 5 * 3 / 10)   # z from -0.6 to 0.6
+    assert dome["rise_to_span"] == pytest.approx(2.5 / 10)          # an elliptic paraboloid, 0 at the corners
+    assert hypar["supported_share"] == pytest.approx(2 * 13 / (2 * 21 + 2 * 11))
+    assert hypar["mixed_share"] == pytest.approx(0.5) and hypar["biaxial_compression_share"] == pytest.approx(0.5)
+    assert hypar["eccentricity_mm"] == pytest.approx(50.0)
+    assert hypar["field_mean_aspect"] == 1.5
+    assert roof_descriptors(tmp_path / "none") is None
+
+
+def test_the_roof_table_sets_the_default_design_against_the_quad_grid_and_the_control(tmp_path):
+    from study import roof_table
+
+    lines = [{"question": "spacing", "surface": "cap", "L_tot_m": n, "design": d, "lambda_NL_worst": v}
+             for n, d, v in ((100, "Voro(2,2)", 1.2), (100, "quad 0", 1.0), (100, "isotropic CVT", 0.8),
+                             (200, "Voro(2,2)", 1.5), (200, "quad 0", 3.0), (200, "isotropic CVT", None))]
+    text, rows = roof_table(lines, tmp_path)
+    assert rows[0]["voronoi_over_quad"] == pytest.approx([1.2, 0.5])
+    assert rows[0]["voronoi_over_control"][0] == pytest.approx(1.5) and rows[0]["voronoi_over_control"][1] is None
+    assert "| cap | - |" in text and "1.20, 0.50" in text
