@@ -173,6 +173,11 @@ def run_sweep(path: Path, workers: int | None) -> list[dict]:
             figures = data.get(key, data) if key else data
             value = figures.get("size_rank_correlation") if isinstance(figures, dict) else None
             row[column] = float(value) if isinstance(value, (int, float)) else None
+        try:                  # whether lambda_NL_worst is a limit point or the load at the tolerable deflection
+            row["limit_point"] = json.loads((folder / "06-analysis" / "analysis.json").read_text(
+                encoding="utf-8")).get("limit_point_reached")
+        except (OSError, ValueError):
+            row["limit_point"] = None
     return rows
 
 
@@ -237,6 +242,7 @@ def summary(rows: list[dict]) -> list[dict]:
                       "size_rank_correlation": _median(m["size_rank_correlation"] for m in ok),
                       "L_tot_deviation": max(deviation) if deviation else None,
                       "L_tot_median_m": _median(m.get("total_beam_length_m") for m in ok),
+                      "at_limit": sum(m.get("limit_point") is True for m in ok),
                       "message": next((m["message"] for m in members if m["status"] != "ok"), "")})
     return lines
 
@@ -249,11 +255,12 @@ def _fmt(value, digits=2) -> str:
 
 def markdown(lines: list[dict], question: str) -> str:
     rows = [line for line in lines if line["question"] == question]
-    head = ("| surface | L_tot m | design | runs ok | lambda_NL worst | lambda_LB | delta_L mm | size rank corr. "
-            "| L_tot dev. % |")
-    out = [head, "|" + "---|" * 9]
+    head = ("| surface | L_tot m | design | runs ok | at a limit point | lambda_NL worst | lambda_LB | delta_L mm "
+            "| size rank corr. | L_tot dev. % |")
+    out = [head, "|" + "---|" * 10]
     for r in rows:
         out.append(f"| {r['surface']} | {r['L_tot_m']:.0f} | {r['design']} | {r['ok']}/{r['runs']} | "
+                   f"{r.get('at_limit', 0)}/{r['ok']} | "
                    f"{_fmt(r['lambda_NL_worst'])} | {_fmt(r['lambda_LB'])} | {_fmt(r['delta_L_mm'], 1)} | "
                    f"{_fmt(r['size_rank_correlation'])} | "
                    f"{_fmt(None if r['L_tot_deviation'] is None else 100 * r['L_tot_deviation'], 1)} |")
@@ -273,17 +280,21 @@ def verdicts(lines: list[dict]) -> str:
     higher, the median and range of the ratio, the median ratio of the deflections under the
     serviceability load (below 1: stiffer), and how far apart the two designs' median lengths
     are at most (the study asks for 1 %: a pair beyond it is marked, and its ratio carries the
-    difference: lambda_NL grows about 1.5 to 2 times as fast as L_tot in the spacing study)."""
+    difference: lambda_NL grows about 1.5 to 2 times as fast as L_tot in the spacing study). The
+    last column counts the pairs whose every run reached a limit point (a buckling load, not the
+    load at the tolerable deflection span/50), with the first design higher at how many."""
     best = {(line["surface"], line["L_tot_m"], line["design"]): line for line in lines}
     out = ["| design | against | higher at | ratio median | ratio range | deflection ratio median "
-           "| L_tot apart, at most |", "|---|---|---|---|---|---|---|"]
+           "| L_tot apart, at most | both at a limit point: higher at |", "|---|---|---|---|---|---|---|---|"]
     for design, reference in VERDICTS:
-        ratios, apart, deflections = [], [], []
+        ratios, apart, deflections, buckled = [], [], [], []
         for (surface, length, name), line in best.items():
             other = best.get((surface, length, reference))
             if name != design or other is None or not line["lambda_NL_worst"] or not other["lambda_NL_worst"]:
                 continue
             ratios.append(line["lambda_NL_worst"] / other["lambda_NL_worst"])
+            if all(r.get("at_limit", 0) == r["ok"] > 0 for r in (line, other)):
+                buckled.append(ratios[-1])
             if line["delta_L_mm"] and other["delta_L_mm"]:
                 deflections.append(line["delta_L_mm"] / other["delta_L_mm"])
             if line["L_tot_median_m"] and other["L_tot_median_m"]:
@@ -292,9 +303,11 @@ def verdicts(lines: list[dict]) -> str:
             continue
         higher = sum(r > 1 for r in ratios)
         gap = f"{100 * max(apart):.1f} %" + (" (over 1 %)" if max(apart) > 0.01 else "") if apart else "-"
+        at_limit = (f"{sum(r > 1 for r in buckled)} of {len(buckled)} (median {np.median(buckled):.2f})"
+                    if buckled else "none")
         out.append(f"| {design} | {reference} | {higher} of {len(ratios)} | {np.median(ratios):.2f} | "
                    f"{min(ratios):.2f}-{max(ratios):.2f} | "
-                   f"{_fmt(float(np.median(deflections)) if deflections else None)} | {gap} |")
+                   f"{_fmt(float(np.median(deflections)) if deflections else None)} | {gap} | {at_limit} |")
     return "\n".join(out)
 
 
@@ -346,9 +359,10 @@ def roof_descriptors(surface_dir: Path) -> dict | None:
 def roof_table(lines: list[dict], out: Path) -> tuple[str, list[dict]]:
     """One row per roof: its descriptors (``roof_descriptors``) and, per L_tot, the default design's
     lambda_NL_worst over the quad grid's at 0 degrees and over the isotropic control's (medians over
-    the seeds). Markdown and the rows."""
-    best = {(r["surface"], r["L_tot_m"], r["design"]): r["lambda_NL_worst"] for r in lines
-            if r["question"] == "spacing" and r["lambda_NL_worst"]}
+    the seeds), and how many of the default design's and the quad grid's runs reached a limit point
+    (the others' lambda_NL is the load at the tolerable deflection). Markdown and the rows."""
+    spacing = [r for r in lines if r["question"] == "spacing"]
+    best = {(r["surface"], r["L_tot_m"], r["design"]): r["lambda_NL_worst"] for r in spacing if r["lambda_NL_worst"]}
     rows = []
     for surface in sorted({r["surface"] for r in lines if r["question"] == "spacing"}, key=str.lower):
         roof = roof_descriptors(out / surface) or {}
@@ -356,11 +370,17 @@ def roof_table(lines: list[dict], out: Path) -> tuple[str, list[dict]]:
         ratios = {ref: [best[(surface, n, "Voro(2,2)")] / best[(surface, n, ref)] if best.get((surface, n, ref))
                         and best.get((surface, n, "Voro(2,2)")) else None for n in lengths]
                   for ref in ("quad 0", "isotropic CVT")}
+        limits = {design: (sum(r.get("at_limit", 0) for r in spacing if r["surface"] == surface
+                               and r["design"] == design),
+                           sum(r["ok"] for r in spacing if r["surface"] == surface and r["design"] == design))
+                  for design in ("Voro(2,2)", "quad 0")}
         rows.append({"surface": surface, **roof, "voronoi_over_quad": ratios["quad 0"],
-                     "voronoi_over_control": ratios["isotropic CVT"]})
+                     "voronoi_over_control": ratios["isotropic CVT"],
+                     "voronoi_at_limit": limits["Voro(2,2)"], "quad_at_limit": limits["quad 0"]})
     head = ("| roof | span m | rise / span | anticlastic | supported edge | biaxial compression | mixed signs "
-            "| eccentricity mm | field aspect | Voro(2,2) / quad 0 | Voro(2,2) / control |")
-    text = [head, "|" + "---|" * 11]
+            "| eccentricity mm | field aspect | Voro(2,2) / quad 0 | Voro(2,2) / control "
+            "| at a limit point: Voro, quad |")
+    text = [head, "|" + "---|" * 12]
 
     def share(row: dict, key: str) -> str:
         return "-" if row.get(key) is None else f"{100 * row[key]:.0f} %"
@@ -371,7 +391,8 @@ def roof_table(lines: list[dict], out: Path) -> tuple[str, list[dict]]:
                     f"{share(r, 'biaxial_compression_share')} | {share(r, 'mixed_share')} | "
                     f"{_fmt(r.get('eccentricity_mm'), 0)} | {_fmt(r.get('field_mean_aspect'))} | "
                     f"{', '.join(_fmt(v) for v in r['voronoi_over_quad'])} | "
-                    f"{', '.join(_fmt(v) for v in r['voronoi_over_control'])} |")
+                    f"{', '.join(_fmt(v) for v in r['voronoi_over_control'])} | "
+                    f"{'/'.join(map(str, r['voronoi_at_limit']))}, {'/'.join(map(str, r['quad_at_limit']))} |")
     return "\n".join(text), rows
 
 

@@ -64,10 +64,28 @@ def test_a_hypar_is_anticlastic_and_a_dome_synclastic_with_their_rise_span_and_f
 def test_the_roof_table_sets_the_default_design_against_the_quad_grid_and_the_control(tmp_path):
     from study import roof_table
 
-    lines = [{"question": "spacing", "surface": "cap", "L_tot_m": n, "design": d, "lambda_NL_worst": v}
-             for n, d, v in ((100, "Voro(2,2)", 1.2), (100, "quad 0", 1.0), (100, "isotropic CVT", 0.8),
-                             (200, "Voro(2,2)", 1.5), (200, "quad 0", 3.0), (200, "isotropic CVT", None))]
+    lines = [{"question": "spacing", "surface": "cap", "L_tot_m": n, "design": d, "lambda_NL_worst": v, "ok": ok,
+              "at_limit": limit}
+             for n, d, v, ok, limit in ((100, "Voro(2,2)", 1.2, 3, 1), (100, "quad 0", 1.0, 1, 1),
+                                        (100, "isotropic CVT", 0.8, 3, 0), (200, "Voro(2,2)", 1.5, 3, 3),
+                                        (200, "quad 0", 3.0, 1, 0), (200, "isotropic CVT", None, 0, 0))]
     text, rows = roof_table(lines, tmp_path)
     assert rows[0]["voronoi_over_quad"] == pytest.approx([1.2, 0.5])
     assert rows[0]["voronoi_over_control"][0] == pytest.approx(1.5) and rows[0]["voronoi_over_control"][1] is None
-    assert "| cap | - |" in text and "1.20, 0.50" in text
+    assert "| cap | - |" in text and "1.20, 0.50" in text and "| 4/6, 1/2 |" in text
+
+
+def test_the_verdicts_count_apart_the_pairs_that_both_reached_a_limit_point():
+    """A pair counts as buckling only where every run of both designs reached a limit point; the
+    others' load factors are loads at the tolerable deflection."""
+    from study import verdicts
+
+    def line(length, design, value, at_limit):
+        return {"surface": "cap", "L_tot_m": length, "design": design, "lambda_NL_worst": value, "ok": 3,
+                "at_limit": at_limit, "delta_L_mm": 10.0, "L_tot_median_m": length}
+
+    lines = [line(100, "Voro(2,2)", 1.2, 3), line(100, "quad 0", 1.0, 3),      # both buckle: Voronoi higher
+             line(200, "Voro(2,2)", 0.5, 2), line(200, "quad 0", 1.0, 3),      # one Voronoi run stopped at span/50
+             line(300, "Voro(2,2)", 0.9, 3), line(300, "quad 0", 1.0, 3)]      # both buckle: quad higher
+    row = next(r for r in verdicts(lines).splitlines() if r.startswith("| Voro(2,2) | quad 0 |"))
+    assert "| 1 of 3 |" in row and row.endswith("| 1 of 2 (median 1.05) |")
