@@ -31,6 +31,13 @@ plotted in OUT/roofs.png): what the roof is (span, rise, curvature, supports, th
 forces and eccentricity, the field's aspect) beside the default design's load factor over the quad
 grid's and over the control's, to say where the claim holds and why. Sweeps already run are read
 from their cache, so a rerun only adds what is missing (a new surface, seed or question).
+
+With ``--stiff-sections REFERENCE_OUT`` each roof takes its own tube (every design of the roof the
+same one): the lightest EN 10210 tube that would bring the default design within its deflection
+limit, estimated from the study's run at the cap's section in REFERENCE_OUT (``stiff_section``). At
+the cap's section most roofs deflect metres under the serviceability load and every path stops at
+the tolerable deflection (span / 50) before any limit point: their load factors compare stiffness,
+not buckling, which is what the thesis's claim is about.
 """  # noqa: E501 (Markdown table rows, which cannot be wrapped)
 
 from __future__ import annotations
@@ -88,11 +95,17 @@ def _section(text: str, name: str) -> tuple[int, int]:
     return start, end
 
 
-def project_text(surface: Path | None, name: str, total_length_m: float) -> str:
+def project_text(surface: Path | None, name: str, total_length_m: float,
+                 section_mm: tuple[float, float] | None = None) -> str:
     """The study's project: the cap template with the surface (None: the cap itself) and its
     flagged supports, no symmetry planes but the cap's, a total-length target (set per point) and no
-    coarsening for the joints (which would change L_tot)."""
+    coarsening for the joints (which would change L_tot); ``section_mm``: the tube's diameter and
+    wall instead of the cap's (``stiff_section``)."""
     lines = _cap_text().splitlines()
+    if section_mm is not None:
+        lines = [f'diameter = "{section_mm[0]:g} mm"' if line.startswith("diameter = ")
+                 else f'thickness = "{section_mm[1]:g} mm"' if line.startswith("thickness = ") else line
+                 for line in lines]
     out = []
     skip = None
     for line in lines:
@@ -120,6 +133,35 @@ def project_text(surface: Path | None, name: str, total_length_m: float) -> str:
     text = re.sub(r'description = ".*"', 'description = "same-length study: the cap\'s loads, section and protocol"',
                   text, count=1)
     return text
+
+
+def stiff_section(reference: Path) -> tuple[str, float, float, float] | None:
+    """The lightest EN 10210 tube that would bring the default design's deflection under the
+    serviceability load within its limit (span / 250), estimated from a run of the study at the
+    cap's section (``reference``: that run's OUT/SURFACE): the median deflection delta_0 of Voro(2,2)
+    at the middle length, and the second moment I >= I_0 delta_0 / limit (a bending-dominated grid:
+    the deflection goes as 1 / I; the heavier tube's own weight is left out). (name, diameter mm,
+    wall mm, delta_0 / limit); the cap's section where delta_0 already meets the limit, and None
+    without the reference's spacing sweep."""
+    import pandas as pd
+
+    table = reference / "spacing" / "voronoi" / "out" / "sweep.csv"
+    if not table.is_file():
+        return None
+    rows = pd.read_csv(table)
+    rows = rows[(rows["remesh.grid"] == "voronoi") & (rows["status"] == "ok")]
+    if rows.empty:
+        return None
+    lengths = sorted(rows["remesh.total_length"].unique())
+    middle = rows[rows["remesh.total_length"] == lengths[len(lengths) // 2]]
+    limit = json.loads((table.parent / str(middle["folder"].iloc[0]) / "06-analysis" / "analysis.json").read_text(
+        encoding="utf-8"))["deflection_limit_m"]
+    over = float(middle["delta_L_m"].median()) / limit
+    catalogue = pd.read_csv(ROOT / "engine" / "data" / "en10210_chs.csv", comment="#")
+    cap = catalogue[(catalogue["diameter_mm"] == 114.3) & (catalogue["thickness_mm"] == 6.3)].iloc[0]
+    enough = catalogue[catalogue["I_cm4"] >= cap["I_cm4"] * over].sort_values("mass_kg_per_m")
+    pick = cap if over <= 1.0 else enough.iloc[0] if not enough.empty else catalogue.sort_values("I_cm4").iloc[-1]
+    return str(pick["name"]), float(pick["diameter_mm"]), float(pick["thickness_mm"]), over
 
 
 def length_levels(project: Path, cells: list[int]) -> list[float]:
@@ -511,6 +553,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--questions", default=",".join(QUESTIONS))
     parser.add_argument("--workers", type=int, default=None, help="sweep workers (default: the cores)")
     parser.add_argument("--out", default=str(ROOT / "out" / "study"))
+    parser.add_argument("--stiff-sections", metavar="REFERENCE_OUT",
+                        help="each roof takes the tube that brings its default design within the deflection "
+                             "limit, estimated from a run of the study at the cap's section (stiff_section)")
     args = parser.parse_args(argv)
     import pandas as pd
 
@@ -526,15 +571,29 @@ def main(argv: list[str] | None = None) -> int:
         wanted = args.surfaces.split(",")
         surfaces = [s for s in surfaces if s[0] in wanted]
     rows: list[dict] = []
+    sections: list[str] = []
     started = time.perf_counter()
     for name, path in surfaces:
         folder = out / name
         folder.mkdir(parents=True, exist_ok=True)
         project = folder / "project.toml"
-        project.write_text(project_text(path, name, 1.0), encoding="utf-8")
+        section = None
+        if args.stiff_sections:
+            picked = stiff_section(Path(args.stiff_sections).resolve() / name)
+            if picked is None:
+                print(f"{name}: no reference run in {args.stiff_sections}; skipped", flush=True)
+                continue
+            sections.append(f"| {name} | {picked[3]:.1f} | {picked[0]} |")
+            if picked[3] <= 1.0:           # the cap's section: the reference's sweeps are this roof's
+                if not folder.is_symlink() and not any(folder.iterdir()):
+                    folder.rmdir()
+                    folder.symlink_to(Path(args.stiff_sections).resolve() / name, target_is_directory=True)
+            else:
+                section = picked[1:3]
+        project.write_text(project_text(path, name, 1.0, section), encoding="utf-8")
         lengths = length_levels(project, cells)
-        project.write_text(project_text(path, name, lengths[len(lengths) // 2]), encoding="utf-8")
-        print(f"{name}: L_tot {lengths} m", flush=True)
+        project.write_text(project_text(path, name, lengths[len(lengths) // 2], section), encoding="utf-8")
+        print(f"{name}: L_tot {lengths} m" + (f", {sections[-1]}" if section else ""), flush=True)
         for question, sweeps in questions_of(folder, project, lengths, seeds, asked).items():
             for sweep, parameters in sweeps.items():
                 sweep_file = write_sweep(folder / question / sweep, project, parameters)
@@ -561,6 +620,9 @@ def main(argv: list[str] | None = None) -> int:
     lines.sort(key=lambda r: (r["question"], r["surface"], r["L_tot_m"], r["design"]))
     unique = {(r["surface"], r["L_tot_m"], r["design"]): r for r in lines}  # the shared rows once
     text = "### verdicts (median over the seeds of lambda_NL_worst)\n\n" + verdicts(list(unique.values()))
+    if sections:
+        text = ("### sections (the default design's deflection over its limit at the cap's section, and the tube "
+                "taken)\n\n| roof | delta / limit | section |\n|---|---|---|\n" + "\n".join(sections) + "\n\n" + text)
     text += "\n\n" + "\n\n".join(f"### {q}\n\n{markdown(lines, q)}" for q in asked)
     roofs_text, roofs = roof_table(lines, out)
     if roofs:

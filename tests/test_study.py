@@ -89,3 +89,35 @@ def test_the_verdicts_count_apart_the_pairs_that_both_reached_a_limit_point():
              line(300, "Voro(2,2)", 0.9, 3), line(300, "quad 0", 1.0, 3)]      # both buckle: quad higher
     row = next(r for r in verdicts(lines).splitlines() if r.startswith("| Voro(2,2) | quad 0 |"))
     assert "| 1 of 3 |" in row and row.endswith("| 1 of 2 (median 1.05) |")
+
+
+def _reference(folder: Path, deflection_m: float, limit_m: float) -> Path:
+    """A study run's spacing sweep at the cap's section: Voro(2,2) at three lengths."""
+    out = folder / "spacing" / "voronoi" / "out"
+    rows = []
+    for k, (length, grid) in enumerate([(100.0, "voronoi"), (200.0, "voronoi"), (200.0, "isotropic"),
+                                        (300.0, "voronoi")]):
+        point = out / "points" / f"{k + 1:04d}" / "06-analysis"
+        point.mkdir(parents=True)
+        (point / "analysis.json").write_text(json.dumps({"deflection_limit_m": limit_m}))
+        rows.append(f"{length},{grid},ok,{deflection_m if length == 200.0 else 99.0},points/{k + 1:04d}")
+    (out / "sweep.csv").write_text("remesh.total_length,remesh.grid,status,delta_L_m,folder\n" + "\n".join(rows))
+    return folder
+
+
+def test_a_roof_too_soft_at_the_caps_section_takes_the_lightest_tube_stiff_enough(tmp_path):
+    """The second moment of area goes as delta_0 / limit, from the tube formula, not the table's."""
+    import pandas as pd
+    from study import ROOT, stiff_section
+
+    catalogue = pd.read_csv(ROOT / "engine" / "data" / "en10210_chs.csv", comment="#")
+    D, t = catalogue["diameter_mm"], catalogue["thickness_mm"]
+    inertia = np.pi * (D**4 - (D - 2 * t) ** 4) / 64                         # mm^4
+    cap = float(np.pi * (114.3**4 - (114.3 - 12.6) ** 4) / 64)
+    name, diameter, wall, over = stiff_section(_reference(tmp_path / "soft", 0.9, 0.09))
+    assert over == pytest.approx(10.0)
+    lightest = catalogue[inertia >= 10 * cap].sort_values("mass_kg_per_m").iloc[0]
+    assert (diameter, wall) == (lightest["diameter_mm"], lightest["thickness_mm"])
+    assert np.pi * (diameter**4 - (diameter - 2 * wall) ** 4) / 64 >= 10 * cap * (1 - 1e-3)
+    assert stiff_section(_reference(tmp_path / "stiff", 0.05, 0.09))[:3] == ("CHS 114.3x6.3", 114.3, 6.3)
+    assert stiff_section(tmp_path / "none") is None
