@@ -319,17 +319,19 @@ VERDICTS = (("Voro(2,2)", "quad 0"), ("Voro(2,2)", "quad 45"), ("Voro(2,2)", "is
 
 def verdicts(lines: list[dict]) -> str:
     """Per pair of designs: at how many (surface, L_tot) the first's median lambda_NL_worst is
-    higher, the median and range of the ratio, the median ratio of the deflections under the
+    higher, the median and range of the ratio, the median ratio of the linear buckling factors,
+    the median ratio of the deflections under the
     serviceability load (below 1: stiffer), and how far apart the two designs' median lengths
     are at most (the study asks for 1 %: a pair beyond it is marked, and its ratio carries the
     difference: lambda_NL grows about 1.5 to 2 times as fast as L_tot in the spacing study). The
     last column counts the pairs whose every run reached a limit point (a buckling load, not the
     load at the tolerable deflection span/50), with the first design higher at how many."""
     best = {(line["surface"], line["L_tot_m"], line["design"]): line for line in lines}
-    out = ["| design | against | higher at | ratio median | ratio range | deflection ratio median "
-           "| L_tot apart, at most | both at a limit point: higher at |", "|---|---|---|---|---|---|---|---|"]
+    out = ["| design | against | higher at | ratio median | ratio range | lambda_LB ratio median "
+           "| deflection ratio median | L_tot apart, at most | both at a limit point: higher at |",
+           "|---|---|---|---|---|---|---|---|---|"]
     for design, reference in VERDICTS:
-        ratios, apart, deflections, buckled = [], [], [], []
+        ratios, apart, deflections, buckled, linear = [], [], [], [], []
         for (surface, length, name), line in best.items():
             other = best.get((surface, length, reference))
             if name != design or other is None or not line["lambda_NL_worst"] or not other["lambda_NL_worst"]:
@@ -337,6 +339,8 @@ def verdicts(lines: list[dict]) -> str:
             ratios.append(line["lambda_NL_worst"] / other["lambda_NL_worst"])
             if all(r.get("at_limit", 0) == r["ok"] > 0 for r in (line, other)):
                 buckled.append(ratios[-1])
+            if line.get("lambda_LB") and other.get("lambda_LB"):
+                linear.append(line["lambda_LB"] / other["lambda_LB"])
             if line["delta_L_mm"] and other["delta_L_mm"]:
                 deflections.append(line["delta_L_mm"] / other["delta_L_mm"])
             if line["L_tot_median_m"] and other["L_tot_median_m"]:
@@ -348,7 +352,7 @@ def verdicts(lines: list[dict]) -> str:
         at_limit = (f"{sum(r > 1 for r in buckled)} of {len(buckled)} (median {np.median(buckled):.2f})"
                     if buckled else "none")
         out.append(f"| {design} | {reference} | {higher} of {len(ratios)} | {np.median(ratios):.2f} | "
-                   f"{min(ratios):.2f}-{max(ratios):.2f} | "
+                   f"{min(ratios):.2f}-{max(ratios):.2f} | {_fmt(float(np.median(linear)) if linear else None)} | "
                    f"{_fmt(float(np.median(deflections)) if deflections else None)} | {gap} | {at_limit} |")
     return "\n".join(out)
 

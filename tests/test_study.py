@@ -82,13 +82,14 @@ def test_the_verdicts_count_apart_the_pairs_that_both_reached_a_limit_point():
 
     def line(length, design, value, at_limit):
         return {"surface": "cap", "L_tot_m": length, "design": design, "lambda_NL_worst": value, "ok": 3,
-                "at_limit": at_limit, "delta_L_mm": 10.0, "L_tot_median_m": length}
+                "at_limit": at_limit, "delta_L_mm": 10.0, "L_tot_median_m": length,
+                "lambda_LB": 2.0 if design == "quad 0" else 3.0}
 
     lines = [line(100, "Voro(2,2)", 1.2, 3), line(100, "quad 0", 1.0, 3),      # both buckle: Voronoi higher
              line(200, "Voro(2,2)", 0.5, 2), line(200, "quad 0", 1.0, 3),      # one Voronoi run stopped at span/50
              line(300, "Voro(2,2)", 0.9, 3), line(300, "quad 0", 1.0, 3)]      # both buckle: quad higher
     row = next(r for r in verdicts(lines).splitlines() if r.startswith("| Voro(2,2) | quad 0 |"))
-    assert "| 1 of 3 |" in row and row.endswith("| 1 of 2 (median 1.05) |")
+    assert "| 1 of 3 | 0.90 | 0.50-1.20 | 1.50 | 1.00 |" in row and row.endswith("| 1 of 2 (median 1.05) |")
 
 
 def _reference(folder: Path, deflection_m: float, limit_m: float) -> Path:
