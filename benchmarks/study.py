@@ -309,6 +309,10 @@ def markdown(lines: list[dict], question: str) -> str:
     return "\n".join(out)
 
 
+#: The protocol's largest load factor (ProtocolSettings.max_load_factor): a path that carries it
+#: stops there, so a pair of designs that both reach it has no verdict.
+CEILING = 10.0
+
 #: The verdicts: each design's lambda_NL_worst over a reference design's at the same surface and L_tot.
 VERDICTS = (("Voro(2,2)", "quad 0"), ("Voro(2,2)", "quad 45"), ("Voro(2,2)", "isotropic CVT"),
             ("statics-aware quad", "quad 0"), ("Voro(2,2)", "triangular"), ("Voro(1,2)", "isotropic CVT"),
@@ -324,6 +328,7 @@ def verdicts(lines: list[dict]) -> str:
     serviceability load (below 1: stiffer), and how far apart the two designs' median lengths
     are at most (the study asks for 1 %: a pair beyond it is marked, and its ratio carries the
     difference: lambda_NL grows about 1.5 to 2 times as fast as L_tot in the spacing study). The
+    pairs where both designs carried the protocol's largest load factor (``CEILING``) are left out. The
     last column counts the pairs whose every run reached a limit point (a buckling load, not the
     load at the tolerable deflection span/50), with the first design higher at how many."""
     best = {(line["surface"], line["L_tot_m"], line["design"]): line for line in lines}
@@ -336,6 +341,8 @@ def verdicts(lines: list[dict]) -> str:
             other = best.get((surface, length, reference))
             if name != design or other is None or not line["lambda_NL_worst"] or not other["lambda_NL_worst"]:
                 continue
+            if min(line["lambda_NL_worst"], other["lambda_NL_worst"]) >= CEILING * (1 - 1e-6):
+                continue                                   # both carried the largest load asked: no verdict
             ratios.append(line["lambda_NL_worst"] / other["lambda_NL_worst"])
             if all(r.get("at_limit", 0) == r["ok"] > 0 for r in (line, other)):
                 buckled.append(ratios[-1])

@@ -122,3 +122,22 @@ def test_a_roof_too_soft_at_the_caps_section_takes_the_lightest_tube_stiff_enoug
     assert np.pi * (diameter**4 - (diameter - 2 * wall) ** 4) / 64 >= 10 * cap * (1 - 1e-3)
     assert stiff_section(_reference(tmp_path / "stiff", 0.05, 0.09))[:3] == ("CHS 114.3x6.3", 114.3, 6.3)
     assert stiff_section(tmp_path / "none") is None
+
+
+def test_a_pair_that_both_carried_the_largest_load_factor_has_no_verdict():
+    """Paths that carry the protocol's largest load factor stop there: two such designs tie by
+    construction, not by strength, and one of them against a weaker design still counts."""
+    from study import CEILING, verdicts
+
+    from engine.structure.protocol import ProtocolSettings
+
+    assert CEILING == ProtocolSettings().max_load_factor
+
+    def line(length, design, value):
+        return {"surface": "shell", "L_tot_m": length, "design": design, "lambda_NL_worst": value, "ok": 1,
+                "at_limit": 0, "delta_L_mm": 1.0, "L_tot_median_m": length, "lambda_LB": 20.0}
+
+    lines = [line(100, "Voro(2,2)", 5.0), line(100, "quad 0", CEILING),
+             line(200, "Voro(2,2)", CEILING), line(200, "quad 0", CEILING)]
+    row = next(r for r in verdicts(lines).splitlines() if r.startswith("| Voro(2,2) | quad 0 |"))
+    assert "| 0 of 1 | 0.50 |" in row
