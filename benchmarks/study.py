@@ -158,7 +158,11 @@ def stiff_section(reference: Path) -> tuple[str, float, float, float] | None:
         encoding="utf-8"))["deflection_limit_m"]
     over = float(middle["delta_L_m"].median()) / limit
     catalogue = pd.read_csv(ROOT / "engine" / "data" / "en10210_chs.csv", comment="#")
-    cap = catalogue[(catalogue["diameter_mm"] == 114.3) & (catalogue["thickness_mm"] == 6.3)].iloc[0]
+    start, end = _section(_cap_text(), "section")
+    tube = "\n".join(_cap_text().splitlines()[start:end])            # the cap's tube, not its shell's
+    diameter, wall = (float(re.search(rf'^{key} = "([0-9.]+) mm"', tube, re.M).group(1))
+                      for key in ("diameter", "thickness"))
+    cap = catalogue[(catalogue["diameter_mm"] == diameter) & (catalogue["thickness_mm"] == wall)].iloc[0]
     enough = catalogue[catalogue["I_cm4"] >= cap["I_cm4"] * over].sort_values("mass_kg_per_m")
     pick = cap if over <= 1.0 else enough.iloc[0] if not enough.empty else catalogue.sort_values("I_cm4").iloc[-1]
     return str(pick["name"]), float(pick["diameter_mm"]), float(pick["thickness_mm"]), over
@@ -417,7 +421,7 @@ def roof_table(lines: list[dict], out: Path) -> tuple[str, list[dict]]:
     spacing = [r for r in lines if r["question"] == "spacing"]
     best = {(r["surface"], r["L_tot_m"], r["design"]): r["lambda_NL_worst"] for r in spacing if r["lambda_NL_worst"]}
     rows = []
-    for surface in sorted({r["surface"] for r in lines if r["question"] == "spacing"}, key=str.lower):
+    for surface in sorted({r["surface"] for r in spacing}, key=str.lower):
         roof = roof_descriptors(out / surface) or {}
         lengths = sorted({length for (s, length, _) in best if s == surface})
         ratios = {ref: [best[(surface, n, "Voro(2,2)")] / best[(surface, n, ref)] if best.get((surface, n, ref))
@@ -494,21 +498,20 @@ def plot_study(lines: list[dict], out: Path) -> list[Path]:
         figure, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(designs) + 2), 4.6))
         colours = plt.get_cmap("tab20")
         offsets = np.linspace(-0.3, 0.3, len(surfaces)) if len(surfaces) > 1 else np.zeros(1)
-        medians = []
         for k, surface in enumerate(surfaces):
+            label: str | None = surface                  # on the roof's first dot only
             for j, design in enumerate(designs):
                 match = [r["lambda_NL_worst"] / control[(surface, r["L_tot_m"])] for r in others
                          if r["surface"] == surface and r["design"] == design and r["lambda_NL_worst"]
                          and control.get((surface, r["L_tot_m"]))]
                 if match:
-                    ax.plot(j + offsets[k], match[0], "o", ms=5, color=colours(k % 20),
-                            label=surface if j == next(i for i, d in enumerate(designs) if any(
-                                r["surface"] == surface and r["design"] == d for r in others)) else None)
+                    ax.plot(j + offsets[k], match[0], "o", ms=5, color=colours(k % 20), label=label)
+                    label = None
         for j, design in enumerate(designs):
             ratios = [r["lambda_NL_worst"] / control[(r["surface"], r["L_tot_m"])] for r in others
                       if r["design"] == design and r["lambda_NL_worst"] and control.get((r["surface"], r["L_tot_m"]))]
             if ratios:
-                medians.append(ax.hlines(np.median(ratios), j - 0.38, j + 0.38, color="k", lw=2))
+                ax.hlines(np.median(ratios), j - 0.38, j + 0.38, color="k", lw=2)
         ax.axhline(1.0, color="grey", lw=0.8, ls="--")
         ax.set_xticks(np.arange(len(designs)), designs, rotation=35, ha="right", fontsize=8)
         ax.set_ylabel("lambda_NL worst / isotropic CVT's")
