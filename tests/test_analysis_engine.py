@@ -14,7 +14,8 @@ from engine.structure.loads import LimitState, LoadCase, LoadCombination, pick_c
 from engine.structure.protocol import ImperfectionCase
 from engine.structure.supports import Supports
 
-FIXES = VerdictFixes(stiffer="stiffer", deflection="stiffer or a looser limit", buckling_not_solved="check supports")
+FIXES = VerdictFixes(stiffer="stiffer", deflection="stiffer or a looser limit", buckling_not_solved="check supports",
+                     path_stopped="the solver stopped")
 
 
 def _displacements(uz: list[float]) -> np.ndarray:
@@ -66,6 +67,25 @@ def test_a_path_stopped_at_the_tolerable_deflection_is_judged_there_not_at_the_l
     assert not nonlinear.passed and nonlinear.value == 0.4
     assert nonlinear.check == ("worst non-linear load factor at the tolerable deflection "
                                "(no limit point before it) (mode2+)")
+
+
+def test_a_path_whose_solver_stopped_is_no_buckling_load():
+    """A path whose corrector did not converge at its first step carried 0: that is the solver's
+    limit, not the structure's, so it fails as a stopped path with the solver's fix, not as a
+    buckling load with "stiffer"; one that stopped above the required factor passes on its lower bound."""
+    stopped = ImperfectionCase(name="linear+", limit_load_factor=None, converged=False, path=np.array([[0.0, 0.0]]))
+    nonlinear = _verdicts(worst=stopped)[-1]
+    assert (nonlinear.kind, nonlinear.value, nonlinear.passed) == ("nonlinear_path_stopped", 0.0, False)
+    assert nonlinear.check == "worst non-linear load factor carried before its path stopped unconverged (linear+)"
+    (finding,) = findings_of([nonlinear])
+    assert finding.kind == "nonlinear_path_stopped" and finding.fix == "the solver stopped"
+    late = ImperfectionCase(name="mode1+", limit_load_factor=None, converged=False,
+                            path=np.array([[0.0, 0.0], [2.5, -0.1]]))
+    passed = _verdicts(worst=late)[-1]
+    assert passed.passed and passed.kind == "nonlinear_buckling" and passed.value == 2.5
+    buckled = ImperfectionCase(name="mode1+", limit_load_factor=1.2, converged=False,
+                               path=np.array([[0.0, 0.0], [1.2, -0.1], [1.1, -0.2]]))
+    assert _verdicts(worst=buckled)[-1].kind == "nonlinear_buckling", "a limit point found is a buckling load"
 
 
 def test_a_buckling_analysis_that_did_not_solve_fails_with_its_error():

@@ -28,9 +28,10 @@ _PART_AFTER_RESULT = ("utilisation", "deflection")
 @dataclass(frozen=True, kw_only=True)
 class Verdict:
     """One check: ``check`` (its line for a person), ``kind`` (utilisation, deflection, buckling,
-    buckling_not_solved, nonlinear_buckling), ``value`` against ``limit`` in ``unit`` (None where
-    the check could not be computed), ``passed``, the ``part`` it concerns (B0001, N0001, mode 1,
-    an imperfection's name), ``fix`` (what to change) and ``error`` (why it was not computed)."""
+    buckling_not_solved, nonlinear_buckling, nonlinear_path_stopped), ``value`` against ``limit``
+    in ``unit`` (None where the check could not be computed), ``passed``, the ``part`` it concerns
+    (B0001, N0001, mode 1, an imperfection's name), ``fix`` (what to change) and ``error`` (why it
+    was not computed)."""
 
     check: str
     kind: str
@@ -75,11 +76,13 @@ class Verdict:
 @dataclass(frozen=True, kw_only=True)
 class VerdictFixes:
     """What to change when a check fails: ``stiffer`` (a stiffer or stronger structure: utilisation,
-    lambda_LB, lambda_NL), ``deflection`` and ``buckling_not_solved``."""
+    lambda_LB, lambda_NL), ``deflection``, ``buckling_not_solved`` and ``path_stopped`` (a
+    non-linear path whose corrector did not converge under the required load factor)."""
 
     stiffer: str
     deflection: str
     buckling_not_solved: str
+    path_stopped: str = "check the supports and end releases for a near-mechanism"
 
 
 def design_verdicts(*, utilisation: np.ndarray, sls_displacements: np.ndarray, deflection_limit: float,
@@ -91,7 +94,8 @@ def design_verdicts(*, utilisation: np.ndarray, sls_displacements: np.ndarray, d
     ``deflection_ratio``), then where there is one each: the linear buckling analysis that did not
     solve (``buckling_error``), lambda_LB and the ``worst`` imperfect non-linear path's capacity (its
     limit load factor, the load factor at the tolerable deformation, or the load factor it carried),
-    each at least ``required_load_factor``."""
+    each at least ``required_load_factor``. A worst path that stopped unconverged under it is a
+    ``nonlinear_path_stopped`` verdict: its load factor is a lower bound, not a buckling load."""
     utilisation = np.asarray(utilisation)
     vertical = np.abs(np.asarray(sls_displacements)[:, 2])
     largest_utilisation, deflection = float(utilisation.max()), float(vertical.max())
@@ -113,12 +117,20 @@ def design_verdicts(*, utilisation: np.ndarray, sls_displacements: np.ndarray, d
                                 passed=bool(lambda_LB >= required_load_factor), fix=fixes.stiffer))
     if worst is not None:
         capacity = float(worst.capacity)
+        passed = bool(capacity >= required_load_factor)
+        if worst.read_at == "carried" and not worst.converged:
+            # the solver stopped, not the structure: a lower bound, and no buckling shown
+            verdicts.append(Verdict(
+                check=f"worst non-linear load factor carried before its path stopped unconverged ({worst.name})",
+                kind="nonlinear_buckling" if passed else "nonlinear_path_stopped", value=capacity,
+                limit=required_load_factor, part=worst.name, passed=passed, fix=fixes.path_stopped))
+            return verdicts
         label = {"limit": "limit load factor",
                  "tolerable": "load factor at the tolerable deflection (no limit point before it)",
                  "carried": "load factor carried (no limit point found)"}[worst.read_at]
         verdicts.append(Verdict(check=f"worst non-linear {label} ({worst.name})", kind="nonlinear_buckling",
                                 value=capacity, limit=required_load_factor, part=worst.name,
-                                passed=bool(capacity >= required_load_factor), fix=fixes.stiffer))
+                                passed=passed, fix=fixes.stiffer))
     return verdicts
 
 

@@ -380,6 +380,9 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     scale = max(float(np.linalg.norm(F_ref[free])), float(np.linalg.norm(F_dead[free])), 1e-300)
     x = cr.X.copy()
     triads = np.tile(np.eye(3), (cr.n_all, 1, 1))
+    # the smallest correction the coordinates can take: below it an update is round-off (a model
+    # whose members are so stiff that its whole path moves a few thousand ulps of its coordinates)
+    floor = 4 * np.finfo(float).eps * float(np.sqrt(np.sum(cr.X**2) + 3 * cr.n_all))
 
     def residual(x, triads, lam):
         f_int, cache = cr.internal_forces(x, triads)
@@ -394,13 +397,16 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
         for _ in range(40):
             f_int, cache = cr.internal_forces(x, triads)
             r = target - f_int
-            if np.linalg.norm(r[free]) < tolerance * scale:
+            error = float(np.linalg.norm(r[free]))
+            if error < tolerance * scale:
                 return x, triads
             lu = factor(cache)
             if lu is None:
                 return None
             du = np.zeros(6 * cr.n_all)
             du[free] = lu.solve(r[free])
+            if error < 1e3 * tolerance * scale and np.linalg.norm(du[free]) < floor:
+                return x, triads                     # the residual left is the coordinates' round-off
             x, triads = _update(x, triads, du)
         return None
 
@@ -516,7 +522,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
                 applied = max(float(np.linalg.norm(F_dead[free] + lam_try * F_ref[free])), 1e-12 * scale)
                 error = float(np.linalg.norm(r[free])) / applied
                 if error < tolerance or (error < 1e3 * tolerance
-                                         and correction_norm < 1e-10 * np.linalg.norm(total[free])):
+                                         and correction_norm < max(1e-10 * np.linalg.norm(total[free]), floor)):
                     ok = True
                     break
                 if full and _iteration - restarted_at >= 25:          # as many as full Newton takes

@@ -225,7 +225,11 @@ def _fixes(project: Project, sections: BeamSections | None) -> VerdictFixes:
                         deflection=f"{stiffer}; or [analysis] deflection_limit_ratio if the limit is not the project's",
                         buckling_not_solved="check the supports ([[supports]]) for a near-mechanism, or fewer "
                                             "[analysis] n_modes; the non-linear paths ran without mode-shaped "
-                                            "imperfections")
+                                            "imperfections",
+                        path_stopped="the solver stopped, not the structure: its load factor is only a lower "
+                                     "bound. Check the supports ([[supports]]) for a near-mechanism; or leave "
+                                     "that shape out of [analysis] imperfection_shapes, or set [analysis] "
+                                     "elements_per_beam, and run again")
 
 
 def _load_test(ctx, project: Project, surface, polymesh, model, supports, props, combination) -> dict:
