@@ -496,6 +496,26 @@ def test_condensed_factor_solves_as_a_plain_lu_and_keeps_the_inertia(library, co
             assert factor.negative_pivots == (0 if sigma == 0 else 2)
 
 
+def test_the_compiled_condensation_gives_numpys_block_products():
+    """W = K_ii^-1 K_ie, V = K_ei K_ii^-1 and K_ee - K_ei W of random non-symmetric beams of four
+    elements, against numpy's products of the blocks written out."""
+    from engine.structure.block_inverse import condensation
+
+    rng = np.random.default_rng(5)
+    m, g = 7, 18
+    inverse, first, last = rng.normal(size=(m, g, g)), rng.normal(size=(m, 12, 12)), rng.normal(size=(m, 12, 12))
+    K_ie = np.zeros((m, g, 12))
+    K_ie[:, :6, :6], K_ie[:, g - 6:, 6:] = first[:, 6:, :6], last[:, :6, 6:]
+    K_ei = np.zeros((m, 12, g))
+    K_ei[:, :6, :6], K_ei[:, 6:, g - 6:] = first[:, :6, 6:], last[:, 6:, :6]
+    K_ee = np.zeros((m, 12, 12))
+    K_ee[:, :6, :6], K_ee[:, 6:, 6:] = first[:, :6, :6], last[:, 6:, 6:]
+    W, V, condensed = condensation(inverse, first, last)
+    assert np.allclose(W, inverse @ K_ie, rtol=1e-12, atol=1e-12)
+    assert np.allclose(V, K_ei @ inverse, rtol=1e-12, atol=1e-12)
+    assert np.allclose(condensed, K_ee - K_ei @ inverse @ K_ie, rtol=1e-12, atol=1e-11)
+
+
 def test_the_compiled_block_elimination_gives_numpys_inverses_and_pivots():
     """Block-tridiagonal blocks of 6 x 6 (three internal nodes, as a beam of four elements):
     positive definite, indefinite and non-symmetric ones against numpy's inverse and the

@@ -276,12 +276,13 @@ def short_beam_hint(beam_lengths: np.ndarray | None) -> str | None:
 
 def factor_free_stiffness(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray,
                           beam_lengths: np.ndarray | None = None, *,
-                          ordering: FillOrdering | None = None) -> CondensedFactor:
+                          ordering: FillOrdering | None = None, compiled: bool = False) -> CondensedFactor:
     """Factor of the stiffness on the free DOFs from the element matrices (m,12,12) in global
     axes, the beams' internal nodes condensed out (``engine.structure.condensed``); a singular matrix is a
-    mechanism, named with its count. ``ordering``: kept between factorisations of one pattern."""
+    mechanism, named with its count. ``ordering``: kept between factorisations of one pattern;
+    ``compiled``: CondensedFactor's."""
     try:
-        lu = condensed_factor(K_elements, el, free, ordering)
+        lu = condensed_factor(K_elements, el, free, ordering, compiled=compiled)
     except RuntimeError as exc:
         raise MechanismError("the frame is a mechanism: its stiffness matrix is singular", n_modes=1,
                              hint="check for loose beams or nodes held by pinned ends only") from exc
@@ -317,10 +318,10 @@ def factor_or_none(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray,
 
 
 def factor_with_inertia(K_elements: np.ndarray, el: ElementMesh, free: np.ndarray,
-                        ordering: FillOrdering | None = None) -> tuple[CondensedFactor, int]:
+                        ordering: FillOrdering | None = None, compiled: bool = False) -> tuple[CondensedFactor, int]:
     """The condensed factor and its count of negative pivots. Raises RuntimeError where the matrix
-    is singular (as factor_or_none's None)."""
-    lu = condensed_factor(K_elements, el, free, ordering)
+    is singular (as factor_or_none's None). ``compiled``: CondensedFactor's."""
+    lu = condensed_factor(K_elements, el, free, ordering, compiled=compiled)
     if lu.singular:
         raise RuntimeError("Factor is singular (a pivot perturbed)")
     return lu, lu.negative_pivots

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["inverse_and_pivots", "SMALL_PIVOT"]
+__all__ = ["condensation", "inverse_and_pivots", "SMALL_PIVOT"]
 
 #: A pivot this small against its block's largest entry makes the elimination without row
 #: exchanges inaccurate: such a block's inverse is numpy's instead.
@@ -73,3 +73,54 @@ def inverse_and_pivots(blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         except np.linalg.LinAlgError:
             inverse[b] = np.nan
     return inverse, pivots
+
+
+@njit(cache=True, nogil=True)
+def _condense(inverse, first, last, W, V, condensed):  # pragma: no cover - compiled
+    m, g, _ = inverse.shape
+    e = g - 6
+    for b in range(m):
+        for i in range(g):
+            for j in range(6):
+                w0 = 0.0
+                w1 = 0.0
+                for t in range(6):
+                    w0 += inverse[b, i, t] * first[b, 6 + t, j]
+                    w1 += inverse[b, i, e + t] * last[b, t, 6 + j]
+                W[b, i, j] = w0
+                W[b, i, 6 + j] = w1
+        for i in range(6):
+            for j in range(g):
+                v0 = 0.0
+                v1 = 0.0
+                for t in range(6):
+                    v0 += first[b, i, 6 + t] * inverse[b, t, j]
+                    v1 += last[b, 6 + i, t] * inverse[b, e + t, j]
+                V[b, i, j] = v0
+                V[b, 6 + i, j] = v1
+        for i in range(6):
+            for j in range(12):
+                c0 = first[b, i, j] if j < 6 else 0.0
+                c1 = last[b, 6 + i, j] if j >= 6 else 0.0
+                for t in range(6):
+                    c0 -= first[b, i, 6 + t] * W[b, t, j]
+                    c1 -= last[b, 6 + i, t] * W[b, e + t, j]
+                condensed[b, i, j] = c0
+                condensed[b, 6 + i, j] = c1
+
+
+def condensation(inverse: np.ndarray, first: np.ndarray, last: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(W (m, g, 12), V (m, 12, g), condensed (m, 12, 12)) of beams whose internal nodes' block has
+    the ``inverse`` (m, g, g), first and last elements (m, 12, 12): W = K_ii^-1 K_ie, V = K_ei
+    K_ii^-1 and the beam-end stiffness K_ee - K_ei W, K_ie being the first element's block on
+    internal node 1 x end node 0 and the last's on internal node k-1 x end node k
+    (``engine.structure.condensed``), in one compiled pass where numpy's batched products of 6 x 6
+    blocks take several."""
+    inverse = np.ascontiguousarray(inverse, dtype=float)
+    first = np.ascontiguousarray(first, dtype=float)
+    last = np.ascontiguousarray(last, dtype=float)
+    m, g, _ = inverse.shape
+    W, V, condensed = np.empty((m, g, 12)), np.empty((m, 12, g)), np.empty((m, 12, 12))
+    _condense(inverse, first, last, W, V, condensed)
+    return W, V, condensed

@@ -263,9 +263,10 @@ class CondensedFactor:
     ``singular`` instead, its zero pivots counted in ``tiny_pivots``. With k = 1, S is the
     assembled matrix. ``ordering``: S's elimination order for SuperLU, kept from one factorisation
     of a pattern to the next. ``library``: S's, as ``engine.structure.solvers.library_for``.
-    ``compiled``: the internal blocks' inverses and pivots from one compiled elimination
-    (``engine.structure.block_inverse``: 0.03 s against 0.13 s at 7384 beams), for the many
-    factors of a large path; loading it costs some 0.5 s a process, more than one factor saves.
+    ``compiled``: the internal blocks' inverses and pivots from one compiled elimination, and the
+    condensation from one compiled pass (``engine.structure.block_inverse``: 0.03 s against 0.13 s
+    at 7384 beams, and about 0.06 s less), for the many factors of a large path; loading it costs
+    some 0.5 s a process, more than one factor saves.
     """
 
     def __init__(self, element_matrices: np.ndarray, connectivity: np.ndarray, n_nodes: int, n_original: int,
@@ -308,15 +309,20 @@ class CondensedFactor:
         self._inverse = inverse
         # W = K_ii^-1 K_ie and V = K_ei K_ii^-1 (K_ie: the first element's block on node 1 x
         # node 0 and the last's on node k-1 x node k)
-        self._W = np.concatenate([np.matmul(inverse[:, :, :6], first[:, 6:, :6]),
-                                  np.matmul(inverse[:, :, g - 6:], last[:, :6, 6:])], axis=2)       # (m, g, 12)
-        self._V = np.concatenate([np.matmul(first[:, :6, 6:], inverse[:, :6, :]),
-                                  np.matmul(last[:, 6:, :6], inverse[:, g - 6:, :])], axis=1)       # (m, 12, g)
-        condensed = np.zeros((m, 12, 12))
-        condensed[:, :6, :6] = first[:, :6, :6]
-        condensed[:, 6:, 6:] = last[:, 6:, 6:]
-        condensed[:, :6] -= np.matmul(first[:, :6, 6:], self._W[:, :6, :])
-        condensed[:, 6:] -= np.matmul(last[:, 6:, :6], self._W[:, g - 6:, :])
+        if compiled:
+            from .block_inverse import condensation
+
+            self._W, self._V, condensed = condensation(inverse, first, last)
+        else:
+            self._W = np.concatenate([np.matmul(inverse[:, :, :6], first[:, 6:, :6]),
+                                      np.matmul(inverse[:, :, g - 6:], last[:, :6, 6:])], axis=2)   # (m, g, 12)
+            self._V = np.concatenate([np.matmul(first[:, :6, 6:], inverse[:, :6, :]),
+                                      np.matmul(last[:, 6:, :6], inverse[:, g - 6:, :])], axis=1)   # (m, 12, g)
+            condensed = np.zeros((m, 12, 12))
+            condensed[:, :6, :6] = first[:, :6, :6]
+            condensed[:, 6:, 6:] = last[:, 6:, 6:]
+            condensed[:, :6] -= np.matmul(first[:, :6, 6:], self._W[:, :6, :])
+            condensed[:, 6:] -= np.matmul(last[:, 6:, :6], self._W[:, g - 6:, :])
         beam_ends = np.stack([connectivity[::k, 0], connectivity[k - 1::k, 1]], axis=1)
         self._n_boundary_dofs = 6 * n_original
         self._boundary = free[free < 6 * n_original]

@@ -364,6 +364,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     cr = _Corotational(model, supports)
     free = cr.free
     factored = 0
+    compiled = len(cr.L0) >= COMPILED_FROM        # the internal blocks by the compiled elimination
 
     def factor(cache, exact: bool = False):
         """The factored tangent at an element state, or None where it is singular. ``exact``: the
@@ -371,7 +372,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
         nonlocal factored
         factored += 1
         return factor_or_none(cr.tangent(cache), cr.el, free, cr.ordering, "superlu" if exact else "auto",
-                              compiled=len(cr.L0) >= COMPILED_FROM)
+                              compiled=compiled)
     F_ref = np.zeros(6 * cr.n_all)
     F_ref[:6 * n] = loads.ravel()
     F_dead = np.zeros(6 * cr.n_all)
@@ -419,7 +420,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             x, triads = state
     # first step size from a linear prediction reaching about max_load_factor / 20
     _, cache = residual(x, triads, 0.0)
-    lu = factor_free_stiffness(cr.tangent(cache), cr.el, free, ordering=cr.ordering)
+    lu = factor_free_stiffness(cr.tangent(cache), cr.el, free, ordering=cr.ordering, compiled=compiled)
     factored += 1
     u_ref = np.zeros(6 * cr.n_all)
     u_ref[free] = lu.solve(F_ref[free])
@@ -467,7 +468,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
         else:
             _, cache = residual(x, triads, lam)
             try:
-                lu, negatives = factor_with_inertia(cr.tangent(cache), cr.el, free, cr.ordering)
+                lu, negatives = factor_with_inertia(cr.tangent(cache), cr.el, free, cr.ordering, compiled)
             except RuntimeError:
                 converged_all = False
                 break
@@ -628,7 +629,8 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             break
     if len(path) > 1:                                        # pivots of the final state
         try:
-            pivots[-1] = factor_with_inertia(cr.tangent(residual(x, triads, lam)[1]), cr.el, free, cr.ordering)[1]
+            pivots[-1] = factor_with_inertia(cr.tangent(residual(x, triads, lam)[1]), cr.el, free, cr.ordering,
+                                             compiled)[1]
             factored += 1
         except RuntimeError:
             pass
