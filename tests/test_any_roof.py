@@ -224,13 +224,15 @@ def test_generated_roofs_reach_the_report_at_60_cells(seed, tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [24, 34, 44])
+@pytest.mark.parametrize("seed", [24, 34, 44, 404])
 def test_generated_roofs_with_drawn_settings_reach_the_report(seed, tmp_path):
     """Roofs and settings nobody tuned on (seeds past the 0-19 of the benchmarks): seed 34 is a
     courtyard roof of glulam on steel nodes, coarsened so far that its hole lay inside one cell and
     the remesh stopped; seed 24 has aluminium tubes in printed sockets round two holes; seed 44 has
     two corners of its outline 145 mm apart under steel joints that take 222 mm, whose joints
-    clashed until the bare corner was merged into the other (a corners_merged finding)."""
+    clashed until the bare corner was merged into the other (a corners_merged finding); seed 404's
+    glulam joints coarsen its two-courtyard roof to some 20 cells and collapse the courtyards'
+    outlines to triangles, whose cells then span two thirds of each (an opening_spanned finding)."""
     from workflow.config import load_project
 
     from .generated_surfaces import drawn_settings
@@ -262,6 +264,34 @@ def test_generated_roofs_with_drawn_settings_reach_the_report(seed, tmp_path):
             assert grid.nodes[node] == pytest.approx(m["kept_m"], abs=1e-6)
             assert grid.supports[node]
             assert 0 < np.linalg.norm(np.subtract(m["kept_m"], m["merged_m"])) < grid.beam_lengths.min()
+    if seed == 404:
+        (spanned,) = [f for f in summary.findings if f["kind"] == "opening_spanned"]
+        measured = _plan_openings_kept(out)
+        recorded = json.loads((out / "05-optimize" / "optimize.json").read_text())["openings"]
+        assert len(measured) == len(recorded) == 2
+        # each recorded opening against the one measured in plan nearest its centre
+        kept = [min(measured, key=lambda m: np.hypot(*(np.subtract(m[0], o["centre_m"][:2]))))[1] for o in recorded]
+        assert [o["kept"] for o in recorded] == pytest.approx(kept, abs=0.05)
+        assert spanned["parts"] == [f"opening {k + 1}" for k in range(2) if kept[k] < 0.5] != []
+
+
+def _plan_openings_kept(out: Path) -> list[tuple[tuple[float, float], float]]:
+    """(centroid in plan, share left open) of each opening of the surface under the written grid,
+    read from the stage files by other readers: trimesh's outlines of surface.ply and of the
+    triangulated gridshell.obj, their areas in plan by shapely; each grid hole counts at the
+    opening that holds it."""
+    import trimesh
+    from shapely.geometry import Point, Polygon
+
+    def plan_loops(path: Path) -> list[Polygon]:
+        mesh = trimesh.load(path, process=False, force="mesh")
+        outline = mesh.outline()
+        loops = [Polygon(outline.vertices[entity.points][:, :2]) for entity in outline.entities]
+        return sorted(loops, key=lambda p: p.area)[:-1]       # the outline itself spans the most
+    holes = plan_loops(out / "01-surface" / "surface.ply")
+    gaps = plan_loops(out / "05-optimize" / "gridshell.obj")
+    return [((hole.centroid.x, hole.centroid.y),
+             sum(g.area for g in gaps if hole.contains(Point(g.centroid))) / hole.area) for hole in holes]
 
 
 @pytest.mark.slow

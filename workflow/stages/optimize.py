@@ -30,6 +30,7 @@ from engine.remeshing.collapse import (
 from engine.remeshing.field import GuidingField
 from engine.remeshing.grids import LATTICES, GridKind, isotropic_field
 from engine.remeshing.local_global import ClosestSurfacePoints
+from engine.remeshing.openings import OPENING_KEPT, Opening, openings
 from engine.remeshing.optimize import OptimizeResult, OptimizeSettings, grid_quality, optimize
 from fabrication.files import write_text_atomic
 from fabrication.ids import joint_id, panel_id
@@ -243,6 +244,9 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: RemeshedGrid, proje
             result = dataclasses.replace(result, polymesh=symmetric)
     if removed or planes:  # the shortest beam and the smallest angle of the grid as written
         buildable.update({**grid_figures(result.polymesh), "short_beams_left": short_count(result.polymesh, project)})
+    kept_open = openings(surface.mesh, result.polymesh)
+    if any(o.kept < OPENING_KEPT for o in kept_open):
+        ctx.report_findings([openings_finding(kept_open, project.section.size_key())])
     write_polymesh_obj(result.polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: optimised grid-shell")
     ctx.step("panels: planar convex pieces of the cells that are not")
@@ -258,6 +262,7 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: RemeshedGrid, proje
     quality["shortest_beam_m"] = buildable["shortest_beam_m"]
     quality["smallest_beam_angle_deg"] = buildable["smallest_beam_angle_deg"]
     quality["defects_flipped"] = defects
+    quality["openings"] = [o.to_dict() for o in kept_open]
     quality["weights"] = project.optimize.model_dump(mode="json")
     if planes:  # of the grid as written
         quality["symmetry"] = symmetry_record(result.polymesh.nodes, planes,
@@ -370,6 +375,23 @@ def folded_cells_on(grid: PolyMesh, surface: SurfaceResult) -> np.ndarray:
     fans = CellFans(grid.faces)
     normals = ClosestSurfacePoints(surface.mesh).closest_normals(fans.centroids(grid.nodes))[1]
     return folded_cells(grid.nodes, fans, normals)
+
+
+def openings_finding(kept_open: list[Opening], size_key: str = "[section] diameter") -> dict:
+    """The finding that the grid spans openings of the surface: where joints coarsened the grid or
+    collapsed the beams along an opening, its outline shrank (JSON-ready)."""
+    spanned = [(k, o) for k, o in enumerate(kept_open, start=1) if o.kept < OPENING_KEPT]
+    where = "; ".join(f"opening {k} at ({o.centre[0]:.1f}, {o.centre[1]:.1f}) m: {o.grid_area_m2:.2f} of "
+                      f"{o.surface_area_m2:.2f} m^2 left open, {o.joints} joints on its outline" for k, o in spanned)
+    return Finding(kind="opening_spanned", parts=[f"opening {k}" for k, _ in spanned],
+                   measure=100 * min(o.kept for _, o in spanned), limit=100 * OPENING_KEPT, unit="% open",
+                   stage="optimize",
+                   message=(f"the grid's cells span {len(spanned)} of the surface's openings, leaving less than "
+                            f"{OPENING_KEPT:.0%} of each open ({where}): their panels and beams cross what was "
+                            "meant to be open"),
+                   fix=("more cells ([remesh] n_cells) or smaller joints and shorter cuts, so that beams can run "
+                        f"along the openings ([fabrication.joints], [fabrication.beams] min_cut_length, {size_key}); "
+                        "or [remesh] coarsen_for_joints = false")).to_dict()
 
 
 def folded_finding(cells: list[int]) -> dict:
