@@ -62,6 +62,14 @@ def neighbour_lists(edges: np.ndarray, n: int) -> list[list[int]]:
     return out
 
 
+def _used_once(start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """(k,) bool: which of the directed edges start[i] -> end[i] no other edge shares, either way
+    round (the boundary edges of faces given by their edges in turn)."""
+    key = np.sort(np.stack([start, end], axis=1), axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return counts[inverse.ravel()] == 1
+
+
 def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
     """Closed boundary loops of a manifold triangle mesh, each an ordered vertex array.
 
@@ -69,9 +77,7 @@ def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
     Returned longest first.
     """
     directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=-1).reshape(-1, 2)
-    key = np.sort(directed, axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    border = directed[counts[inverse.ravel()] == 1]
+    border = directed[_used_once(directed[:, 0], directed[:, 1])]
     return chain_loops(border[:, 0], border[:, 1])
 
 
@@ -324,12 +330,17 @@ class PolyMesh:
     def face_boundary(self) -> np.ndarray:
         """(n_faces,) bool: the cell has an edge on the surface boundary (used by one face)."""
         node, following, owner = self.corner_table
-        key = np.sort(np.stack([node, following], axis=1), axis=1)
-        _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-        once = counts[inverse.ravel()] == 1
         out = np.zeros(self.n_faces, dtype=bool)
-        out[owner[once]] = True
+        out[owner[_used_once(node, following)]] = True
         return _readonly(out)
+
+    @cached_property
+    def boundary_loops(self) -> list[np.ndarray]:
+        """Node loops of the grid's boundary (its beams used by one cell), in the cells'
+        orientation, longest first."""
+        node, following, _ = self.corner_table
+        once = _used_once(node, following)
+        return chain_loops(node[once], following[once])
 
     def face_planarity(self) -> np.ndarray:
         """(n_faces,) largest distance of a face's nodes from its best-fit plane, m."""
@@ -363,4 +374,4 @@ class PolyMesh:
 
 
 #: PolyMesh's cached properties that depend on its faces only (kept by replace_nodes)
-_TOPOLOGY = ("edges", "face_degrees", "valence", "face_boundary", "corner_table")
+_TOPOLOGY = ("edges", "face_degrees", "valence", "face_boundary", "boundary_loops", "corner_table")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from engine.mesh import PolyMesh, TriMesh
-from engine.remeshing.openings import grid_boundary_loops, loop_area, openings
+from engine.remeshing.openings import loop_area, openings
 from workflow.stages.optimize import openings_finding
 
 TILT = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(0.3), np.sin(0.3)], [0.0, -np.sin(0.3), np.cos(0.3)]])
@@ -50,7 +50,7 @@ def test_a_loop_spans_its_shoelace_area_on_any_plane():
 
 def test_a_grid_that_follows_the_courtyard_keeps_it_open():
     grid = _frame([(3.0, 3.0), (7.0, 3.0), (7.0, 7.0), (3.0, 7.0)])
-    assert sorted(len(loop) for loop in grid_boundary_loops(grid)) == [4, 4]
+    assert sorted(len(loop) for loop in grid.boundary_loops) == [4, 4]
     (courtyard,) = openings(_courtyard(), grid)
     assert courtyard.surface_area_m2 == pytest.approx(16.0)
     assert courtyard.grid_area_m2 == pytest.approx(16.0)

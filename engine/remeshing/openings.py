@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..mesh import PolyMesh, TriMesh, chain_loops
+from ..mesh import PolyMesh, TriMesh
 
-__all__ = ["OPENING_KEPT", "Opening", "grid_boundary_loops", "loop_area", "openings"]
+__all__ = ["OPENING_KEPT", "Opening", "loop_area", "openings"]
 
 #: An opening that the grid leaves less than this share of open is a finding.
 OPENING_KEPT = 0.5
@@ -52,20 +52,11 @@ def loop_area(points: np.ndarray) -> float:
     return float(np.linalg.norm(0.5 * np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0)))
 
 
-def grid_boundary_loops(grid: PolyMesh) -> list[np.ndarray]:
-    """The node loops of the grid's boundary (its beams used by one cell), in the cells' orientation."""
-    node, following, _ = grid.corner_table
-    key = np.sort(np.stack([node, following], axis=1), axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    once = counts[inverse.ravel()] == 1
-    return chain_loops(node[once], following[once])
-
-
 def _inner(loops: list[np.ndarray], points: np.ndarray) -> tuple[list[np.ndarray], list[float]]:
     """The loops but the one spanning the largest area (the outline), and their areas."""
-    areas = [loop_area(points[loop]) for loop in loops]
     if not loops:
         return [], []
+    areas = [loop_area(points[loop]) for loop in loops]
     outer = int(np.argmax(areas))
     return ([loop for i, loop in enumerate(loops) if i != outer], [a for i, a in enumerate(areas) if i != outer])
 
@@ -76,7 +67,7 @@ def openings(surface: TriMesh, grid: PolyMesh) -> list[Opening]:
     holes, hole_areas = _inner(surface.boundary_loops, surface.vertices)
     if not holes:
         return []
-    gaps, gap_areas = _inner(grid_boundary_loops(grid), grid.nodes)
+    gaps, gap_areas = _inner(grid.boundary_loops, grid.nodes)
     trees = [cKDTree(surface.vertices[hole]) for hole in holes]
     open_area = np.zeros(len(holes))
     joints = np.zeros(len(holes), dtype=int)
