@@ -118,19 +118,17 @@ def design_verdicts(*, utilisation: np.ndarray, sls_displacements: np.ndarray, d
     if worst is not None:
         capacity = float(worst.capacity)
         passed = bool(capacity >= required_load_factor)
+        kind, fix = "nonlinear_buckling", fixes.stiffer
         if worst.read_at == "carried" and not worst.converged:
             # the solver stopped, not the structure: a lower bound, and no buckling shown
-            verdicts.append(Verdict(
-                check=f"worst non-linear load factor carried before its path stopped unconverged ({worst.name})",
-                kind="nonlinear_buckling" if passed else "nonlinear_path_stopped", value=capacity,
-                limit=required_load_factor, part=worst.name, passed=passed, fix=fixes.path_stopped))
-            return verdicts
-        label = {"limit": "limit load factor",
-                 "tolerable": "load factor at the tolerable deflection (no limit point before it)",
-                 "carried": "load factor carried (no limit point found)"}[worst.read_at]
-        verdicts.append(Verdict(check=f"worst non-linear {label} ({worst.name})", kind="nonlinear_buckling",
-                                value=capacity, limit=required_load_factor, part=worst.name,
-                                passed=passed, fix=fixes.stiffer))
+            label = "load factor carried before its path stopped unconverged"
+            kind, fix = ("nonlinear_buckling" if passed else "nonlinear_path_stopped"), fixes.path_stopped
+        else:
+            label = {"limit": "limit load factor",
+                     "tolerable": "load factor at the tolerable deflection (no limit point before it)",
+                     "carried": "load factor carried (no limit point found)"}[worst.read_at]
+        verdicts.append(Verdict(check=f"worst non-linear {label} ({worst.name})", kind=kind, value=capacity,
+                                limit=required_load_factor, part=worst.name, passed=passed, fix=fix))
     return verdicts
 
 
