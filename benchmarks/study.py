@@ -57,6 +57,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _cli import ROOT, gridshell_command  # noqa: E402
 
 sys.path.insert(0, str(ROOT))
+from engine.structure.protocol import ProtocolSettings  # noqa: E402
 
 REAL_SURFACES = Path(os.environ.get("GRIDSHELL_SURFACES", ROOT.parent / "shared" / "data" / "surfaces"))
 QUESTIONS = ("spacing", "statics", "optimiser", "rounds")
@@ -85,14 +86,6 @@ def height_field_roofs() -> list[Path]:
 
 def _cap_text() -> str:
     return (ROOT / "templates" / "cap.toml").read_text(encoding="utf-8")
-
-
-def _section(text: str, name: str) -> tuple[int, int]:
-    """Line range [start, end) of the TOML table ``[name]`` (its header included)."""
-    lines = text.splitlines()
-    start = next(i for i, line in enumerate(lines) if line.strip() == f"[{name}]")
-    end = next((i for i in range(start + 1, len(lines)) if lines[i].lstrip().startswith("[")), len(lines))
-    return start, end
 
 
 def project_text(surface: Path | None, name: str, total_length_m: float,
@@ -158,11 +151,11 @@ def stiff_section(reference: Path) -> tuple[str, float, float, float] | None:
         encoding="utf-8"))["deflection_limit_m"]
     over = float(middle["delta_L_m"].median()) / limit
     catalogue = pd.read_csv(ROOT / "engine" / "data" / "en10210_chs.csv", comment="#")
-    start, end = _section(_cap_text(), "section")
-    tube = "\n".join(_cap_text().splitlines()[start:end])            # the cap's tube, not its shell's
-    diameter, wall = (float(re.search(rf'^{key} = "([0-9.]+) mm"', tube, re.M).group(1))
-                      for key in ("diameter", "thickness"))
-    cap = catalogue[(catalogue["diameter_mm"] == diameter) & (catalogue["thickness_mm"] == wall)].iloc[0]
+    from workflow.config import load_project
+
+    tube = load_project(ROOT / "templates" / "cap.toml").section           # the cap's tube, in m
+    cap = catalogue[np.isclose(catalogue["diameter_mm"], 1000 * tube.diameter)
+                    & np.isclose(catalogue["thickness_mm"], 1000 * tube.thickness)].iloc[0]
     enough = catalogue[catalogue["I_cm4"] >= cap["I_cm4"] * over].sort_values("mass_kg_per_m")
     pick = cap if over <= 1.0 else enough.iloc[0] if not enough.empty else catalogue.sort_values("I_cm4").iloc[-1]
     return str(pick["name"]), float(pick["diameter_mm"]), float(pick["thickness_mm"]), over
@@ -313,9 +306,9 @@ def markdown(lines: list[dict], question: str) -> str:
     return "\n".join(out)
 
 
-#: The protocol's largest load factor (ProtocolSettings.max_load_factor): a path that carries it
-#: stops there, so a pair of designs that both reach it has no verdict.
-CEILING = 10.0
+#: The protocol's largest load factor: a path that carries it stops there, so a pair of designs
+#: that both reach it has no verdict.
+CEILING = ProtocolSettings().max_load_factor
 
 #: The verdicts: each design's lambda_NL_worst over a reference design's at the same surface and L_tot.
 VERDICTS = (("Voro(2,2)", "quad 0"), ("Voro(2,2)", "quad 45"), ("Voro(2,2)", "isotropic CVT"),
