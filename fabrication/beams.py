@@ -259,7 +259,8 @@ def tube_solids(polymesh: PolyMesh, table: pd.DataFrame, *, outer_size_mm: float
         at = tuple(map(float, origin + ends_mm[0] * direction))
         plane = (Plane(origin=at, z_dir=tuple(map(float, direction))) if across is None else
                  Plane(origin=at, x_dir=tuple(map(float, across)), z_dir=tuple(map(float, direction))))
-        solid = solid.moved(Location(plane))
+        # placed, not moved: build123d's moved copies the fresh prism first (2.5 s of 4500 tubes)
+        solid = Solid(solid.wrapped.Moved(Location(plane).wrapped))
         solid.label = row.id
         ends = []
         if slots is not None and slotted:

@@ -1083,7 +1083,7 @@ def _build_and_write_one(job: tuple, turned: tuple | None = None) -> tuple[dict,
 def _build_and_write_checked(job: tuple, turned: tuple | None = None) -> tuple[dict, object]:
     geometry, settings, folder, parts_folder, first_id, last_id, *more = job
     breps = more[0] if more else None  # a folder for each joint's .brep too (JointsInBackground's breps)
-    from build123d import Location, export_step
+    from build123d import export_step
 
     started = time.perf_counter()
     if turned is None:
@@ -1098,9 +1098,8 @@ def _build_and_write_checked(job: tuple, turned: tuple | None = None) -> tuple[d
     report["valid"] = bool(report["valid"]) if "valid" in report else _is_valid(solid.wrapped)
     if blank is not solid:
         report["valid"] = report["valid"] and _is_valid(blank.wrapped)
-    location = Location(tuple(map(float, geometry.position_mm)))
-    placed = solid.moved(location)
-    exact = blank.moved(location)  # the STEP: the exact solid without the engraved id (the STL has it)
+    placed = _placed(solid, geometry.position_mm)
+    exact = _placed(blank, geometry.position_mm)  # the STEP: the exact solid without the engraved id (the STL has it)
     exact.label = report["id"]
     folder = Path(folder)
     step_path = folder / f"{report['id']}.step"
@@ -1139,6 +1138,18 @@ def _build_and_write_checked(job: tuple, turned: tuple | None = None) -> tuple[d
     return report, blank.wrapped
 
 
+def _placed(shape, position_mm: np.ndarray):
+    """``shape`` (build123d) moved to ``position_mm``, sharing its geometry: build123d's ``moved``
+    copies the whole B-rep first, 3 of a steel node's 80 ms for nothing, since the joint's solid
+    at the origin is not used again."""
+    from OCP.gp import gp_Trsf, gp_Vec
+    from OCP.TopLoc import TopLoc_Location
+
+    shift = gp_Trsf()
+    shift.SetTranslation(gp_Vec(*map(float, position_mm)))
+    return type(shape)(shape.wrapped.Moved(TopLoc_Location(shift)))
+
+
 def _id_ranges(n_joints: int) -> list[tuple[int, int]]:
     """Disjoint STEP entity id ranges, one per joint (a socket joint has some 10 000 entities),
     leaving room above them below 2**30 (readers keep ids in 32 bits)."""
@@ -1162,11 +1173,13 @@ class JointsInBackground:
     from entering the block to the last joint written. ``combined_step``: write joints.step too,
     where it comes under JOINTS_STEP_LIMIT_BYTES (``combined_bytes`` is its size either way).
     ``breps``: a folder (outside the stage's) for each joint's solid in OCCT's own format as
-    well, which gridshell.step reads some 30 times faster than the STEP file."""
+    well, which gridshell.step reads some 30 times faster than the STEP file; with
+    ``breps_limit``, only while there are at most that many distinct joints (``breps`` is None
+    otherwise: the model then draws spheres, and the files would be written for nothing)."""
 
     def __init__(self, polymesh: PolyMesh, normals: np.ndarray, beam_size_mm: float, settings: JointSettings,
                  folder: Path, *, workers: int | None = None, progress=None, combined_step: bool = False,
-                 breps: Path | None = None) -> None:
+                 breps: Path | None = None, breps_limit: int | None = None) -> None:
         self.folder = Path(folder)
         self.geometries = joint_geometry(polymesh, normals, beam_size_mm)
         self.settings = settings
@@ -1177,6 +1190,7 @@ class JointsInBackground:
         self.combined_step = combined_step
         self.combined_bytes = 0  # joints.step's size, written or not (0: not asked for)
         self.breps = None if breps is None else str(breps)
+        self.breps_limit = breps_limit
         self.groups: list = []  # _groups_of_same's groups of equal joints, (index, shift) each
         self._writer: StepAssemblyWriter | None = None
         self._ranges = _id_ranges(len(self.geometries))
@@ -1204,13 +1218,15 @@ class JointsInBackground:
                 self._combined = Path(parts) / "joints.step"
                 self._file = self._stack.enter_context(open(self._combined, "w", encoding="utf-8"))
                 self._writer = StepAssemblyWriter(self._file, "joints")
-            self._jobs = [(g, self.settings, str(self.folder), parts, *self._ranges[k], self.breps)
-                          for k, g in enumerate(self.geometries)]
             # equal joints go to one worker, which builds the first and turns its blank onto the
             # others (their booleans were two thirds of a printed socket's time); most beams first
             groups = _groups_of_same(self.geometries)
             groups.sort(key=lambda group: -len(self.geometries[group[0][0]].directions))
             self.groups = groups
+            if self.breps_limit is not None and len(groups) > self.breps_limit:
+                self.breps = None
+            self._jobs = [(g, self.settings, str(self.folder), parts, *self._ranges[k], self.breps)
+                          for k, g in enumerate(self.geometries)]
             self._groups = [tuple((self._jobs[k], shift) for k, shift in group) for group in groups]
             if self.workers > 1 and len(self._jobs) > 4:
                 self._pool = self._stack.enter_context(ProcessPoolExecutor(

@@ -134,12 +134,13 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     # below, or by the object's finaliser if the stage fails before)
     scratch = tempfile.TemporaryDirectory(prefix="gridshell-joints-")
     breps = Path(scratch.name)
+    # with very many distinct joints their solids would pass GRIDSHELL_STEP_JOINT_BYTES: the model
+    # then draws spheres and is written alongside the joints rather than after them
+    most_solids = GRIDSHELL_STEP_JOINT_BYTES // JOINT_STEP_BYTES_AT_LEAST
     with JointsInBackground(polymesh, normals, size_mm, joint_settings, folder / "joints",
                             workers=config.workers, combined_step=config.joints.combined_step,
-                            breps=breps) as joints:
-        # with very many distinct joints their solids would pass GRIDSHELL_STEP_JOINT_BYTES: the model
-        # then draws spheres and is written alongside the joints rather than after them
-        spheres = joints.distinct > GRIDSHELL_STEP_JOINT_BYTES // JOINT_STEP_BYTES_AT_LEAST
+                            breps=breps, breps_limit=most_solids) as joints:
+        spheres = joints.distinct > most_solids
         write_model = _beams_panels_drawings_assembly(project, ctx, clock, optimize, normals, joint_settings,
                                                       limits, summary, findings, sections, share=joints.run_steps,
                                                       spheres=spheres)
