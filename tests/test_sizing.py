@@ -412,3 +412,50 @@ def test_tubes_larger_than_the_grid_was_made_for_are_a_finding_or_capped(tmp_pat
     assert members["diameter_mm"].max() <= 88.9 + 0.01
     figures = json.loads((out / "06-analysis" / "analysis.json").read_text())
     assert not [f for f in figures["findings"] if f["kind"] == "tubes_outgrow_grid"]
+
+
+def test_the_last_refit_sizes_within_its_grids_tube(tmp_path, monkeypatch):
+    """Where every round's longer beams ask for larger tubes again (the courtyard template:
+    CHS 114.3 -> 193.7 -> 273 -> 323.9), the refits stop at MAX_REFITS and the last one sizes
+    within the tube its grid was made for, so that the joints fit. The sizing is stood in for by
+    a rule that always asks for the next tube up the catalogue, within [design] max_diameter."""
+    from types import SimpleNamespace
+
+    import workflow.runner
+    from workflow.config import load_project
+    from workflow.design_loop import MAX_REFITS, run_with_fitted_grid
+
+    tubes_mm = [114.3, 193.7, 273.0, 323.9, 355.6, 406.4]
+    sized = []
+
+    def run_project(project, out_dir, stages, **run):
+        grid_mm = 1000 * project.section.diameter
+        allowed = [d for d in tubes_mm if project.design.max_diameter is None
+                   or d <= 1000 * project.design.max_diameter + 0.01]
+        largest = min((d for d in allowed if d > grid_mm + 0.01), default=max(allowed))
+        sized.append((grid_mm, largest))
+        folder = Path(out_dir) / "06-analysis"
+        folder.mkdir(parents=True, exist_ok=True)
+        group = {"profile": f"CHS {largest:g}x6.3", "diameter_mm": largest, "thickness_mm": 6.3}
+        (folder / "analysis.json").write_text(json.dumps({"design": {"groups": [group]}}))
+        return SimpleNamespace(message=None)
+
+    monkeypatch.setattr(workflow.runner, "run_project", run_project)
+    base = load_project(resources.files("templates") / "courtyard.toml")
+    project = base.model_copy(update={"design": base.design.model_copy(
+        update={"size_sections": True, "fit_grid_to_tubes": True})})
+    stages = [SimpleNamespace(name=n) for n in ("surface", "remesh", "analysis", "fabrication", "report")]
+    said = []
+    final, _ = run_with_fitted_grid(project, tmp_path, stages, say=said.append)
+    fitted = json.loads((tmp_path / "fitted_grid.json").read_text())
+    assert len(fitted["rounds"]) == MAX_REFITS and fitted["fits"]
+    # each round's grid: the tube sized the round before; the last sizes within its own
+    assert [g for g, _ in sized[:MAX_REFITS + 1]] == tubes_mm[:MAX_REFITS + 1]
+    assert sized[MAX_REFITS] == (tubes_mm[MAX_REFITS], tubes_mm[MAX_REFITS])
+    assert 1000 * final.design.max_diameter == pytest.approx(tubes_mm[MAX_REFITS])
+    assert 1000 * final.section.diameter == pytest.approx(tubes_mm[MAX_REFITS])
+    assert "thicker walls" in said[-1]
+    # a rerun starts where the last round was: the same grid and the same cap
+    sized.clear()
+    again, _ = run_with_fitted_grid(project, tmp_path, stages, say=said.append)
+    assert sized[0] == (tubes_mm[MAX_REFITS], tubes_mm[MAX_REFITS]) and again.design == final.design

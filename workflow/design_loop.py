@@ -6,9 +6,14 @@ larger tubes, whose larger joints need longer beams (a 219 mm node where the gri
 114 mm ones clashes with its neighbours). So where the largest sized tube is larger than
 ``[section]``, the run goes on with ``[section]`` = that tube: the remesh, the optimisation and the
 sizing run again (the sizing from there may choose smaller tubes for most beams, never needing
-larger joints than the grid now allows for) - at most ``MAX_REFITS`` times. ``OUT/fitted_grid.json``
-records each round; a rerun starts from the section recorded there, so that it finds its stages
-cached. The stages after the analysis run once, for the grid that fits.
+larger joints than the grid now allows for) - at most ``MAX_REFITS`` times. Each round makes the
+beams longer, and on some roofs their moments then ask for larger tubes again (the courtyard
+template: CHS 114.3 -> 193.7 -> 273 -> 323.9, and 33 clashing joints). So the last round sizes
+within its grid's tube (``[design] max_diameter``, the walls grow instead), and the tubes fit the
+joints the grid was made for; where no tube that size passes, the sizing says so as it would for
+any catalogue. ``OUT/fitted_grid.json`` records each round; a rerun starts from the section
+recorded there, so that it finds its stages cached. The stages after the analysis run once, for
+the grid that fits.
 """
 
 from __future__ import annotations
@@ -53,7 +58,7 @@ def run_with_fitted_grid(project: Project, out_dir: Path, stages, *, say: Callab
     earlier = _earlier_fit(record, project)
     if earlier is not None:  # a rerun: start from the section the grid was made for last time
         rounds = earlier["rounds"]
-        project = _with_tube(project, *earlier["section_mm"])
+        project = _with_tube(project, *earlier["section_mm"], capped=len(rounds) >= MAX_REFITS)
     # up to the analysis first: the later stages are made once, for the grid that fits
     summary = run_project(project, out_dir, stages, **{**run, "until": "analysis"})
     for number in range(len(rounds) + 1, MAX_REFITS + 1):
@@ -61,11 +66,13 @@ def run_with_fitted_grid(project: Project, out_dir: Path, stages, *, say: Callab
         if summary.message or largest is None or _fits(largest, project):
             break
         before = profile_name(project)
+        last = number == MAX_REFITS
         say(f"the sized tubes (largest {largest['profile']}) are larger than the grid's joints were made for "
             f"([section] {before}): the grid is made again for {largest['profile']} ({number} of {MAX_REFITS}; "
-            f"[design] fit_grid_to_tubes = false keeps it)")
+            f"[design] fit_grid_to_tubes = false keeps it)"
+            + ("; the last round sizes tubes up to that diameter, thicker walls instead" if last else ""))
         rounds.append({"round": number, "section_before": before, "largest_sized": largest["profile"]})
-        project = _with_tube(project, largest["diameter_mm"], largest["thickness_mm"])
+        project = _with_tube(project, largest["diameter_mm"], largest["thickness_mm"], capped=last)
         summary = run_project(project, out_dir, stages, **{**run, "until": "analysis", "force": False})
     if rounds:
         final = _largest_sized(out_dir)
@@ -90,9 +97,17 @@ def _fits(group: dict, project: Project) -> bool:
     return group["diameter_mm"] <= 1000 * project.section.diameter + 0.01
 
 
-def _with_tube(project: Project, diameter_mm: float, thickness_mm: float) -> Project:
-    section = project.section.model_copy(update={"diameter": diameter_mm / 1000.0, "thickness": thickness_mm / 1000.0})
-    return project.model_copy(update={"section": section})
+def _with_tube(project: Project, diameter_mm: float, thickness_mm: float, *, capped: bool = False) -> Project:
+    """``project`` with [section] that tube; ``capped``: and sized within its diameter ([design]
+    max_diameter, or the one given where that is smaller)."""
+    diameter = diameter_mm / 1000.0
+    section = project.section.model_copy(update={"diameter": diameter, "thickness": thickness_mm / 1000.0})
+    update: dict = {"section": section}
+    if capped:
+        given = project.design.max_diameter
+        update["design"] = project.design.model_copy(
+            update={"max_diameter": diameter if given is None else min(given, diameter)})
+    return project.model_copy(update=update)
 
 
 def _earlier_fit(record: Path, project: Project) -> dict | None:
