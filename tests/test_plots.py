@@ -185,6 +185,30 @@ def test_the_surface_caption_names_the_colour_the_supports_are_drawn_in(drawn, t
     assert all(_is(colour, rgba) for d in dots for rgba in d.get_facecolor())
 
 
+@pytest.mark.parametrize("shape", ["courtyard", "cap", "vault"])
+def test_the_surface_pictures_labels_stay_apart(drawn, tmp_path, shape):
+    """Every axis label of the surface picture, the 3-D view's z label among them, keeps clear of
+    the others as drawn (the z label ran into the plan's y label on the courtyard template)."""
+    from engine.geometry import parametric
+    from workflow.plots.surface import plot_surface
+
+    mesh = getattr(parametric, shape)()
+    plot_surface(mesh, np.asarray(mesh.boundary_loops[0]), tmp_path / "surface.png")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    figure = drawn[-1]
+    canvas = FigureCanvasAgg(figure)  # drawn again as saved: the 3-D labels are placed at draw time
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    labels = [axis.label for ax in figure.axes for axis in (ax.xaxis, ax.yaxis, getattr(ax, "zaxis", None))
+              if axis is not None and axis.label.get_text()]
+    boxes = [label.get_window_extent(renderer) for label in labels]
+    assert len(boxes) >= 6
+    for i in range(len(boxes)):
+        for j in range(i + 1, len(boxes)):
+            assert not boxes[i].overlaps(boxes[j]), (labels[i].get_text(), labels[j].get_text())
+
+
 def test_the_axial_force_caption_says_which_colour_is_compression(drawn, grid, tmp_path):
     """'compression red, tension blue': each beam's drawn colour by the sign of its force."""
     import re

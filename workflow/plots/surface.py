@@ -47,5 +47,7 @@ def plot_surface(mesh: TriMesh, support_nodes: np.ndarray, path: Path, *, title:
     ax.set_title("plan: height and supports")
     fig.suptitle(title or f"{mesh.name}: {mesh.n_vertices} vertices, {mesh.n_faces} triangles, "
                  f"{len(mesh.boundary_loops)} boundary loop(s)")
-    fig.tight_layout()
+    # room between the two: tight_layout leaves out the 3D view's z label, which then ran into the
+    # plan's y label on plans wider than deep (the courtyard template)
+    fig.tight_layout(w_pad=5.0)
     return save_png(fig, path, dpi=110)
