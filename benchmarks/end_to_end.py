@@ -6,7 +6,9 @@ Targets: the default job cold under 1 minute, cached under 2 s (issue 16; issue 
 4 GiB (issue 16); the default job's whole output under 60 MB (issue 17: the bytes of its files;
 `du -sb` adds a few kB for the folders). Each run is a separate `gridshell run` process, so the figures include start-up
 and imports, as a user sees them; peak memory is the largest resident set of the run and of the
-worker processes it waited for. The load average is printed before and after the cold run.
+worker processes it waited for. The load average is printed before and after the cold run, and
+the CPU seconds of each run (its own and its workers', user and system) with the cores they kept
+busy on average: the wall clock of this shared machine varies by 10-20 % from run to run.
 
     .venv/bin/python benchmarks/end_to_end.py [--out DIR] [--project FILE]
     .venv/bin/python benchmarks/end_to_end.py --large [--roof ../shared/data/surfaces/Hall.ply] [--cells 1500]
@@ -26,15 +28,20 @@ import time
 from pathlib import Path
 
 
-def _run(arguments: list[str]) -> tuple[float, float, int]:
-    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+def _run(arguments: list[str]) -> tuple[float, float, int, float]:
+    """(wall seconds, peak MiB, exit code, CPU seconds) of one ``gridshell`` process: the CPU time
+    (user and system) is its own and that of every worker it waited for, so that a change of the
+    work shows beside this machine's changes of speed, which move the wall clock by 10-20 %."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     completed = subprocess.run([sys.executable, "-m", "workflow.cli", *arguments], capture_output=True, text=True)
     seconds = time.perf_counter() - start
-    peak_mib = max(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, before) / 1024
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    peak_mib = max(after.ru_maxrss, before.ru_maxrss) / 1024
+    cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
     if completed.returncode != 0:
         print(completed.stderr[-3000:], file=sys.stderr)
-    return seconds, peak_mib, completed.returncode
+    return seconds, peak_mib, completed.returncode, cpu
 
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -70,14 +77,14 @@ def main() -> int:
         args.project = str(_large_project(args.roof, args.cells, out.parent / f"{kind}-project"))
     base = ([args.project] if args.project else []) + ["--out", str(out), "--quiet"]
     load_before = os.getloadavg()
-    cold, cold_peak, code = _run(["run", *base])
+    cold, cold_peak, code, cold_cpu = _run(["run", *base])
     if code != 0:
         print(f"cold run failed with exit code {code}")
         return 1
     cold_stages = json.loads((out / "manifest.json").read_text())["stages"]
     steps = next((s.get("step_seconds", {}) for s in cold_stages if s["name"] == "fabrication"), {})
     load_after_cold = os.getloadavg()
-    cached, cached_peak, code = _run(["run", *base])
+    cached, cached_peak, code, cached_cpu = _run(["run", *base])
     manifest = json.loads((out / "manifest.json").read_text())
     stages = {s["name"]: (s["status"], s.get("duration_s", 0.0)) for s in manifest["stages"]}
     print(f"cores: {os.cpu_count()}  output: {out}")
@@ -86,9 +93,11 @@ def main() -> int:
           + ", ".join(f"{s['name']} {s.get('duration_s', 0.0):.1f}" for s in cold_stages))
     if steps:
         print("fabrication steps of the cold run (s): " + ", ".join(f"{k} {v:.1f}" for k, v in steps.items()))
-    print(f"{'run':<8}{'time s':>10}{'target s':>10}{'peak MiB':>10}")
-    print(f"{'cold':<8}{cold:>10.1f}{TARGETS_S[kind][0]:>10.0f}{cold_peak:>10.0f}")
-    print(f"{'cached':<8}{cached:>10.2f}{TARGETS_S[kind][1]:>10.0f}{cached_peak:>10.0f}")
+    print(f"{'run':<8}{'time s':>10}{'target s':>10}{'peak MiB':>10}{'CPU s':>10}{'cores':>7}")
+    print(f"{'cold':<8}{cold:>10.1f}{TARGETS_S[kind][0]:>10.0f}{cold_peak:>10.0f}{cold_cpu:>10.1f}"
+          f"{cold_cpu / cold:>7.2f}")
+    print(f"{'cached':<8}{cached:>10.2f}{TARGETS_S[kind][1]:>10.0f}{cached_peak:>10.0f}{cached_cpu:>10.2f}"
+          f"{cached_cpu / cached:>7.2f}")
     if args.large:
         analysis = next((s.get("duration_s", 0.0) for s in cold_stages if s["name"] == "analysis"), float("nan"))
         optimize = json.loads((out / "05-optimize" / "optimize.json").read_text()).get("after", {})
