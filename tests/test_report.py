@@ -316,6 +316,22 @@ def test_the_job_table_gives_a_section_as_its_designation_reads():
         "solid_rectangle 200 mm x 100 mm"
 
 
+def test_the_job_table_says_which_tube_the_grid_was_made_again_for():
+    """OUT/fitted_grid.json as the courtyard template wrote it with size_sections and
+    fit_grid_to_tubes, and a record whose tubes still outgrew the grid."""
+    from workflow.stages.report import fitted_grid_text
+
+    fitted = {"rounds": [{"round": 1, "section_before": "CHS 114.3x6.3", "largest_sized": "CHS 193.7x5"},
+                         {"round": 2, "section_before": "CHS 193.7x5", "largest_sized": "CHS 273x6.3"}],
+              "section": "CHS 273x6.3", "section_mm": [273.0, 6.3], "largest_sized": "CHS 273x10", "fits": True}
+    assert fitted_grid_text(fitted) == ("CHS 273x6.3: made again 2 times for the sized tubes "
+                                        "(CHS 114.3x6.3 -> CHS 193.7x5 -> CHS 273x6.3)")
+    once = {**fitted, "rounds": fitted["rounds"][:1], "section": "CHS 193.7x5", "largest_sized": "CHS 273x6.3",
+            "fits": False}
+    assert fitted_grid_text(once) == ("CHS 193.7x5: made again once for the sized tubes (CHS 114.3x6.3 -> "
+                                      "CHS 193.7x5); CHS 273x6.3 sized larger still")
+
+
 def test_a_value_beside_its_limit_never_reads_as_equal_to_it_when_it_is_not():
     """A cut of 359.6 mm against a limit of 360 mm is written with the digit that tells them apart
     (360.0 beside it), on the page's findings table and in the terminal's summary; equal values and those 3 digits

@@ -154,8 +154,19 @@ def load_case_text(name: str, case, panel_weight_N_per_m2: float) -> str:
     return f"{name} ({', '.join(parts) or 'no load'})"
 
 
+def fitted_grid_text(fitted: dict) -> str:
+    """The job table's line for OUT/fitted_grid.json (workflow.design_loop): the tube the grid was
+    made for, and the tubes it was made for before."""
+    rounds = fitted["rounds"]
+    text = (f"{fitted['section']}: made again {'once' if len(rounds) == 1 else f'{len(rounds)} times'} for the "
+            f"sized tubes ({' -> '.join([r['section_before'] for r in rounds] + [fitted['section']])})")
+    return text if fitted.get("fits", True) else f"{text}; {fitted.get('largest_sized')} sized larger still"
+
+
 def _summary(project: Project, surface: SurfaceResult, polymesh, analysis: dict, fabrication: FabricationResult,
-             shell: dict, findings: list[dict]) -> Section:
+             shell: dict, findings: list[dict], fitted: dict | None = None) -> Section:
+    """The summary: verdicts, findings and the job's table; ``fitted``: OUT/fitted_grid.json where
+    the grid was made again for the sized tubes (workflow.design_loop)."""
     supports = surface.supports
     weight = project.carried_panel_weight_N_per_m2
     loads = "; ".join(load_case_text(n, c, weight) for n, c in project.loads.cases.items()) or "-"
@@ -172,6 +183,7 @@ def _summary(project: Project, surface: SurfaceResult, polymesh, analysis: dict,
                               + ("" if not analysis.get("design") else
                                  f"; sized from {analysis['design']['catalogue']}: "
                                  + ", ".join(g["profile"] for g in analysis["design"]["groups"])),
+        **({"grid made for": fitted_grid_text(fitted)} if fitted and fitted.get("rounds") else {}),
         "nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
         "panels": "-" if fabrication.panels is None else fabrication.panels, "joints": fabrication.joints,
         "total beam length (m)": float(polymesh.total_length),
@@ -340,7 +352,8 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     polymesh = optimize.polymesh
     shell = _json(out_dir / "02-shell/shell.json")
     ctx.step("collecting")
-    summary = _summary(project, surface, polymesh, analysis.figures, fabrication, shell, ctx.earlier_findings)
+    summary = _summary(project, surface, polymesh, analysis.figures, fabrication, shell, ctx.earlier_findings,
+                       _json(out_dir / "fitted_grid.json"))
     sections = _stage_sections(out_dir, project)
     axial = np.asarray(analysis.axial_forces, dtype=float)
     viewer = Viewer(nodes=polymesh.nodes, beams=polymesh.edges, panels=[p.loop for p in optimize.pieces],
