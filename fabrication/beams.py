@@ -259,7 +259,7 @@ def tube_solids(polymesh: PolyMesh, table: pd.DataFrame, *, outer_size_mm: float
         at = tuple(map(float, origin + ends_mm[0] * direction))
         plane = (Plane(origin=at, z_dir=tuple(map(float, direction))) if across is None else
                  Plane(origin=at, x_dir=tuple(map(float, across)), z_dir=tuple(map(float, direction))))
-        # placed, not moved: build123d's moved copies the fresh prism first (2.5 s of 4500 tubes)
+        # placed, not moved: build123d's moved copies the fresh prism first (some 0.2 ms a tube)
         solid = Solid(solid.wrapped.Moved(Location(plane).wrapped))
         solid.label = row.id
         ends = []

@@ -24,6 +24,7 @@ from ..runner import StageContext
 from .analysis import AnalysisSummary
 from .fabrication import FabricationResult
 from .optimize import OptimizedGrid
+from .sizing import profile_name
 from .surface import SurfaceResult
 
 __all__ = ["ReportResult", "run", "load"]
@@ -352,8 +353,10 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     polymesh = optimize.polymesh
     shell = _json(out_dir / "02-shell/shell.json")
     ctx.step("collecting")
+    # the record of the refits, where it is this run's: a later run without them leaves it behind
+    fitted = _json(out_dir / "fitted_grid.json")
     summary = _summary(project, surface, polymesh, analysis.figures, fabrication, shell, ctx.earlier_findings,
-                       _json(out_dir / "fitted_grid.json"))
+                       fitted if fitted and fitted.get("section") == profile_name(project) else None)
     sections = _stage_sections(out_dir, project)
     axial = np.asarray(analysis.axial_forces, dtype=float)
     viewer = Viewer(nodes=polymesh.nodes, beams=polymesh.edges, panels=[p.loop for p in optimize.pieces],
