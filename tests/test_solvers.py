@@ -156,7 +156,7 @@ def test_pardiso_takes_its_settings_a_small_pivot_is_not_a_zero_one_and_a_solve_
     regular = factor_symmetric(sp.diags([1.0, 1e-10, 2.0]).tocsr(), library="pardiso")
     assert regular.tiny_pivots == 0 and regular.negative_pivots == 0
     assert np.allclose(regular.solve(np.array([1.0, 1e-10, 2.0])), 1.0, rtol=1e-12)
-    assert regular._solver.iparm[6] == 0, "no iterative refinement without perturbed pivots"
+    assert regular._analysis.iparm[6] == 0, "no iterative refinement without perturbed pivots"
     singular = factor_symmetric(sp.csr_matrix(np.diag([1.0, 0.0, 2.0])), library="pardiso")
     assert singular.tiny_pivots == 1
 
@@ -185,7 +185,7 @@ def _solution_bits(_: int = 0) -> tuple[int, bytes]:
     enough rows (14 400) for PARDISO to share its work between threads."""
     A = _laplacian(120, 0.3)
     factor = factor_symmetric(A, library="pardiso")
-    threads = int(factor._solver.libmkl.MKL_Get_Max_Threads())
+    threads = int(factor._analysis._solver.libmkl.MKL_Get_Max_Threads())
     return threads, factor.solve(np.linspace(0.0, 1.0, A.shape[0])).tobytes()
 
 
@@ -248,3 +248,32 @@ def test_a_path_tangent_factored_through_the_scatter_solves_and_counts_as_the_as
     b = np.random.default_rng(2).normal(size=len(cr.free))
     assert np.abs(kept.solve(b) - plain.solve(b)).max() <= 1e-10 * np.abs(plain.solve(b)).max()
     assert kept.negative_pivots == plain.negative_pivots
+
+
+@pytest.mark.skipif(not pardiso_available(), reason="pypardiso is not installed")
+def test_factors_on_a_kept_analysis_are_the_bits_of_fresh_ones_and_give_their_slots_back():
+    """A path's tangents share their pattern, so PARDISO's ordering and symbolic factorisation are
+    kept (PardisoAnalysis). Three shifted Laplacians of one pattern: each factor made in a slot of
+    the kept analysis solves with the bits of a fresh handle's and counts the closed form's negative
+    eigenvalues; with every slot live the next factor takes a handle of its own; a slot is free
+    again once its factor is gone; another pattern is not taken."""
+    from engine.structure.solvers import PardisoAnalysis, _upper_with_diagonal, factor_upper
+
+    n, shifts = 30, (0.0, 0.5, 2.3)
+    k = np.arange(1, n + 1)
+    one = 2 - 2 * np.cos(np.pi * k / (n + 1))
+    negatives = [int(np.sum((one[:, None] + one[None, :]).ravel() - shift < 0)) for shift in shifts]
+    uppers = [_upper_with_diagonal(_laplacian(n, shift)) for shift in shifts]
+    b = np.random.default_rng(4).normal(size=(n * n, 2))
+    analysis = PardisoAnalysis(uppers[0], slots=2)
+    kept = [factor_upper(upper, analysis) for upper in uppers]
+    assert [factor._shared for factor in kept] == [True, True, False] and not analysis.available
+    for factor, upper, count in zip(kept, uppers, negatives):
+        fresh = factor_upper(upper)
+        assert factor.solve(b).tobytes() == fresh.solve(b).tobytes()
+        assert factor.negative_pivots == fresh.negative_pivots == count
+    del kept[0]
+    assert analysis.available
+    again = factor_upper(uppers[2], analysis)
+    assert again._shared and again.solve(b).tobytes() == kept[-1].solve(b).tobytes()
+    assert analysis.factor(_upper_with_diagonal(_laplacian(20, 0.0))) is None

@@ -31,7 +31,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..linalg import assemble_blocks
-from .solvers import count_tiny, factor_symmetric, factor_upper, library_for
+from .solvers import PardisoAnalysis, count_tiny, factor_symmetric, factor_upper, library_for
 
 __all__ = ["CondensedFactor", "FillOrdering", "SchurScatter", "sparse_lu"]
 
@@ -118,6 +118,7 @@ class SchurScatter:
         self._whole = self._targets(np.flatnonzero(kept), r[kept], c[kept], n, diagonal=False)
         upper = kept & (r <= c)
         self._upper = self._targets(np.flatnonzero(upper), r[upper], c[upper], n, diagonal=True)
+        self._analysis: PardisoAnalysis | None = None
 
     @staticmethod
     def _targets(entries: np.ndarray, r: np.ndarray, c: np.ndarray, n: int, *, diagonal: bool) -> tuple:
@@ -143,6 +144,13 @@ class SchurScatter:
     def whole(self, blocks: np.ndarray) -> sp.csr_matrix:
         """The matrix ``blocks`` assemble to (CSR)."""
         return self._matrix(blocks, self._whole)
+
+    def analysis(self, upper: sp.csr_matrix) -> PardisoAnalysis:
+        """PARDISO's analysis of this pattern (``upper``, as ``upper`` makes it), made at the first
+        factorisation and kept for the next ones (engine.structure.solvers.PardisoAnalysis)."""
+        if self._analysis is None:
+            self._analysis = PardisoAnalysis(upper)
+        return self._analysis
 
 
 class _SchurLU:
@@ -182,9 +190,9 @@ class _SchurLDLT:
     library = "pardiso"
 
     def __init__(self, symmetric: sp.spmatrix | None, skew: sp.csr_matrix | None, *,
-                 upper: sp.csr_matrix | None = None) -> None:
+                 upper: sp.csr_matrix | None = None, analysis: PardisoAnalysis | None = None) -> None:
         self._factor = (factor_symmetric(symmetric, library="pardiso") if upper is None
-                        else factor_upper(upper))
+                        else factor_upper(upper, analysis))
         self._skew = skew
         self.negative_pivots = self._factor.negative_pivots
         self.tiny_pivots = self._factor.tiny_pivots
@@ -223,8 +231,9 @@ def _factor_of_s(blocks: np.ndarray, pairs: np.ndarray, n_nodes: int, rows: np.n
         try:
             if ordering is not None:  # a path's tangents: their pattern's scatter, kept
                 scatter = ordering.scatter(pairs, n_nodes, rows)
+                upper = scatter.upper(blocks - skew_blocks)
                 return _SchurLDLT(None, scatter.whole(skew_blocks) if asymmetric else None,
-                                  upper=scatter.upper(blocks - skew_blocks))
+                                  upper=upper, analysis=scatter.analysis(upper))
             symmetric = assemble_blocks(blocks - skew_blocks, pairs, n_nodes)[rows][:, rows]
             skew = sp.csr_matrix(assemble_blocks(skew_blocks, pairs, n_nodes)[rows][:, rows]) if asymmetric else None
             return _SchurLDLT(symmetric, skew)
