@@ -241,12 +241,36 @@ def compact_step_points(path: str | os.PathLike, decimals: int = 8) -> None:
     to BRepCheck, docs/decisions.md)."""
     path = Path(path)
     data = path.read_bytes()
+    matches = list(_STEP_POINT.finditer(data))
+    # every coordinate of every point shortened in one pass (a callback per number took 35 us a
+    # point: 43 ms of a printed socket's 0.8 s), then each point's line put together again
+    tokens = [b"".join(m.group(3).split()).split(b",") for m in matches]
+    short = _short_reals([t for point in tokens for t in point], decimals)
+    pieces, start, k = [], 0, 0
+    for match, point in zip(matches, tokens):
+        pieces += [data[start:match.start()], match.group(1), b" = CARTESIAN_POINT('", match.group(2), b"',(",
+                   b",".join(short[k:k + len(point)]), b"));"]
+        start, k = match.end(), k + len(point)
+    pieces.append(data[start:])
+    path.write_bytes(b"".join(pieces))
 
-    def point(match: re.Match) -> bytes:
-        coordinates = _STEP_REAL.sub(lambda m: _short_real(m, decimals), re.sub(rb"\s+", b"", match.group(3)))
-        return match.group(1) + b" = CARTESIAN_POINT('" + match.group(2) + b"',(" + coordinates + b"));"
 
-    path.write_bytes(_STEP_POINT.sub(point, data))
+def _short_reals(tokens: list[bytes], decimals: int) -> list[bytes]:
+    """Each of ``tokens`` (a STEP real, or anything else, kept as it is) to ``decimals`` places,
+    trailing zeros dropped: the bytes ``_short_real`` writes for each. Formatting to ``decimals``
+    places rounds as ``round`` does (both correctly, from the same binary value), so ``round`` is
+    skipped where the rounded value prints back to the same places (under 1e7: its ulp is below
+    half the last place)."""
+    if not _STEP_REALS.fullmatch(b",".join(tokens)):
+        return [_STEP_REAL.sub(lambda m: _short_real(m, decimals), token) for token in tokens]
+    out = []
+    for value in map(float, tokens):
+        text = f"{value if abs(value) < 1e7 else round(value, decimals):.{decimals}f}".rstrip("0")
+        out.append(b"0." if text in ("0.", "-0.") else text.encode())
+    return out
+
+
+_STEP_REALS = re.compile(rb"(?:" + _STEP_REAL.pattern + rb")(?:,(?:" + _STEP_REAL.pattern + rb"))*")
 
 
 _STEP_ENTITY = re.compile(rb"#(\d+)\s*=\s*((?:[^;']|'(?:[^']|'')*')*);")

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -1024,6 +1025,49 @@ def test_step_points_written_to_8_places_read_back_the_same_solid(tmp_path):
     assert _volume_and_box(short) == pytest.approx(_volume_and_box(full), abs=1e-6)
     assert (tmp_path / "short.step").stat().st_size < 0.88 * (tmp_path / "full.step").stat().st_size
     assert "CARTESIAN_POINT('',(0.,0.,0.));" in (tmp_path / "short.step").read_text()
+
+
+def test_step_points_are_the_decimal_roundings_and_nothing_else_changes(tmp_path):
+    """compact_step_points against Python's decimal module: each coordinate of each CARTESIAN_POINT
+    is its exact binary value rounded half-even to 8 places, trailing zeros dropped ("0." for
+    zero, also negative); a point split over lines is joined; tokens that are not STEP reals and
+    every other line stay as they were."""
+    from decimal import ROUND_HALF_EVEN, Decimal
+
+    from fabrication.files import compact_step_points
+
+    rng = np.random.default_rng(5)
+    values = np.concatenate([rng.normal(scale=scale, size=300) for scale in (1e-9, 1e-4, 1.0, 1e3, 1e5, 3e7)]
+                            + [np.array([0.0, -0.0, 5e-9, -5e-9, 2.5e-9, 1.000000005, 123.456, -7.0])])
+    lines = ["ISO-10303-21;", "DATA;", "#1 = DIRECTION('',(1.000000000000,0.,0.));"]
+    for i, triple in enumerate(values.reshape(-1, 2)):
+        a, b = (f"{v:.12E}" if i % 3 else f"{v:.13f}" for v in triple)
+        lines.append(f"#{i + 2} = CARTESIAN_POINT('P{i}',({a},\n  {b}, {a}));" if i % 7 == 0
+                     else f"#{i + 2} = CARTESIAN_POINT('P{i}',({a},{b},{a}));")
+    lines += ["ENDSEC;", "END-ISO-10303-21;"]
+    text = "\n".join(lines) + "\n"
+    path = tmp_path / "points.step"
+    path.write_text(text)
+    compact_step_points(path)
+    written = path.read_text()
+    odd = tmp_path / "odd.step"                     # tokens that are not STEP reals, beside one that is
+    odd.write_text("#2 = CARTESIAN_POINT('odd',(5,1.5E,-0.000000001));\n")
+    compact_step_points(odd)
+    assert odd.read_text() == "#2 = CARTESIAN_POINT('odd',(5,1.5E,0.));\n"
+
+    def expected(token: str) -> str:
+        rounded = Decimal(float(token)).quantize(Decimal("1E-8"), rounding=ROUND_HALF_EVEN)
+        digits = f"{rounded:f}".rstrip("0")
+        return "0." if digits in ("0.", "-0.") else digits
+
+    point = re.compile(r"#(\d+) = CARTESIAN_POINT\('([^']*)',\(([^)]*)\)\s*\);")
+    before = {m.group(1): (m.group(2), "".join(m.group(3).split()).split(",")) for m in point.finditer(text)}
+    after = {m.group(1): (m.group(2), m.group(3).split(",")) for m in point.finditer(written)}
+    assert before.keys() == after.keys() and len(after) == len(values) // 2
+    for key, (name, tokens) in before.items():
+        assert after[key] == (name, [expected(t) for t in tokens])
+    assert [line for line in written.splitlines() if "CARTESIAN_POINT" not in line] == \
+        [line for line in text.splitlines() if "CARTESIAN_POINT" not in line and not line.startswith("  ")]
 
 
 def test_a_steel_node_has_no_stl_and_the_clash_check_takes_its_box_from_the_solid(tmp_path):
