@@ -74,7 +74,10 @@ def planar_faces(solid, origin: np.ndarray, normal: np.ndarray, tolerance: float
             continue
         plane = surface.Plane()
         d, p = plane.Axis().Direction(), plane.Location()
-        outward = np.array([d.X(), d.Y(), d.Z()]) * (-1.0 if face.Orientation() == TopAbs_REVERSED else 1.0)
+        # the surface's normal is the axis of a right-handed plane, its opposite for a left-handed
+        # one (a mirrored solid's); the face's own normal is the surface's, reversed if the face is
+        sign = (1.0 if plane.Direct() else -1.0) * (-1.0 if face.Orientation() == TopAbs_REVERSED else 1.0)
+        outward = np.array([d.X(), d.Y(), d.Z()]) * sign
         if outward @ normal > 1 - 1e-9 and abs((np.array([p.X(), p.Y(), p.Z()]) - origin) @ normal) < tolerance:
             found.append(face)
     return found

@@ -45,7 +45,7 @@ from .settings import check_ranges
 from .step_assembly import StepAssemblyWriter, step_part, write_step_part
 from .workers import StepOutcome, exit_with_parent, run_steps
 
-__all__ = ["JointKind", "JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm",
+__all__ = ["JointKind", "JointSettings", "JointGeometry", "joint_geometry", "joint_setback_mm", "mirrored_copy",
            "geometry_setback_mm", "joint_hub_radius_mm", "joint_sleeve_mm", "smallest_angle", "build_joint",
            "build_joint_and_blank", "build_joints", "same_joints", "JointsInBackground", "joint_name",
            "copy_placements", "joint_hub_height_mm", "geometry_hub_height_mm", "joint_plate_height_mm",
@@ -517,8 +517,66 @@ def turned_copy(first: JointGeometry, other: JointGeometry, shift: int,
                          beam_size_mm=first.beam_size_mm, beam_sizes_mm=sizes), rotation
 
 
+def mirrored_copy(first: JointGeometry, other: JointGeometry,
+                  tolerance_rad: float = 2e-3) -> tuple[JointGeometry, np.ndarray] | None:
+    """(``first`` mirrored onto ``other``, the reflection (3, 3), determinant -1): as
+    ``turned_copy``, where ``other`` is a mirror image of ``first`` (a symmetric grid's joints on
+    either side of a symmetry plane), its beams matched in reverse azimuth order and every size
+    the same. None where no reflection brings every beam and the axis within ``tolerance_rad``."""
+    k = len(first.directions)
+    if len(other.directions) != k or k == 0:
+        return None
+    a_order = _azimuth_order(first)
+    reverse = _azimuth_order(other)[::-1]
+    source = np.vstack([first.directions[a_order], first.axis])
+    best = None
+    for shift in range(k):
+        matched = reverse[(np.arange(k) + shift) % k]
+        if np.abs(other.sizes_mm[matched] - first.sizes_mm[a_order]).max() > 1e-3:
+            continue
+        target = np.vstack([other.directions[matched], other.axis])
+        u, _, vt = np.linalg.svd(target.T @ source)
+        reflection = u @ np.diag([1.0, 1.0, -np.sign(np.linalg.det(u @ vt))]) @ vt
+        error = float(np.max(np.linalg.norm(source @ reflection.T - target, axis=1)))
+        if error <= tolerance_rad and (best is None or error < best[0]):
+            best = (error, matched, reflection)
+    if best is None:
+        return None
+    _, matched, reflection = best
+    turned = source @ reflection.T
+    directions = np.empty_like(first.directions)
+    directions[matched] = turned[:k]
+    sizes = None
+    if first.beam_sizes_mm is not None:
+        sizes = np.empty(k)
+        sizes[matched] = np.asarray(first.beam_sizes_mm, dtype=float)[a_order]
+    return JointGeometry(node=other.node, position_mm=other.position_mm, directions=directions, axis=turned[k],
+                         beam_size_mm=first.beam_size_mm, beam_sizes_mm=sizes), reflection
+
+
+def _mirror_families(geometries: list[JointGeometry], groups: list[list[tuple[int, int]]]) -> list[list[int]]:
+    """The groups of equal joints (``_groups_of_same``) gathered in families, as indices into
+    ``groups``: each family's first group, then the groups whose first joints are mirror images of
+    its first joint (``mirrored_copy``). A mirror image is another part (``same_joints``), but its
+    blank need not be built again: the first's, mirrored, is the same solid."""
+    firsts = [geometries[group[0][0]] for group in groups]
+    near = _near_joints([_beams_about_axis(g) for g in firsts], np.array([1e-3, 1e-3, 1e-3]))
+    families: list[list[int]] = []
+    taken: set[int] = set()
+    for i in range(len(groups)):
+        if i in taken:
+            continue
+        families.append([i])
+        for j in sorted(near[i]):  # a mirror image has the same sorted elevations, gaps and sizes
+            if j > i and j not in taken and mirrored_copy(firsts[i], firsts[j]) is not None:
+                families[-1].append(j)
+                taken.add(j)
+    return families
+
+
 def _turned_shape(shape, rotation: np.ndarray):
-    """A copy of the OCP ``shape`` turned by ``rotation`` (3, 3) about the origin."""
+    """A copy of the OCP ``shape`` turned by ``rotation`` (3, 3) about the origin (a reflection
+    too: OCCT then reverses the faces' orientations, so the copy stays a solid)."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
     from OCP.gp import gp_Trsf
 
@@ -1037,10 +1095,42 @@ def _build_and_write_group(jobs: tuple) -> list[dict]:
     is built; the blank of each other one is the first's turned onto it (``turned_copy``), then
     engraved with its own id, checked and written like any joint. Where the turn is not found, or a
     copy fails a check, that joint is built by itself."""
+    return _group_reports(jobs)[0]
+
+
+def _build_and_write_family(family: tuple) -> list[dict]:
+    """``_build_and_write_group`` of each group of a family (``_mirror_families``): the first group
+    as it is; the first joint of each other group has for its blank the family's first blank
+    mirrored onto it (``mirrored_copy``), then is engraved, checked and written like any joint
+    (``mirror_of`` in its report), and the rest of its group are turned copies of it. Where the
+    reflection is not found, or the copy fails a check, that joint is built by itself."""
+    reports: list[dict] = []
+    source = None
+    for index, group in enumerate(family):
+        group_reports, blank = _group_reports(group, source if index else None)
+        if index == 0 and blank is not None:
+            source = (group[0][0][0], blank)
+        reports += group_reports
+    return reports
+
+
+def _group_reports(jobs: tuple, mirror_source: tuple | None = None) -> tuple[list[dict], object]:
+    """(the reports of ``_build_and_write_group``, the group's first blank or None); with
+    ``mirror_source`` (a joint's geometry and blank), the first joint's blank is that one mirrored
+    where it is a mirror image of it."""
     reports: list[dict] = []
     first_blank = None
     for index, (job, shift) in enumerate(jobs):
         report = None
+        if index == 0 and mirror_source is not None:
+            copy = mirrored_copy(mirror_source[0], job[0])
+            if copy is not None:
+                report, blank = _build_and_write_one(job, turned=(copy[0], _turned_shape(mirror_source[1], copy[1])))
+                if report.get("ok"):
+                    report["mirror_of"] = joint_name(mirror_source[0].node)  # its blank is that one's, mirrored
+                    first_blank = blank
+                else:
+                    report = None
         if index > 0 and first_blank is not None:
             copy = turned_copy(jobs[0][0][0], job[0], shift)
             if copy is not None:
@@ -1054,7 +1144,7 @@ def _build_and_write_group(jobs: tuple) -> list[dict]:
             if index == 0 and report.get("ok"):
                 first_blank = blank
         reports.append(report)
-    return reports
+    return reports, first_blank
 
 
 def _build_and_write(job: tuple) -> dict:
@@ -1192,6 +1282,8 @@ class JointsInBackground:
         self.breps = None if breps is None else str(breps)
         self.breps_limit = breps_limit
         self.groups: list = []  # _groups_of_same's groups of equal joints, (index, shift) each
+        self._groups: list = []
+        self._families: list = []  # the groups' jobs in families of mirror images (_mirror_families)
         self._writer: StepAssemblyWriter | None = None
         self._ranges = _id_ranges(len(self.geometries))
         self._latest: tuple[str, float] | None = None
@@ -1228,10 +1320,15 @@ class JointsInBackground:
             self._jobs = [(g, self.settings, str(self.folder), parts, *self._ranges[k], self.breps)
                           for k, g in enumerate(self.geometries)]
             self._groups = [tuple((self._jobs[k], shift) for k, shift in group) for group in groups]
+            # printed sockets: a mirror image's blank is mirrored from its twin's, checked by its bores
+            # against its own beams (a steel node's fin plates lie on one side of their beam's plane)
+            families = (_mirror_families(self.geometries, groups) if self.settings.kind == "socket"
+                        else [[i] for i in range(len(groups))])
+            self._families = [tuple(self._groups[i] for i in family) for family in families]
             if self.workers > 1 and len(self._jobs) > 4:
                 self._pool = self._stack.enter_context(ProcessPoolExecutor(
                     max_workers=self.workers, initializer=exit_with_parent, initargs=(os.getpid(),)))
-                self._futures = [self._pool.submit(_build_and_write_group, group) for group in self._groups]
+                self._futures = [self._pool.submit(_build_and_write_family, family) for family in self._families]
                 self._thread = threading.Thread(target=self._collect_all, name="joints", daemon=True)
                 self._thread.start()
         except BaseException:
@@ -1300,8 +1397,8 @@ class JointsInBackground:
         if error is None:
             try:
                 if self._thread is None:
-                    for group in self._groups:
-                        for report in _build_and_write_group(group):
+                    for family in self._families:
+                        for report in _build_and_write_family(family):
                             self._collect(report)
                 self.wait()
                 if self._error is not None:

@@ -969,6 +969,42 @@ def test_a_joint_turned_onto_an_equal_one_has_its_beams_and_a_mirror_image_has_n
     assert all(turned_copy(first, image, shift) is None for shift in range(4))
 
 
+def test_a_mirror_image_joint_is_its_twins_blank_mirrored_and_engraved_with_its_own_id(tmp_path):
+    """Two printed sockets on either side of a symmetry plane are two parts (no turn makes one the
+    other) but one computation: the second's blank is the first's mirrored (a reflection of
+    determinant -1 found from the beams alone), engraved on its top face with its own id, its bores
+    checked against its own beams. Read back from the STEP files, its volume is that of the same
+    joint built by itself (1e-8); both are valid, watertight and engraved through their faces."""
+    from fabrication import joints
+
+    directions = np.array([[1.0, 0.1, 0.15], [-0.4, 0.9, 0.05], [-0.5, -0.8, 0.25]])
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    axis = np.array([0.05, -0.1, 1.0]) / np.linalg.norm([0.05, -0.1, 1.0])
+    mirror = np.diag([-1.0, 1.0, 1.0])
+    first = joints.JointGeometry(node=0, position_mm=np.array([300.0, 0.0, 0.0]), directions=directions, axis=axis,
+                                 beam_size_mm=12.0)
+    image = joints.JointGeometry(node=1, position_mm=np.array([-300.0, 0.0, 0.0]),
+                                 directions=(directions @ mirror)[[2, 0, 1]], axis=mirror @ axis, beam_size_mm=12.0)
+    assert all(joints.turned_copy(first, image, shift) is None for shift in range(3))
+    copy, reflection = joints.mirrored_copy(first, image)
+    assert np.linalg.det(reflection) == pytest.approx(-1.0)
+    assert np.allclose(np.sort(copy.directions, axis=0), np.sort(image.directions, axis=0), atol=1e-12)
+    groups = joints._groups_of_same([first, image])
+    assert joints._mirror_families([first, image], groups) == [[0, 1]]
+    settings, ranges = joints.JointSettings(), joints._id_ranges(2)
+    jobs = [(g, settings, str(tmp_path), None, *ranges[k]) for k, g in enumerate((first, image))]
+    reports = joints._build_and_write_family(tuple(tuple((jobs[k], shift) for k, shift in g) for g in groups))
+    assert [r.get("mirror_of") for r in reports] == [None, "J0001"]
+    assert all(r["ok"] and r["valid"] and r["watertight"] and r["engraving"] == "faces" for r in reports)
+    assert all(r["max_axis_error_deg"] < 1e-6 for r in reports)
+    alone = tmp_path / "alone"
+    alone.mkdir()
+    joints._build_and_write((image, settings, str(alone), None, *ranges[1]))
+    assert _volume(_read_step(tmp_path / "J0002.step")) == pytest.approx(_volume(_read_step(alone / "J0002.step")),
+                                                                         rel=1e-8)
+    assert (tmp_path / "J0002.stl").read_bytes() != (tmp_path / "J0001.stl").read_bytes()
+
+
 def test_equal_joints_are_built_once_and_turned_each_engraved_with_its_own_id(tmp_path):
     """A group of equal joints is built once: each other joint's blank is the first's turned onto it
     (read back from the STEP files, the same volume to 1e-9, against 1e-4 for a joint built by

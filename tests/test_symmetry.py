@@ -177,3 +177,39 @@ def test_a_step_that_leaves_the_reals_ends_the_optimisation_at_the_last_finite_g
     monkeypatch.setattr(optimize_module, "symmetrise_points", real)
     clean = optimize(grid, mesh, field, OptimizeSettings(iterations=20, symmetry_planes=(plane,)))
     assert not clean.quality["stopped_non_finite"] and not _unsettled(clean)
+
+
+def test_node_normals_of_a_symmetric_grid_are_mirror_images_and_nearer_the_surface():
+    """A grid symmetric about x = 0 and y = 0 on the paraboloid z = 1 - x^2 - y^2 / 2, its node
+    normals read from a triangulation of the same surface without that symmetry (jittered
+    vertices): with the symmetry planes, the normals of mirror-image nodes are mirror images
+    (1e-12), those of nodes on a plane lie in it, and they are nearer the exact normal
+    (2x, y, 1) / |.| than the nearest vertex's, on average."""
+    from engine.mesh import PolyMesh
+    from engine.structure.grid_model import node_normals
+
+    surface = lambda x, y: 1.0 - x**2 - 0.5 * y**2  # noqa: E731
+    rng = np.random.default_rng(3)
+    u = np.linspace(-1.0, 1.0, 41)
+    x, y = np.meshgrid(u, u, indexing="ij")
+    plan = np.column_stack([x.ravel(), y.ravel()]) + rng.uniform(-0.02, 0.02, (x.size, 2))
+    plan = np.clip(plan, -1.0, 1.0)
+    reference = TriMesh(vertices=np.column_stack([plan, surface(*plan.T)]), faces=grid_triangles(40, 40))
+    g = np.linspace(-0.9, 0.9, 7)                       # quads, symmetric about both planes
+    gx, gy = np.meshgrid(g, g, indexing="ij")
+    nodes = np.column_stack([gx.ravel(), gy.ravel(), surface(gx.ravel(), gy.ravel())])
+    faces = tuple(np.array([i * 7 + j, (i + 1) * 7 + j, (i + 1) * 7 + j + 1, i * 7 + j + 1])
+                  for i in range(6) for j in range(6))
+    grid = PolyMesh(nodes=nodes, faces=faces)
+    planes = (((0.0, 0.0, 0.0), (1.0, 0.0, 0.0)), ((0.0, 0.0, 0.0), (0.0, 1.0, 0.0)))
+    raw, symmetric = node_normals(grid, reference), node_normals(grid, reference, symmetry_planes=planes)
+    index = {tuple(np.round(p[:2], 6)): k for k, p in enumerate(nodes)}
+    for k, p in enumerate(nodes):
+        for sx, sy in ((-1, 1), (1, -1), (-1, -1)):
+            twin = index[(round(sx * p[0], 6) + 0.0, round(sy * p[1], 6) + 0.0)]
+            assert np.allclose(symmetric[twin], symmetric[k] * [sx, sy, 1], atol=1e-12)
+    assert np.allclose(symmetric[np.isclose(nodes[:, 0], 0.0), 0], 0.0, atol=1e-12)
+    exact = np.column_stack([2 * nodes[:, 0], nodes[:, 1], np.ones(len(nodes))])
+    exact /= np.linalg.norm(exact, axis=1)[:, None]
+    error = lambda normals: np.degrees(np.arccos(np.clip(np.sum(normals * exact, axis=1), -1, 1))).mean()  # noqa: E731
+    assert not np.allclose(raw, symmetric) and error(symmetric) < error(raw)

@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 
 from ..mesh import PolyMesh
 
-__all__ = ["SYMMETRY_TOLERANCE", "Plane", "reflect", "mirror_partners", "symmetrise_points",
+__all__ = ["SYMMETRY_TOLERANCE", "Plane", "reflect", "mirror_partners", "symmetrise_points", "symmetrise_directions",
            "symmetry_deviation", "symmetry_record", "symmetrised_grid"]
 
 Plane = tuple[Sequence[float], Sequence[float]]
@@ -68,6 +68,23 @@ def symmetrise_points(points: np.ndarray, planes: Sequence[Plane], partners: np.
             own = np.where(held[i], 1.0, np.where(held[j], 0.0, 0.5))
             x[i] = own[:, None] * x[i] + (1.0 - own[:, None]) * reflect(x[j], plane)
     return x
+
+
+def symmetrise_directions(vectors: np.ndarray, planes: Sequence[Plane], partners: np.ndarray) -> np.ndarray:
+    """(n, 3) unit ``vectors`` (one per point: normals) with each partner pair's (mirror_partners)
+    turned to the mean of one and the other's mirror image, and a point's that is its own partner
+    turned into the plane; vectors without partners stay."""
+    v = np.array(vectors, dtype=float)
+    for _ in range(PASSES if len(planes) > 1 else 1):
+        for plane, partner in zip(planes, partners):
+            _, normal = _unit(plane)
+            i = np.flatnonzero(partner >= 0)
+            mirrored = v[partner[i]] - 2.0 * np.outer(v[partner[i]] @ normal, normal)
+            mean = 0.5 * (v[i] + mirrored)
+            length = np.linalg.norm(mean, axis=1)
+            keep = length > 1e-9  # opposite vectors (a vertical plane's normal on it) stay
+            v[i[keep]] = mean[keep] / length[keep, None]
+    return v
 
 
 def symmetry_deviation(points: np.ndarray, planes: Sequence[Plane], length: float) -> list[float]:

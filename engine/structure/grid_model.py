@@ -35,9 +35,23 @@ class BeamProperties:
     mass_per_length: float
 
 
-def node_normals(polymesh: PolyMesh, reference: TriMesh | None = None) -> np.ndarray:
+def node_normals(polymesh: PolyMesh, reference: TriMesh | None = None, symmetry_planes: tuple = ()) -> np.ndarray:
     """(n_nodes, 3) unit normals: of the nearest reference-surface vertex where given, else
-    the sum of the adjacent cells' vector areas; oriented like the cells (up or out)."""
+    the sum of the adjacent cells' vector areas; oriented like the cells (up or out). With
+    ``symmetry_planes`` ((point, normal) pairs, m), the normals of mirror-image nodes (within
+    SYMMETRY_TOLERANCE of the mean beam) are made mirror images too: a symmetric grid on a surface
+    triangulated without its symmetry has symmetric joints and beam axes."""
+    normals = _node_normals(polymesh, reference)
+    if symmetry_planes and len(polymesh.edges):
+        from ..geometry.symmetry import SYMMETRY_TOLERANCE, mirror_partners, symmetrise_directions
+
+        reach = SYMMETRY_TOLERANCE * float(polymesh.beam_lengths.mean())
+        planes = list(symmetry_planes)
+        normals = symmetrise_directions(normals, planes, mirror_partners(polymesh.nodes, planes, reach))
+    return normals
+
+
+def _node_normals(polymesh: PolyMesh, reference: TriMesh | None) -> np.ndarray:
     areas = polymesh.face_vector_areas()
     node, _, cell = polymesh.corner_table
     acc = np.stack([np.bincount(node, weights=areas[cell, k], minlength=polymesh.n_nodes) for k in range(3)], axis=1)

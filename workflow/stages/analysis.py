@@ -57,7 +57,7 @@ from .sizing import (
 )
 from .surface import SurfaceResult
 
-__all__ = ["run", "load", "beam_properties", "build_frame", "pick_combination", "linear_axial_forces",
+__all__ = ["run", "load", "beam_properties", "build_frame", "grid_normals", "pick_combination", "linear_axial_forces",
            "AnalysisSummary"]
 
 
@@ -92,10 +92,19 @@ def pick_combination(project: Project, surface: SurfaceResult, limit_state: str)
     return choose_combination(surface.combinations, surface.load_cases, limit_state, name)
 
 
+def grid_normals(polymesh: PolyMesh, surface: SurfaceResult, project: Project | None = None) -> np.ndarray:
+    """(n_nodes, 3) the grid's node normals (engine.structure.grid_model.node_normals), mirror
+    images of each other across [field] symmetry_planes where the grid is symmetric: the joints'
+    axes and the beams' up vectors of the analysis and the fabrication."""
+    planes = project.field.to_settings().symmetry_planes if project is not None else ()
+    return node_normals(polymesh, surface.mesh, symmetry_planes=planes)
+
+
 def build_frame(polymesh: PolyMesh, surface: SurfaceResult, props: BeamProperties,
-                elements_per_beam: int) -> tuple[FrameModel, Supports, np.ndarray]:
-    """(FrameModel, Supports, node normals) of the grid-shell."""
-    normals = node_normals(polymesh, surface.mesh)
+                elements_per_beam: int, project: Project | None = None) -> tuple[FrameModel, Supports, np.ndarray]:
+    """(FrameModel, Supports, node normals) of the grid-shell (``project``: its symmetry planes for
+    the normals, grid_normals)."""
+    normals = grid_normals(polymesh, surface, project)
     up = beam_up_vectors(polymesh, normals)
     n_beams = len(polymesh.edges)
     model = FrameModel(nodes=polymesh.nodes, beams=polymesh.edges, E=np.full(n_beams, props.E),
@@ -289,10 +298,11 @@ def load(folder: Path, project: Project) -> AnalysisSummary:
     return AnalysisSummary(figures=figures, axial_forces=members["axial_force_kN"].to_numpy() * 1e3, sections=sections)
 
 
-def frame_and_loads(polymesh, surface, props: BeamProperties, cases, elements_per_beam: int):
+def frame_and_loads(polymesh, surface, props: BeamProperties, cases, elements_per_beam: int,
+                    project: Project | None = None):
     """(FrameModel, Supports, [nodal loads (n,6) per load case]) of the grid-shell with ``props``
-    (whose mass per length the self-weight takes)."""
-    model, supports, _ = build_frame(polymesh, surface, props, elements_per_beam)
+    (whose mass per length the self-weight takes); ``project`` as for build_frame."""
+    model, supports, _ = build_frame(polymesh, surface, props, elements_per_beam, project)
     loads = [gridshell_loads(polymesh, case, mass_per_length=props.mass_per_length,
                              surface_vertices=surface.mesh.vertices) for case in cases]
     return model, supports, loads
@@ -304,7 +314,8 @@ def linear_axial_forces(polymesh: PolyMesh, surface: SurfaceResult, project: Pro
     beam's force the mean of its two ends."""
     props = beam_properties(project)[0]
     case = combine(surface.load_cases, pick_combination(project, surface, "ULS"))
-    model, supports, (loads,) = frame_and_loads(polymesh, surface, props, [case], project.analysis.elements_per_beam)
+    model, supports, (loads,) = frame_and_loads(polymesh, surface, props, [case], project.analysis.elements_per_beam,
+                                                project)
     return linear_static(model, supports, loads).beam_end_forces[:, :, 0].mean(axis=1)
 
 
@@ -345,7 +356,7 @@ def protocol_with_design(ctx, project: Project, polymesh, surface, material, met
             props = sections.frame_properties(material)
         ctx.step("frame model")
         model, supports, (uls_loads, sls_loads) = frame_and_loads(polymesh, surface, props, cases,
-                                                                 config.elements_per_beam)
+                                                                 config.elements_per_beam, project)
         if executor is not None:
             result = run_protocol(model, supports, sls_loads, uls_loads, settings, progress=ctx.step,
                                   executor=executor)
@@ -398,7 +409,7 @@ class _Sizer:
     def _solve(self, sections: BeamSections):
         model, supports, (uls, sls) = frame_and_loads(self.polymesh, self.surface,
                                                       sections.frame_properties(self.material), self.cases,
-                                                      self.project.analysis.elements_per_beam)
+                                                      self.project.analysis.elements_per_beam, self.project)
         stiffness = factor_stiffness(model, supports)
         uls_result = linear_static(model, supports, uls, stiffness=stiffness)
         sls_result = linear_static(model, supports, sls, stiffness=stiffness, with_energy=True)

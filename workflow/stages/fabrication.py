@@ -24,7 +24,7 @@ import numpy as np
 from engine.design.sections import material
 from engine.findings import Finding
 from engine.mesh import PolyMesh
-from engine.structure.grid_model import beam_up_vectors, node_normals
+from engine.structure.grid_model import beam_up_vectors
 from fabrication.assembly import plan_assembly, write_assembly
 from fabrication.beams import RectangularSection, slot_volumes_mm3, tube_axes_mm, tube_solids
 from fabrication.clearance import joint_clashes_parallel
@@ -58,7 +58,7 @@ from fabrication.workers import run_steps
 
 from ..config import MM, Project
 from ..runner import StageContext
-from .analysis import AnalysisSummary, beam_properties
+from .analysis import AnalysisSummary, beam_properties, grid_normals
 from .build_limits import build_limits_of
 from .optimize import OptimizedGrid
 from .sizing import BeamSections, profile_name, project_sections
@@ -119,7 +119,7 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     polymesh = optimize.polymesh
     sections = analysis.sections
     folder: Path = ctx.folder
-    normals = node_normals(polymesh, surface.mesh)
+    normals = grid_normals(polymesh, surface, project)  # mirror images across the symmetry planes
     # one outer size, or one per beam where the analysis sized the tubes
     size_mm = project.section.outer_size_mm() if sections is None else MM * sections.diameter
     limits = build_limits_of(project)
