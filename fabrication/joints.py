@@ -1185,8 +1185,12 @@ def _build_and_write_checked(job: tuple, turned: tuple | None = None) -> tuple[d
     report["max_axis_error_deg"] = (_axis_errors_deg(solid, geometry.directions, bores) if settings.kind == "socket"
                                     else 0.0)
     report["single_solid"] = len(solid.solids()) == 1
-    report["valid"] = bool(report["valid"]) if "valid" in report else _is_valid(solid.wrapped)
-    if blank is not solid:
+    # a copy's blank is a valid joint's blank turned or mirrored (a rigid map keeps it valid): only
+    # what was made here, the engraved solid, is checked again (0.05 s of a printed socket)
+    copied = turned is not None
+    report["valid"] = (bool(report["valid"]) if "valid" in report
+                       else copied and blank is solid or _is_valid(solid.wrapped))
+    if blank is not solid and not copied:
         report["valid"] = report["valid"] and _is_valid(blank.wrapped)
     placed = _placed(solid, geometry.position_mm)
     exact = _placed(blank, geometry.position_mm)  # the STEP: the exact solid without the engraved id (the STL has it)
