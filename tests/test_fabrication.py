@@ -225,6 +225,8 @@ def test_gridshell_step_holds_the_joints_as_built_shared_where_they_repeat_and_n
     placed_again = sum(len(group) - 1 for group in summary["same_joints"])
     assert placed_again > 0, "the small mock-up has joints that repeat"
     assert record["joint_parts"] == len(joints) - placed_again == summary["distinct_joints"]
+    made = summary["joints_made"]  # a copy that failed a check was built by itself
+    assert made["built"] + made["turned"] + made["mirrored"] == len(joints) and made["turned"] <= placed_again
     assert text.count("MANIFOLD_SOLID_BREP") < len(joints) + len(polymesh.edges) + summary["panels"]
     cut = pd.read_csv(folder / "beams" / "cutlist.csv").set_index("id")
     D, t = 1000 * project.section.diameter, 1000 * project.section.thickness

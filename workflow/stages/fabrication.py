@@ -165,6 +165,9 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     clock.stop()
     summary["same_joints"] = groups
     summary["distinct_joints"] = len(joint_reports) - sum(len(g) - 1 for g in groups)
+    # how the workers made them: built by booleans, or an equal joint's blank turned or mirrored
+    turned, mirrored = (sum(1 for r in joint_reports if r.get(key)) for key in ("copy_of", "mirror_of"))
+    summary["joints_made"] = {"built": len(joint_reports) - turned - mirrored, "turned": turned, "mirrored": mirrored}
     findings += _joint_findings(joint_reports, limits)
     clock.start("joints: clearance between neighbours")
     summary["joint_clashes"] = _joint_clashes(folder / "joints", [r["id"] for r in joint_reports
