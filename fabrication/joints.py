@@ -417,8 +417,13 @@ def _near_joints(described: list[np.ndarray], scale: np.ndarray) -> list[set[int
     return near
 
 
-def _groups_of_same(geometries: list[JointGeometry], tolerance_rad: float = 1e-3,
-                    tolerance_mm: float = 1e-3) -> list[list[tuple[int, int]]]:
+#: Two joints are the same part where their beams' angles agree within SAME_RAD (0.05 mm at a
+#: sleeve's end) and their sizes within SAME_MM (same_joints; the mirror families likewise).
+SAME_RAD, SAME_MM = 1e-3, 1e-3
+
+
+def _groups_of_same(geometries: list[JointGeometry], tolerance_rad: float = SAME_RAD,
+                    tolerance_mm: float = SAME_MM) -> list[list[tuple[int, int]]]:
     """Every joint in a group of the joints that are the same part (see ``same_joints``), in the
     order the groups were opened: (index, shift) pairs, shift 0 for the first, else the turn of the
     member's beams (in azimuth order) that matches the first's."""
@@ -449,8 +454,8 @@ def _groups_of_same(geometries: list[JointGeometry], tolerance_rad: float = 1e-3
     return groups
 
 
-def same_joints(geometries: list[JointGeometry], tolerance_rad: float = 1e-3,
-                tolerance_mm: float = 1e-3) -> list[list[str]]:
+def same_joints(geometries: list[JointGeometry], tolerance_rad: float = SAME_RAD,
+                tolerance_mm: float = SAME_MM) -> list[list[str]]:
     """Groups (two or more ids) of joints that are the same part but for the engraved id: the same
     beams (sizes within ``tolerance_mm``) at the same angles about the axis and to it (within
     ``tolerance_rad``; 1e-3 rad is 0.05 mm at a sleeve's end), one turned onto the other. A
@@ -502,19 +507,34 @@ def turned_copy(first: JointGeometry, other: JointGeometry, shift: int,
     matched = b_order[(np.arange(k) - shift) % k]
     source = np.vstack([first.directions[a_order], first.axis])
     target = np.vstack([other.directions[matched], other.axis])
-    u, _, vt = np.linalg.svd(target.T @ source)
-    rotation = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+    rotation = _orthogonal_fit(source, target, reflection=False)
     turned = source @ rotation.T
     if np.max(np.linalg.norm(turned - target, axis=1)) > tolerance_rad:  # a mirror image, say
         return None
+    return _carried(first, other, a_order, matched, turned), rotation
+
+
+def _orthogonal_fit(source: np.ndarray, target: np.ndarray, *, reflection: bool) -> np.ndarray:
+    """(3, 3) the rotation (with ``reflection``, the reflection) that best maps the rows of
+    ``source`` onto those of ``target`` (Kabsch's least squares)."""
+    u, _, vt = np.linalg.svd(target.T @ source)
+    sign = np.sign(np.linalg.det(u @ vt))
+    return u @ np.diag([1.0, 1.0, -sign if reflection else sign]) @ vt
+
+
+def _carried(first: JointGeometry, other: JointGeometry, a_order: np.ndarray, matched: np.ndarray,
+             mapped: np.ndarray) -> JointGeometry:
+    """``first`` at ``other``'s node and position, its beams (in ``a_order``) and axis now ``mapped``
+    ((k + 1, 3), the axis last), beam ``a_order[i]`` taking the place of ``other``'s ``matched[i]``."""
+    k = len(first.directions)
     directions = np.empty_like(first.directions)
-    directions[matched] = turned[:k]
+    directions[matched] = mapped[:k]
     sizes = None
     if first.beam_sizes_mm is not None:
         sizes = np.empty(k)
         sizes[matched] = np.asarray(first.beam_sizes_mm, dtype=float)[a_order]
-    return JointGeometry(node=other.node, position_mm=other.position_mm, directions=directions, axis=turned[k],
-                         beam_size_mm=first.beam_size_mm, beam_sizes_mm=sizes), rotation
+    return JointGeometry(node=other.node, position_mm=other.position_mm, directions=directions, axis=mapped[k],
+                         beam_size_mm=first.beam_size_mm, beam_sizes_mm=sizes)
 
 
 def mirrored_copy(first: JointGeometry, other: JointGeometry,
@@ -535,23 +555,15 @@ def mirrored_copy(first: JointGeometry, other: JointGeometry,
         if np.abs(other.sizes_mm[matched] - first.sizes_mm[a_order]).max() > 1e-3:
             continue
         target = np.vstack([other.directions[matched], other.axis])
-        u, _, vt = np.linalg.svd(target.T @ source)
-        reflection = u @ np.diag([1.0, 1.0, -np.sign(np.linalg.det(u @ vt))]) @ vt
-        error = float(np.max(np.linalg.norm(source @ reflection.T - target, axis=1)))
+        reflection = _orthogonal_fit(source, target, reflection=True)
+        mapped = source @ reflection.T
+        error = float(np.max(np.linalg.norm(mapped - target, axis=1)))
         if error <= tolerance_rad and (best is None or error < best[0]):
-            best = (error, matched, reflection)
+            best = (error, matched, reflection, mapped)
     if best is None:
         return None
-    _, matched, reflection = best
-    turned = source @ reflection.T
-    directions = np.empty_like(first.directions)
-    directions[matched] = turned[:k]
-    sizes = None
-    if first.beam_sizes_mm is not None:
-        sizes = np.empty(k)
-        sizes[matched] = np.asarray(first.beam_sizes_mm, dtype=float)[a_order]
-    return JointGeometry(node=other.node, position_mm=other.position_mm, directions=directions, axis=turned[k],
-                         beam_size_mm=first.beam_size_mm, beam_sizes_mm=sizes), reflection
+    _, matched, reflection, mapped = best
+    return _carried(first, other, a_order, matched, mapped), reflection
 
 
 def _mirror_families(geometries: list[JointGeometry], groups: list[list[tuple[int, int]]]) -> list[list[int]]:
@@ -560,7 +572,7 @@ def _mirror_families(geometries: list[JointGeometry], groups: list[list[tuple[in
     its first joint (``mirrored_copy``). A mirror image is another part (``same_joints``), but its
     blank need not be built again: the first's, mirrored, is the same solid."""
     firsts = [geometries[group[0][0]] for group in groups]
-    near = _near_joints([_beams_about_axis(g) for g in firsts], np.array([1e-3, 1e-3, 1e-3]))
+    near = _near_joints([_beams_about_axis(g) for g in firsts], np.array([SAME_RAD, SAME_RAD, SAME_MM]))
     families: list[list[int]] = []
     taken: set[int] = set()
     for i in range(len(groups)):

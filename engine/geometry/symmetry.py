@@ -77,9 +77,8 @@ def symmetrise_directions(vectors: np.ndarray, planes: Sequence[Plane], partners
     v = np.array(vectors, dtype=float)
     for _ in range(PASSES if len(planes) > 1 else 1):
         for plane, partner in zip(planes, partners):
-            _, normal = _unit(plane)
             i = np.flatnonzero(partner >= 0)
-            mirrored = v[partner[i]] - 2.0 * np.outer(v[partner[i]] @ normal, normal)
+            mirrored = reflect(v[partner[i]], ((0.0, 0.0, 0.0), plane[1]))  # a direction: through the origin
             mean = 0.5 * (v[i] + mirrored)
             length = np.linalg.norm(mean, axis=1)
             keep = length > 1e-9  # opposite vectors (a vertical plane's normal on it) stay
