@@ -44,11 +44,13 @@ LOCAL_DEFORMATIONS = (3, 4, 5, 6, 9, 10, 11)
 
 #: From this many elements on, a path's internal forces, tangents, triads' updates and the
 #: elimination of its beams' internal nodes are taken by compiled kernels (``corotational_kernels``,
-#: ``block_inverse``; tangents in closed form: 0.018 s against 0.060 s by differences at
-#: 11 640 elements, 0.046 against 0.147 s at 29 536); below, importing numba and loading the
-#: kernels (some 0.6 s a process) costs about what the differences would over a path's 30-odd
-#: tangents (``benchmarks/frame_speed.py --tangents``).
-COMPILED_FROM = 2000
+#: ``block_inverse``; tangents in closed form: 0.0011 s against 0.0103 s by differences at 796
+#: elements, 0.018 s against 0.060 s at 11 640). At every size: importing numba and loading the
+#: kernels costs some 0.6 s once per process (forked workers inherit them), and a protocol runs a
+#: dozen paths, each 2-3 times faster compiled (a 60-node frame's path 0.21 s against 0.59 s, the
+#: mock-up's analysis stage 10.3 s against 15.5 s on one core; ``benchmarks/frame_speed.py
+#: --tangents``). Tests and benchmarks raise it to run the differences.
+COMPILED_FROM = 0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -219,8 +221,7 @@ class _Corotational:
     def tangent(self, state) -> np.ndarray:
         """Element tangent stiffnesses (m,12,12) in global axes: the derivative of the element
         end forces with respect to the end translations and spins (applied as in ``_update``); in
-        closed form from COMPILED_FROM elements on, by differences below (where loading the
-        compiled kernel costs more than it saves)."""
+        closed form from COMPILED_FROM elements on (every size by default), by differences below."""
         if len(self.L0) >= COMPILED_FROM:
             return self.closed_form_tangent(state)
         return self.difference_tangent(state)
