@@ -224,6 +224,30 @@ def test_cluster_energy_closed_form_is_the_minimum_over_the_centroid():
             assert direct(centroids[k] + 1e-3 * rng.normal(size=3)) > energy[k]
 
 
+def test_label_pieces_counts_what_scipy_finds_in_the_graph_of_edges_inside_clusters():
+    """The compiled count of the clusters' connected pieces equals scipy's connected components of
+    the graph of mesh edges whose ends share a label: on grown clusters (one piece each), on random
+    labels (many pieces) and on clusters with a far vertex relabelled (one cluster split)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from engine.remeshing.clustering import label_pieces
+
+    fine, edges, _, _, grown = _clustering_problem()
+    rng = np.random.default_rng(3)
+    split = grown.copy()
+    split[np.flatnonzero(grown == 0)[-1]] = 1
+
+    def by_scipy(labels):
+        same = labels[edges[:, 0]] == labels[edges[:, 1]]
+        graph = coo_matrix((np.ones(int(same.sum())), (edges[same, 0], edges[same, 1])), shape=(len(labels),) * 2)
+        return connected_components(graph, directed=False)[0]
+
+    for labels in (grown, rng.integers(0, 5, len(fine.vertices)), split):
+        assert label_pieces(labels, edges) == by_scipy(labels)
+    assert label_pieces(grown, edges) == 12
+
+
 def test_clustering_lowers_the_energy_keeps_clusters_connected_and_its_running_moments_agree():
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components

@@ -7,7 +7,7 @@ vertices where the boundary turns by more than CORNER_ANGLE_DEG, kept as nodes o
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -109,6 +109,7 @@ class _Fine:
     graph: sp.csr_matrix | None = None       # metric edge lengths, same order as the adjacency
     moments: np.ndarray | None = None        # centred vertex moments of the clustering, on first use
     tree: cKDTree | None = None              # of the vertices, on first use
+    mirrors: dict = field(default_factory=dict)  # symmetry planes -> mirror maps (geometry.mirror_seeds)
 
 
 def _refine(mesh: TriMesh, field: GuidingField, n_cells: int) -> _Fine:

@@ -7,11 +7,9 @@ that follow each other along a plane merged into one cluster on it (docs/decisio
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from .fine_mesh import _Fine
@@ -37,7 +35,9 @@ class _Mirrors:
     """The clustered mesh's mirror maps through the symmetry planes (perpendicular, one or two):
     per plane each vertex's mirror and whether it is its own (on the plane); for each vertex its
     image in the fundamental region (on the positive side of every plane, a plane's vertices
-    included) and through which planes it gets there."""
+    included) and through which planes it gets there. Also what every clustering step reuses: the
+    mesh's mean edge length and centroid, and per plane the region's vertices on it (with their
+    k-d tree) and the mesh edges within one mean edge of it."""
 
     planes: tuple
     maps: list
@@ -45,6 +45,11 @@ class _Mirrors:
     sides: list
     flips: list
     image: np.ndarray
+    edge: float = 0.0
+    centre: np.ndarray | None = None
+    on: list = field(default_factory=list)
+    on_trees: list = field(default_factory=list)
+    near_edges: list = field(default_factory=list)
 
 
 def _on_planes(mirrors: _Mirrors, combination: tuple) -> np.ndarray:
@@ -58,9 +63,16 @@ def _on_planes(mirrors: _Mirrors, combination: tuple) -> np.ndarray:
 
 def _mirrors(fine: _Fine, planes: tuple) -> _Mirrors | None:
     """The mirror maps of ``fine`` through ``planes``, or None without planes, for planes that are
-    not perpendicular, or where the clustered mesh's vertices are not symmetric (MIRROR_MATCH)."""
+    not perpendicular, or where the clustered mesh's vertices are not symmetric (MIRROR_MATCH).
+    Kept on ``fine`` for its later clusterings."""
     if not planes:
         return None
+    if planes not in fine.mirrors:
+        fine.mirrors[planes] = _mirror_maps(fine, planes)
+    return fine.mirrors[planes]
+
+
+def _mirror_maps(fine: _Fine, planes: tuple) -> _Mirrors | None:
     normals = [np.asarray(n, dtype=float) / np.linalg.norm(n) for _, n in planes]
     if len(normals) == 2 and abs(float(normals[0] @ normals[1])) > 1e-6:
         return None
@@ -84,8 +96,14 @@ def _mirrors(fine: _Fine, planes: tuple) -> _Mirrors | None:
         flip = side[image] < -ON_PLANE * edge
         image = np.where(flip, mirror[image], image)
         flips.append(flip)
-    return _Mirrors(planes=planes, maps=maps, fixed=[m == every for m in maps], sides=sides, flips=flips,
-                    image=image)
+    fixed = [m == every for m in maps]
+    region = image == every
+    E = fine.edges
+    on = [np.flatnonzero(f & region) for f in fixed]
+    return _Mirrors(planes=planes, maps=maps, fixed=fixed, sides=sides, flips=flips, image=image, edge=edge,
+                    centre=x.mean(axis=0), on=on, on_trees=[cKDTree(x[o]) if len(o) else None for o in on],
+                    near_edges=[np.flatnonzero((np.abs(side[E[:, 0]]) <= edge) & (np.abs(side[E[:, 1]]) <= edge))
+                                for side in sides])
 
 
 def _symmetric_seeds(fine: _Fine, mirrors: _Mirrors, seeds: np.ndarray, lloyd: bool = False
@@ -118,23 +136,18 @@ def _symmetric_clusters(fine: _Fine, mirrors: _Mirrors, seeds: np.ndarray, sigma
     cluster empty or in pieces. In the region, a cluster whose seed lies outside it gives its
     vertices to its mirror image's (the border of the two is the plane; the vertices on a plane go
     to the region's side)."""
-    from ..remeshing.clustering import ClusteringResult, _accumulate, centroids_of
+    from ..remeshing.clustering import ClusteringResult, _accumulate, centroids_of, label_pieces
 
     inside = np.searchsorted(seeds, mirrors.image[seeds])
     labels = inside[result.labels][mirrors.image]
     for p in reversed(range(len(mirrors.maps))):
         labels = np.where(mirrors.flips[p], sigma[p][labels], labels)
     count = len(result.centroids)
-    if len(np.unique(labels)) != count:
-        return None
-    E = fine.edges
-    same = labels[E[:, 0]] == labels[E[:, 1]]
-    graph = sp.coo_matrix((np.ones(int(same.sum())), (E[same, 0], E[same, 1])), shape=(len(labels),) * 2)
-    if connected_components(graph, directed=False)[0] != count:
+    if np.count_nonzero(np.bincount(labels, minlength=count)) != count or label_pieces(labels, fine.edges) != count:
         return None
     S, _ = _accumulate(labels, moments, count)
     centred = centroids_of(S)
-    return ClusteringResult(labels=labels, centroids=centred + fine.vertices.mean(axis=0),
+    return ClusteringResult(labels=labels, centroids=centred + mirrors.centre,
                             energy=S[:, 9] - np.einsum("ki,ki->k", S[:, 6:9], centred), sweeps=result.sweeps,
                             moves=result.moves)
 
@@ -169,7 +182,6 @@ def _merged_pairs(fine: _Fine, mirrors: _Mirrors, seeds: np.ndarray, sigma: list
     E = fine.edges
     labels = result.labels
     n = len(seeds)
-    edge = float(np.linalg.norm(x[E[:, 1]] - x[E[:, 0]], axis=1).mean())
     weight = np.bincount(labels, weights=fine.areas * fine.inverse_h2, minlength=n)
     region = mirrors.image == np.arange(len(x))
     orbit = np.searchsorted(seeds, mirrors.image[seeds])  # each cluster's representative in the region
@@ -182,20 +194,18 @@ def _merged_pairs(fine: _Fine, mirrors: _Mirrors, seeds: np.ndarray, sigma: list
         return point
 
     merged: dict[int, int] = {}  # representative replaced -> its new seed on the plane
-    la, lb = labels[E[:, 0]], labels[E[:, 1]]
-    for p, (side, flip_map) in enumerate(zip(mirrors.sides, sigma)):
-        on = np.flatnonzero(mirrors.fixed[p] & region)
+    for on, on_tree, near, flip_map in zip(mirrors.on, mirrors.on_trees, mirrors.near_edges, sigma):
         if not len(on):
             continue
-        on_tree = cKDTree(x[on])
-        near = (np.abs(side[E[:, 0]]) <= edge) & (np.abs(side[E[:, 1]]) <= edge)
+        ends = E[near]                                      # the mesh edges near the plane, in order
+        la, lb = labels[ends[:, 0]], labels[ends[:, 1]]
         straddle = flip_map != np.arange(n)
         touching = np.zeros(n, dtype=bool)
-        across = near & (la != lb) & (flip_map[la] == lb)
+        across = (la != lb) & (flip_map[la] == lb)
         touching[la[across]] = True
         touching[lb[across]] = True
-        junction = (near & (la != lb) & (flip_map[la] != lb) & straddle[la] & straddle[lb] & touching[la]
-                    & touching[lb] & (region[E[:, 0]] | region[E[:, 1]]))
+        junction = ((la != lb) & (flip_map[la] != lb) & straddle[la] & straddle[lb] & touching[la]
+                    & touching[lb] & (region[ends[:, 0]] | region[ends[:, 1]]))
         for e in np.flatnonzero(junction):
             a, b = int(la[e]), int(lb[e])
             if orbit[a] in merged or orbit[b] in merged:

@@ -212,6 +212,32 @@ def _accumulate(labels, P, n_clusters):
     return S, count
 
 
+@njit(cache=True, nogil=True)
+def _pieces(labels, edges):  # pragma: no cover - compiled
+    parent = np.arange(labels.shape[0])
+    pieces = labels.shape[0]
+    for e in range(edges.shape[0]):
+        a, b = edges[e, 0], edges[e, 1]
+        if labels[a] != labels[b]:
+            continue
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        if a != b:
+            parent[max(a, b)] = min(a, b)
+            pieces -= 1
+    return pieces
+
+
+def label_pieces(labels: np.ndarray, edges: np.ndarray) -> int:
+    """How many connected pieces the clusters of ``labels`` (n,) make over the mesh ``edges`` (e, 2):
+    the cluster count when every cluster is connected (union-find over the edges inside clusters)."""
+    return int(_pieces(np.ascontiguousarray(labels, dtype=np.int64), np.ascontiguousarray(edges, dtype=np.int64)))
+
+
 def centroids_of(S: np.ndarray) -> np.ndarray:
     """(k, 3) minimisers c = S1^-1 S2 of the cluster energies from moments (k, 10)."""
     M = np.zeros((len(S), 3, 3))

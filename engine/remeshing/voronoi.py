@@ -461,6 +461,7 @@ def _tessellate(mesh: TriMesh, field: GuidingField, n_cells: int, settings: Reme
     starts_map = timing.starts_map if timing is not None and starts > 1 else None
     if starts_map is not None:  # the starts side by side: the caches they share made once, here
         _clustering_inputs(fine)
+        _mirrors(fine, tuple(settings.symmetry_planes))
     say(f"clustering {len(fine.vertices)} vertices into {n_cells} cells"
         + (f" ({starts} starts)" if starts > 1 else ""), 0.1)
     for done, found in enumerate((starts_map or map)(_cluster_start, jobs)):
