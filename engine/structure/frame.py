@@ -125,7 +125,8 @@ def factor_stiffness(model: FrameModel, supports: Supports) -> FrameStiffness:
     K = assemble(K_elements, element_dofs(el.connectivity), 6 * n_all)
     free = np.flatnonzero(~restrained)
     lu = factor_free_stiffness(K_elements, el, free,
-                 np.linalg.norm(model.nodes[model.beams[:, 1]] - model.nodes[model.beams[:, 0]], axis=1))
+                               np.linalg.norm(model.nodes[model.beams[:, 1]] - model.nodes[model.beams[:, 0]], axis=1),
+                               compiled=True)
     return FrameStiffness(el=el, L=L, R=R, T=T, K_local=K_local, K_elements=K_elements, K=K, restrained=restrained,
                           free=free, lu=lu)
 
@@ -217,7 +218,7 @@ def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_
         sigma = 0.95 / mu
         shifted = None
         for _ in range(SHIFT_HALVINGS):
-            shifted = factor_or_none(state.K_elements + sigma * KG_elements, el, free)
+            shifted = factor_or_none(state.K_elements + sigma * KG_elements, el, free, compiled=True)
             if shifted is not None and shifted.negative_pivots == 0:
                 break
             sigma *= 0.5
