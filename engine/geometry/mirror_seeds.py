@@ -50,6 +50,25 @@ class _Mirrors:
     on: list = field(default_factory=list)
     on_trees: list = field(default_factory=list)
     near_edges: list = field(default_factory=list)
+    nearest_on: dict = field(default_factory=dict)   # _nearest_on_planes' vertices and trees
+
+
+def _nearest_on_planes(fine: _Fine, mirrors: _Mirrors, combination: tuple, points: np.ndarray,
+                       in_region: bool = False) -> np.ndarray | None:
+    """The vertex nearest each of ``points`` (vertex ids) among those on every plane flagged in
+    ``combination`` (``in_region``: and in the fundamental region), or None where there is none;
+    the candidates and their k-d tree kept on ``mirrors``."""
+    key = (combination, in_region)
+    if key not in mirrors.nearest_on:
+        on = _on_planes(mirrors, combination)
+        if in_region:
+            on &= mirrors.image == np.arange(len(fine.vertices))
+        candidates = np.flatnonzero(on)
+        mirrors.nearest_on[key] = (candidates, cKDTree(fine.vertices[candidates]) if len(candidates) else None)
+    candidates, tree = mirrors.nearest_on[key]
+    if tree is None:
+        return None
+    return candidates[tree.query(fine.vertices[points])[1]]
 
 
 def _on_planes(mirrors: _Mirrors, combination: tuple) -> np.ndarray:
@@ -117,11 +136,9 @@ def _symmetric_seeds(fine: _Fine, mirrors: _Mirrors, seeds: np.ndarray, lloyd: b
     near = np.array([np.abs(side[reps]) < reach for side in mirrors.sides])
     for combination in sorted({tuple(column) for column in near.T if any(column)}):
         chosen = np.flatnonzero(np.all(near.T == combination, axis=1))
-        on = _on_planes(mirrors, combination)
-        on &= mirrors.image == np.arange(len(fine.vertices))
-        if on.any():
-            candidates = np.flatnonzero(on)
-            reps[chosen] = candidates[cKDTree(fine.vertices[candidates]).query(fine.vertices[reps[chosen]])[1]]
+        nearest = _nearest_on_planes(fine, mirrors, combination, reps[chosen], in_region=True)
+        if nearest is not None:
+            reps[chosen] = nearest
     orbit = [np.unique(reps)]
     for mirror in mirrors.maps:
         orbit = orbit + [mirror[o] for o in orbit]
@@ -161,10 +178,9 @@ def _onto_planes(fine: _Fine, mirrors: _Mirrors, seeds: np.ndarray, sigma: list)
     own = np.array([mirror == np.arange(len(seeds)) for mirror in sigma])
     for combination in sorted({tuple(column) for column in own.T if any(column)}):
         chosen = np.flatnonzero(np.all(own.T == combination, axis=1))
-        on = _on_planes(mirrors, combination)
-        if on.any():
-            candidates = np.flatnonzero(on)
-            seeds[chosen] = candidates[cKDTree(fine.vertices[candidates]).query(fine.vertices[seeds[chosen]])[1]]
+        nearest = _nearest_on_planes(fine, mirrors, combination, seeds[chosen])
+        if nearest is not None:
+            seeds[chosen] = nearest
     return seeds
 
 
