@@ -1044,6 +1044,45 @@ def test_equal_joints_are_built_once_and_turned_each_engraved_with_its_own_id(tm
         assert 0.0 < volume - mesh.volume < 0.01 * volume  # the engraved pockets, within the STL's chord
 
 
+def test_a_copy_is_measured_against_its_blank_less_its_pockets_as_occt_integrates_it(tmp_path, monkeypatch):
+    """The STL of a turned copy is checked against the volume its source's blank less its own
+    engraved pockets (glyph area times depth), without OCCT's volume integral: the first joint's
+    blank volume so derived is the STEP's (the blank) read back, and every joint's STL volume error
+    the one measured against OCCT's integral of its engraved solid, to 1e-5 (OCCT's integrals over
+    the glyphs' spline faces are good to some 1e-6; the check's tolerance is 5e-3). OCCT integrates
+    only the first joint."""
+    from scipy.spatial.transform import Rotation
+
+    from fabrication import engraving, joints
+
+    base = _joint_geometry(tilt_deg=8.0, beams=3, node=0)
+    settings = joints.JointSettings()
+    turns = [np.eye(3), Rotation.from_rotvec([0.2, 0.5, -1.3]).as_matrix(),
+             Rotation.from_rotvec([-0.9, 0.1, 2.0]).as_matrix()]
+    geometries = [joints.JointGeometry(node=k, position_mm=np.array([200.0 * k, 0.0, 0.0]),
+                                       directions=base.directions @ r.T, axis=r @ base.axis, beam_size_mm=12.0)
+                  for k, r in enumerate(turns)]
+    ranges = joints._id_ranges(3)
+
+    def run(folder):
+        folder.mkdir()
+        group = tuple(((geometries[k], settings, str(folder), None, *ranges[k]), shift)
+                      for k, shift in joints._groups_of_same(geometries)[0])
+        return joints._group_reports(group)
+
+    integrals = []
+    occt = joints._volume_mm3
+    monkeypatch.setattr(joints, "_volume_mm3", lambda shape: integrals.append(1) or occt(shape))
+    derived, blank = run(tmp_path / "derived")
+    assert len(derived) == 3 and all(r["ok"] and "copy_of" in r for r in derived[1:]) and len(integrals) == 1
+    assert blank.volume_mm3 == pytest.approx(_volume(_read_step(tmp_path / "derived" / "J0001.step")), rel=1e-5)
+    monkeypatch.setattr(engraving, "pocket_volume", lambda glyphs, depth: None)  # no derivation: OCCT each time
+    integrated, _ = run(tmp_path / "integrated")
+    assert len(integrals) == 4
+    for a, b in zip(derived, integrated):
+        assert a["stl_volume_error"] == pytest.approx(b["stl_volume_error"], abs=1e-5)
+
+
 def test_step_points_written_to_8_places_read_back_the_same_solid(tmp_path):
     """compact_step_points shortens a joint's STEP (the blank, as written) by a sixth; OCCT reads
     back a valid solid of the same volume (1e-8) and bounding box (1e-6 mm)."""
