@@ -496,6 +496,38 @@ def test_condensed_factor_solves_as_a_plain_lu_and_keeps_the_inertia(library, co
             assert factor.negative_pivots == (0 if sigma == 0 else 2)
 
 
+@pytest.mark.parametrize("compiled", [False, True], ids=["numpy", "compiled"])
+def test_condensed_solve_of_a_non_symmetric_tangent_is_the_plain_lu_solve(compiled):
+    """A co-rotational tangent is not quite symmetric, so K_ei K_ii^-1 is not (K_ii^-1 K_ie)^T:
+    element matrices with a skew part, condensed and solved (one and three right-hand sides; the
+    compiled solve carries the internal loads to the ends and back in its own loops) against
+    SuperLU on the assembled matrix."""
+    from dataclasses import replace
+
+    import scipy.sparse.linalg as spla
+
+    from engine.structure import beam_elements, frame
+    from engine.structure.condensed import CondensedFactor
+
+    model, supports, loads = _space_frame()
+    fine = replace(model, elements_per_beam=4)
+    state = frame._solve_linear(fine, supports, loads)
+    el, free = state.el, state.free
+    rng = np.random.default_rng(7)
+    skew = rng.normal(size=state.K_elements.shape)
+    skew = 1e-3 * np.abs(state.K_elements).max() * (skew - skew.transpose(0, 2, 1))
+    elements = state.K_elements + skew
+    factor = CondensedFactor(elements, el.connectivity, len(el.nodes), el.n_original, free, 4, library="superlu",
+                             compiled=compiled)
+    K = beam_elements.assemble(elements, beam_elements.element_dofs(el.connectivity), 6 * len(el.nodes))
+    K = K[free][:, free].tocsc()
+    assert abs(K - K.T).max() > 1e-6 * abs(K).max()                 # the case: not symmetric
+    rhs = rng.normal(size=(len(free), 3))
+    expected = spla.spsolve(K, rhs)
+    assert np.abs(factor.solve(rhs) - expected).max() < 1e-9 * np.abs(expected).max()
+    assert np.abs(factor.solve(rhs[:, 1]) - expected[:, 1]).max() < 1e-9 * np.abs(expected).max()
+
+
 def test_the_compiled_condensation_gives_numpys_block_products():
     """W = K_ii^-1 K_ie, V = K_ei K_ii^-1 and K_ee - K_ei W of random non-symmetric beams of four
     elements, against numpy's products of the blocks written out."""

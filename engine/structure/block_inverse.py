@@ -124,3 +124,48 @@ def condensation(inverse: np.ndarray, first: np.ndarray, last: np.ndarray
     W, V, condensed = np.empty((m, g, 12)), np.empty((m, 12, g)), np.empty((m, 12, 12))
     _condense(inverse, first, last, W, V, condensed)
     return W, V, condensed
+
+
+@njit(cache=True, nogil=True)
+def _subtract_end_loads(V, f_i, end_dofs, f_b):  # pragma: no cover - compiled
+    m, ends, g = V.shape
+    r = f_i.shape[2]
+    for b in range(m):
+        for c in range(ends):
+            row = end_dofs[b, c]
+            for col in range(r):
+                s = 0.0
+                for t in range(g):
+                    s += V[b, c, t] * f_i[b, t, col]
+                f_b[row, col] -= s
+
+
+@njit(cache=True, nogil=True)
+def _internal_displacements(inverse, W, f_i, x_b, end_dofs, x_i):  # pragma: no cover - compiled
+    m, g, ends = W.shape
+    r = f_i.shape[2]
+    for b in range(m):
+        for i in range(g):
+            for col in range(r):
+                s = 0.0
+                for t in range(g):
+                    s += inverse[b, i, t] * f_i[b, t, col]
+                for c in range(ends):
+                    s -= W[b, i, c] * x_b[end_dofs[b, c], col]
+                x_i[b, i, col] = s
+
+
+def subtract_end_loads(V: np.ndarray, f_i: np.ndarray, end_dofs: np.ndarray, f_b: np.ndarray) -> None:
+    """f_b (n_end_dofs, r) -= the internal loads f_i (m, g, r) carried to the beam ends, V f_i per
+    beam (V (m, 12, g) = K_ei K_ii^-1), scattered onto the end DOFs ``end_dofs`` (m, 12); in place.
+    One compiled pass in place of a batched product and a sparse scatter."""
+    _subtract_end_loads(V, f_i, end_dofs, f_b)
+
+
+def internal_displacements(inverse: np.ndarray, W: np.ndarray, f_i: np.ndarray, x_b: np.ndarray,
+                           end_dofs: np.ndarray) -> np.ndarray:
+    """x_i (m, g, r) = K_ii^-1 f_i - W x_e per beam: the internal nodes' displacements from their
+    loads f_i (m, g, r) and the end displacements x_b (n_end_dofs, r) at ``end_dofs`` (m, 12)."""
+    x_i = np.empty(f_i.shape)
+    _internal_displacements(inverse, W, f_i, x_b, end_dofs, x_i)
+    return x_i
