@@ -461,11 +461,13 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
     saved = None                      # the state before the last step, to redo it shorter
     # with reuse_factor, the factor of the corrector's last iteration where it was made there: one
     # correction (under the tolerance) from the step's end, it serves the next step's predictor and
-    # its pivots count the negative eigenvalues there
+    # its pivots count the negative eigenvalues there (and its solve for the reference load, made
+    # there, is the predictor's)
     carried: tuple | None = None
     for _step in range(max_steps):
+        du_f = None
         if carried is not None:
-            (lu, negatives), carried = carried, None
+            (lu, negatives, du_f), carried = carried, None
         else:
             _, cache = residual(x, triads, lam)
             try:
@@ -475,8 +477,9 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
                 break
             factored += 1
         pivots[-1] = negatives                               # pivots of the tangent at this state
-        du_f = np.zeros(6 * cr.n_all)
-        du_f[free] = lu.solve(F_ref[free])
+        if du_f is None:
+            du_f = np.zeros(6 * cr.n_all)
+            du_f[free] = lu.solve(F_ref[free])
         # the predictor follows the previous increment (at the start: the load's direction on a
         # stable tangent); the load factor falls along it once the path is past a maximum
         if previous is not None:
@@ -543,15 +546,17 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
                     lu_i = factor(cache, exact=_attempt > 0)
                     if lu_i is None:
                         break
-                    df = np.zeros(6 * cr.n_all)
-                    df[free] = lu_i.solve(F_ref[free])
+                    df, dr = np.zeros(6 * cr.n_all), np.zeros(6 * cr.n_all)
+                    both = lu_i.solve(np.column_stack((F_ref[free], r[free])))   # one pass over the factor
+                    df[free], dr[free] = both[:, 0], both[:, 1]
                     reused = 0
+                else:
+                    # an old tangent's factor is only refined towards that old tangent: the
+                    # symmetric part alone does as well for a corrector that iterates anyway
+                    dr = np.zeros(6 * cr.n_all)
+                    dr[free] = lu_i.solve(r[free], refine=False)
                 assert lu_i is not None and df is not None
                 last_error, reused = float(error), reused + 1
-                dr = np.zeros(6 * cr.n_all)
-                # an old tangent's factor is only refined towards that old tangent: the symmetric
-                # part alone does as well for a corrector that iterates anyway
-                dr[free] = lu_i.solve(r[free], refine=fresh)
                 # cylindrical constraint |total + dr + dl df| = arc
                 a = df[free] @ df[free]
                 b = 2 * df[free] @ (total[free] + dr[free])
@@ -611,7 +616,7 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
             arc_cap = np.inf
         x, triads, lam = x_try, t_try, lam_try
         if settings.reuse_factor and fresh and lu_i is not None and not landed:
-            carried = (lu_i, lu_i.negative_pivots)
+            carried = (lu_i, lu_i.negative_pivots, df)
         path.append([lam, displacement_of(x, triads)])
         monitored.append(watched(x, triads))
         pivots.append(negatives)                             # provisional: set at the next step
