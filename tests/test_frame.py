@@ -1146,3 +1146,17 @@ def test_a_reused_factor_finds_the_published_limit_with_no_more_factorisations(p
     assert runs[True].factorisations < runs[False].factorisations
     if problem is _star_dome:
         assert runs[True].factorisations < 0.6 * runs[False].factorisations
+
+
+def test_the_compiled_turn_to_global_axes_is_the_full_congruence():
+    """T^T K T by the sixteen 3 x 3 blocks of the compiled kernel against the batched product of
+    the full block-diagonal T, on random frames and random non-symmetric matrices."""
+    from engine.linalg import congruent
+    from engine.structure.beam_elements import transformation
+    from engine.structure.element_kernels import to_global
+
+    rng = np.random.default_rng(3)
+    R = np.linalg.qr(rng.normal(size=(50, 3, 3)))[0]
+    K = rng.normal(size=(50, 12, 12))
+    expected = congruent(transformation(R), K)
+    assert np.abs(to_global(R, K) - expected).max() < 1e-13 * np.abs(expected).max()

@@ -17,7 +17,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import ConvergenceError
-from ..linalg import congruent, single_threaded_blas
+from ..linalg import single_threaded_blas
 from .beam_elements import (
     ElementMesh,
     FrameModel,
@@ -38,6 +38,7 @@ from .beam_elements import (
 )
 from .condensed import CondensedFactor
 from .corotational import NonlinearResult, nonlinear_static
+from .element_kernels import to_global
 from .loads import equilibrium_error
 from .supports import DOF_NAMES, Supports
 
@@ -121,7 +122,7 @@ def factor_stiffness(model: FrameModel, supports: Supports) -> FrameStiffness:
     L, R = element_geometry(el, el.nodes)
     T = transformation(R)
     K_local = condense(local_stiffness(L, el), el.released)
-    K_elements = congruent(T, K_local)
+    K_elements = to_global(R, K_local)
     K = assemble(K_elements, element_dofs(el.connectivity), 6 * n_all)
     free = np.flatnonzero(~restrained)
     lu = factor_free_stiffness(K_elements, el, free,
@@ -199,7 +200,7 @@ def linear_buckling(model: FrameModel, supports: Supports, loads: np.ndarray, n_
     state = _solve_linear(model, supports, loads, stiffness)
     el = state.el
     N = state.local_forces[:, 6]
-    KG_elements = congruent(state.T, released_zero(geometric_stiffness(state.L, N, el), el.released))
+    KG_elements = to_global(state.R, released_zero(geometric_stiffness(state.L, N, el), el.released))
     K_G = assemble(KG_elements, element_dofs(el.connectivity), len(state.u))
     free = state.free
     minus_KG = (-K_G[free][:, free]).tocsr()
