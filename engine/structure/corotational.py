@@ -553,9 +553,10 @@ def _nonlinear_static(model: FrameModel, supports: Supports, loads: np.ndarray, 
                 else:
                     # an old tangent's factor is only refined towards that old tangent: the
                     # symmetric part alone does as well for a corrector that iterates anyway
+                    assert lu_i is not None
                     dr = np.zeros(6 * cr.n_all)
                     dr[free] = lu_i.solve(r[free], refine=False)
-                assert lu_i is not None and df is not None
+                assert df is not None
                 last_error, reused = float(error), reused + 1
                 # cylindrical constraint |total + dr + dl df| = arc
                 a = df[free] @ df[free]
