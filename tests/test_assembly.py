@@ -235,3 +235,30 @@ def test_large_grids_are_planned_in_runs_whose_ends_stand(limit):
         value, _ = partial_frame_deflection(model, np.array(beams), np.array(panels, dtype=np.int64), step.props)
         assert value == pytest.approx(step.largest_deflection_m, rel=1e-9)
         assert value <= sequence.deflection_limit_m * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("max_images", [None, 3])
+def test_each_step_image_shows_the_panels_built_before_in_grey_and_its_own_in_pink(tmp_path, max_images):
+    """The step pictures read back as pixels: at each panel's centre, grey where the panel went
+    up in an earlier picture, pink where it goes up in this one, white where it is still to come
+    (one picture per step, and pictures of runs of steps)."""
+    from PIL import Image
+
+    from fabrication.assembly import _StepCanvas
+
+    mesh = hex_polymesh(3, 3)
+    sequence = plan_assembly(mesh, np.flatnonzero(mesh.supports), TIMBER, panel_area_load=35.0)
+    canvas = _StepCanvas(sequence, mesh)
+    centres = np.array([mesh.nodes[f, :2].mean(axis=0) for f in mesh.faces])
+    step_of = {f: k for k, s in enumerate(sequence.steps) for f in s.panels}
+    colours = {"built": (204, 204, 204), "new": (244, 166, 166), "to come": (255, 255, 255)}
+    for group in step_groups(len(sequence.steps), max_images):
+        target = tmp_path / f"{group.start}.png"
+        canvas.save(group, target)
+        with Image.open(target) as image:
+            pixels = np.asarray(image.convert("RGB"), dtype=int)
+        x, y = canvas.ax.transData.transform(centres).T
+        seen = pixels[(pixels.shape[0] - y).astype(int), x.astype(int)]
+        for f, colour in enumerate(seen):
+            state = ("built" if step_of[f] < group.start else "new" if step_of[f] < group.stop else "to come")
+            assert np.abs(colour - colours[state]).max() <= 3, (group, f, state, colour)
