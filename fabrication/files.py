@@ -91,18 +91,34 @@ def figure_png(fig, **savefig) -> bytes:
     matplotlib's RGBA PNG."""
     from PIL import Image
 
-    buffer = io.BytesIO()
-    savefig.setdefault("pil_kwargs", {"compress_level": 0})  # read back at once: not worth packing
-    fig.savefig(buffer, format="png", **savefig)
-    buffer.seek(0)
-    with Image.open(buffer) as image:
-        rgba = image.convert("RGBA")
+    rgba = _rendered(fig, savefig)
     white = Image.new("RGBA", rgba.size, (255, 255, 255, 255))
     rgb = Image.alpha_composite(white, rgba).convert("RGB")
     palette = rgb.quantize(colors=PNG_COLOURS, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
     out = io.BytesIO()
     palette.save(out, format="PNG")
     return out.getvalue()
+
+
+def _rendered(fig, savefig: dict):
+    """The figure rendered by Agg as an RGBA image: its raw pixels where the size is the figure's
+    at the dpi (8 of some 30 ms a picture went to packing and unpacking a PNG), else (a tight
+    bounding box) through an unpacked PNG."""
+    from PIL import Image
+
+    if savefig.get("bbox_inches") is None:
+        dpi = float(savefig.get("dpi") or fig.dpi)
+        width, height = (int(v) for v in fig.get_size_inches() * dpi)
+        raw = io.BytesIO()
+        fig.savefig(raw, format="rgba", **savefig)
+        pixels = raw.getvalue()
+        if len(pixels) == 4 * width * height:
+            return Image.frombuffer("RGBA", (width, height), pixels, "raw", "RGBA", 0, 1)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", **{"pil_kwargs": {"compress_level": 0}, **savefig})
+    buffer.seek(0)
+    with Image.open(buffer) as image:
+        return image.convert("RGBA")
 
 
 def save_figure_png(fig, target: str | os.PathLike, **savefig) -> Path:
