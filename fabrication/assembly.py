@@ -296,6 +296,25 @@ def _analyse_with_props(model: _Model, beams: np.ndarray, panels: np.ndarray, pr
 #: are built in runs of consecutive steps, and the state after each run is analysed (see
 #: plan_assembly).
 ANALYSED_RUNS = 150
+#: Deflections of two candidate cells this close (relative) are equal: the cell ranked first
+#: (fewest missing beams, nearest a support) goes up. On a symmetric roof mirror-image cells
+#: deflect the same to round-off, which otherwise picked between them.
+SAME_DEFLECTION = 1e-9
+#: Cells whose distances from the supports (along the beams) differ by less than this share of
+#: the mean beam are equally near (see _Growth.options).
+SAME_DISTANCE = 1e-6
+
+
+def _ranks_before(key: tuple[int, float], best: tuple[int, float]) -> bool:
+    """Whether a candidate cell of (new props, deflection) ``key`` is built before the ``best``
+    so far: fewer props, else a deflection smaller by more than SAME_DEFLECTION (a finite one
+    before one that is not)."""
+    (props, deflection), (best_props, best_deflection) = key, best
+    if props != best_props:
+        return props < best_props
+    if not np.isfinite(best_deflection):
+        return bool(np.isfinite(deflection))
+    return bool(deflection < best_deflection - SAME_DEFLECTION * abs(best_deflection))
 
 
 class _Growth:
@@ -323,6 +342,9 @@ class _Growth:
                            shape=(polymesh.n_nodes,) * 2).tocsr()
         from_support = dijkstra(graph, indices=support_nodes, min_only=True)
         self.distance = np.array([from_support[loop].mean() for loop in self.face_nodes])
+        # ranked to SAME_DISTANCE of the mean beam, so that mirror-image cells tie exactly and the
+        # lower id goes first, whatever the last digits of their distances
+        self.rank = np.round(self.distance / (SAME_DISTANCE * max(float(lengths.mean()), 1e-300)))
         self.edges = edges
         self.beams = np.zeros(len(edges), dtype=bool)
         self.nodes = np.zeros(polymesh.n_nodes, dtype=bool)
@@ -345,10 +367,10 @@ class _Growth:
         open_cells = (missing > 0) & (self.cell_nodes @ touching.astype(float) > 0)
         if not open_cells.any():
             open_cells = missing > 0
-            chosen = [int(np.flatnonzero(open_cells)[np.argmin(self.distance[open_cells])])]
+            chosen = [int(np.flatnonzero(open_cells)[np.argmin(self.rank[open_cells])])]
         else:
             cells = np.flatnonzero(open_cells)
-            chosen = cells[np.lexsort((self.distance[cells], missing[cells]))][:count].tolist()
+            chosen = cells[np.lexsort((self.rank[cells], missing[cells]))][:count].tolist()
         out = []
         for f in chosen:
             todo = self.face_beams[f][~self.beams[self.face_beams[f]]]
@@ -440,9 +462,8 @@ def plan_assembly(polymesh: PolyMesh, support_nodes: np.ndarray, beam: dict, *, 
             beams_after = np.concatenate([np.flatnonzero(growth.beams), todo])
             panels_after = np.concatenate([np.flatnonzero(growth.panels), completed]).astype(np.int64)
             deflection, added = _analyse_with_props(model, beams_after, panels_after, props, limit)
-            key = (len(added), deflection)
-            if best is None or key < best[0]:
-                best = (key, todo, completed, deflection, added)
+            if best is None or _ranks_before((len(added), deflection), best[0]):
+                best = ((len(added), deflection), todo, completed, deflection, added)
         _, todo, completed, deflection, added = best
         new_nodes = growth.build(todo, completed)
         add_step(todo, completed, settled(deflection, added), added, new_nodes)
