@@ -572,6 +572,26 @@ def test_a_grading_compressed_for_the_joints_is_a_finding():
     assert "[section] height, width" in fix and "diameter" not in fix
 
 
+def test_a_grading_lost_to_the_joints_collapses_is_a_finding():
+    """Where the field is graded and the collapses and removals for the joints cost the grid more
+    than 0.1 of its size rank correlation (issue 13's bound), a finding says so with both figures;
+    a loss within the bound, or an even field (whose correlation measures noise), is none."""
+    from workflow.stages.optimize import lost_finding, lost_grading
+
+    def quality(r0: float, r1: float, span: float) -> dict:
+        return {"before": {"size_rank_correlation": r0, "field_size_span_cells": span},
+                "after": {"size_rank_correlation": r1}}
+
+    assert lost_grading(quality(0.81, 0.65, 1.85))
+    assert not lost_grading(quality(0.81, 0.72, 1.85)), "within 0.1"
+    assert not lost_grading(quality(0.81, 0.40, 1.1)), "an even field"
+    assert not lost_grading({"before": {}, "after": {}})
+    finding = lost_finding(quality(0.81, 0.65, 1.85), collapsed=68, removed=27)
+    assert finding["kind"] == "grading_lost" and finding["stage"] == "optimize"
+    assert "0.81" in finding["message"] and "0.65" in finding["message"] and "68" in finding["message"]
+    assert "n_cells" in finding["fix"] and "[fabrication.joints]" in finding["fix"]
+
+
 def test_a_local_optimisation_keeps_the_held_cells_normals_and_gives_the_same_grid(dome, monkeypatch):
     """The fold check of a local optimisation finds the surface's normals at the cells that move
     only (the others' are kept from the first step): the same nodes as finding them all at every

@@ -65,6 +65,11 @@ STRETCH_MARGIN = 1.5
 GRADED_SHORT_SHARE = 0.02
 #: A grading slope lowered by more than this for the joints is a finding (grading_compressed).
 COMPRESSED_SLOPE = 0.05
+#: A size rank correlation with the field lower than the remeshed grid's by more than this, where
+#: the field is graded (GRADED_SPAN at the cells) and no other grading finding says why, is a
+#: finding (grading_lost): issue 13's bound on what the optimiser may cost the grading.
+GRADING_LOST = 0.1
+GRADED_SPAN = 1.3
 #: Rounds of (collapse the beams the optimiser left too short, optimise again).
 BUILDABLE_ROUNDS = 2
 #: Rounds of (remove the beams still short, collapse those the removals freed) at the end.
@@ -234,6 +239,8 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: RemeshedGrid, proje
         ctx.report_findings([grading_finding(share_kept, result.quality, project.section.size_key())])
     elif compressed_grading(result.quality):
         ctx.report_findings([compressed_finding(result.quality, project.section.size_key())])
+    elif lost_grading(result.quality):
+        ctx.report_findings([lost_finding(result.quality, collapsed, removed, project.section.size_key())])
     planes = settings.symmetry_planes
     folded = folded_cells_on(result.polymesh, surface)
     if len(folded):
@@ -440,6 +447,30 @@ def compressed_finding(quality: dict, size_key: str = "[section] diameter") -> d
                             f"of {given:.2f}{figures}"),
                    fix="fewer cells ([remesh] n_cells), less grading ([field] max_size_ratio), or smaller "
                        f"joints or beams ([fabrication.joints], {size_key})").to_dict()
+
+
+def lost_grading(quality: dict) -> bool:
+    """Whether the optimised grid follows a graded field less than the remeshed one, by more than
+    GRADING_LOST of the size rank correlation."""
+    before, after = quality.get("before") or {}, quality.get("after") or {}
+    r0, r1 = before.get("size_rank_correlation"), after.get("size_rank_correlation")
+    span = before.get("field_size_span_cells") or 0.0
+    return r0 is not None and r1 is not None and span >= GRADED_SPAN and r0 - r1 > GRADING_LOST
+
+
+def lost_finding(quality: dict, collapsed: int, removed: int, size_key: str = "[section] diameter") -> dict:
+    """The finding that the beams collapsed and removed for the joints cost the grid its grading,
+    the field's sizes kept as the optimiser's targets (JSON-ready)."""
+    from engine.findings import Finding
+
+    r0, r1 = quality["before"]["size_rank_correlation"], quality["after"]["size_rank_correlation"]
+    return Finding(kind="grading_lost", parts=["grid"], measure=r1, limit=r0 - GRADING_LOST,
+                   unit="rank correlation", stage="optimize",
+                   message=(f"the {collapsed} beams collapsed and {removed} removed, shorter than their joints take, "
+                            f"cost the grid its grading: size rank correlation with the field {r0:.2f} remeshed, "
+                            f"{r1:.2f} optimised"),
+                   fix="fewer cells ([remesh] n_cells), or smaller joints or beams ([fabrication.joints], "
+                       f"{size_key})").to_dict()
 
 
 def _piece_tolerance(polymesh: PolyMesh, project: Project) -> float:
