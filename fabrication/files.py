@@ -107,7 +107,8 @@ def _rendered(fig, savefig: dict):
     from PIL import Image
 
     if savefig.get("bbox_inches") is None:
-        dpi = float(savefig.get("dpi") or fig.dpi)
+        dpi = savefig.get("dpi")
+        dpi = float(fig.dpi if dpi in (None, "figure") else dpi)
         width, height = (int(v) for v in fig.get_size_inches() * dpi)
         raw = io.BytesIO()
         fig.savefig(raw, format="rgba", **savefig)
