@@ -296,3 +296,24 @@ def test_pictures_are_palette_pngs_that_look_like_matplotlibs_own(tmp_path):
     assert title.any() and ours[title].max() <= 12
     assert len(data) < 0.5 * own.getbuffer().nbytes
     _check_png(path)
+
+
+def test_a_picture_has_the_size_its_dpi_gives_read_from_raw_pixels_or_a_tight_png():
+    """figure_png at a number of dots per inch, at the figure's own (dpi='figure', as savefig takes
+    it) and with a tight bounding box: Pillow reads the size each gives (the tight one smaller)."""
+    import io
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from PIL import Image
+
+    from fabrication.files import figure_png
+
+    fig = Figure(figsize=(3, 2), dpi=80)
+    FigureCanvasAgg(fig)
+    fig.add_subplot().plot([0, 1], [1, 0])
+    sizes = {str(kw): Image.open(io.BytesIO(figure_png(fig, **kw))).size
+             for kw in ({"dpi": 100}, {"dpi": "figure"}, {"dpi": 100, "bbox_inches": "tight"})}
+    assert sizes["{'dpi': 100}"] == (300, 200) and sizes["{'dpi': 'figure'}"] == (240, 160)
+    tight = sizes["{'dpi': 100, 'bbox_inches': 'tight'}"]
+    assert tight[0] <= 300 and tight[1] <= 200 and tight != (300, 200)
