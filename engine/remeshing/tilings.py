@@ -244,7 +244,6 @@ def _frame_stiffness(nodes3: np.ndarray, beams: np.ndarray, EA: float, EI_out: f
     """Global stiffness (6N,6N) of the frame elements of engine.structure.beam_elements for a planar patch with the
     beams' local z (strong-axis normal) = global z; returns K, N (nodes incl. internal ones) and
     their positions (N,3)."""
-    from ..linalg import congruent
     from ..structure.beam_elements import (
         FrameModel,
         assemble,
@@ -252,8 +251,8 @@ def _frame_stiffness(nodes3: np.ndarray, beams: np.ndarray, EA: float, EI_out: f
         element_geometry,
         element_mesh,
         local_stiffness,
-        transformation,
     )
+    from ..structure.element_kernels import to_global
 
     # the rigidities as per-beam properties: E = EA and G = GJ with A = J = 1
     per_beam = np.ones(len(beams))
@@ -262,7 +261,7 @@ def _frame_stiffness(nodes3: np.ndarray, beams: np.ndarray, EA: float, EI_out: f
                        up=np.array([0.0, 0.0, 1.0]), elements_per_beam=elements_per_beam)
     el = element_mesh(model)
     L, R = element_geometry(el, el.nodes)
-    K_elements = congruent(transformation(R), local_stiffness(L, el))
+    K_elements = to_global(R, local_stiffness(L, el))
     n_all = len(el.nodes)
     return assemble(K_elements, element_dofs(el.connectivity), 6 * n_all).tocsr(), n_all, el.nodes
 

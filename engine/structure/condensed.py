@@ -387,27 +387,33 @@ class CondensedFactor:
         full[self.free] = rhs.reshape(len(self.free), r)
         nb = self._n_boundary_dofs
         f_i = full[nb:].reshape(m, g, r)
-        if self._compiled:
-            from .block_inverse import internal_displacements, subtract_end_loads
-
-            f_b = full[:nb]
-            subtract_end_loads(self._V, f_i, self._end_dofs, f_b)
-            x_b = np.zeros((nb, r))
-            x_b[self._boundary] = self._lu.solve(f_b[self._boundary], refine).reshape(-1, r)
-            x_i = internal_displacements(self._inverse, self._W, f_i, x_b, self._end_dofs)
-            full[:nb] = x_b
-            full[nb:] = x_i.reshape(m * g, r)
-            return full[self.free].reshape(rhs.shape)
-        end_forces = np.einsum("mij,mj->mi", self._V, f_i[:, :, 0])[:, :, None] if r == 1 else np.matmul(self._V, f_i)
-        f_b = full[:nb] - self._scatter @ end_forces.reshape(12 * m, r)
+        f_b = self._end_loads_taken_off(full[:nb], f_i)
         x_b = np.zeros((nb, r))
         x_b[self._boundary] = self._lu.solve(f_b[self._boundary], refine).reshape(-1, r)
-        if r == 1:                                      # einsum is faster than matmul on vectors
-            x_i = (np.einsum("mij,mj->mi", self._inverse, f_i[:, :, 0])
-                   - np.einsum("mij,mj->mi", self._W, x_b[self._end_dofs][:, :, 0]))[:, :, None]
-        else:
-            x_i = np.matmul(self._inverse, f_i) - np.matmul(self._W, x_b[self._end_dofs])
+        full[nb:] = self._internal_displacements(f_i, x_b).reshape(m * g, r)
         full[:nb] = x_b
-        full[nb:] = x_i.reshape(m * g, r)
-        out = full[self.free]
-        return out.reshape(rhs.shape)
+        return full[self.free].reshape(rhs.shape)
+
+    def _end_loads_taken_off(self, f_b: np.ndarray, f_i: np.ndarray) -> np.ndarray:
+        """The end nodes' loads f_b (n_end_dofs, r) less the internal loads f_i (m, g, r) carried to
+        the beam ends (V f_i per beam): compiled in place, else by batched products and a scatter."""
+        if self._compiled:
+            from .block_inverse import subtract_end_loads
+
+            subtract_end_loads(self._V, f_i, self._end_dofs, f_b)
+            return f_b
+        m, _, r = f_i.shape
+        end_forces = np.einsum("mij,mj->mi", self._V, f_i[:, :, 0])[:, :, None] if r == 1 else np.matmul(self._V, f_i)
+        return f_b - self._scatter @ end_forces.reshape(12 * m, r)
+
+    def _internal_displacements(self, f_i: np.ndarray, x_b: np.ndarray) -> np.ndarray:
+        """x_i (m, g, r) = K_ii^-1 f_i - W x_e per beam, from the internal loads and the end nodes'
+        displacements x_b (n_end_dofs, r)."""
+        if self._compiled:
+            from .block_inverse import internal_displacements
+
+            return internal_displacements(self._inverse, self._W, f_i, x_b, self._end_dofs)
+        if f_i.shape[2] == 1:                           # einsum is faster than matmul on vectors
+            return (np.einsum("mij,mj->mi", self._inverse, f_i[:, :, 0])
+                    - np.einsum("mij,mj->mi", self._W, x_b[self._end_dofs][:, :, 0]))[:, :, None]
+        return np.matmul(self._inverse, f_i) - np.matmul(self._W, x_b[self._end_dofs])
