@@ -1034,6 +1034,16 @@ def _axis_errors_deg(solid, directions: np.ndarray, bore_radius: float | np.ndar
     return worst
 
 
+def _meshed(shape, tolerance: float, angular_tolerance: float, relative: bool) -> None:
+    """Triangulate ``shape``'s faces with OCCT's mesher (kept on the shape), unless it holds a
+    triangulation as fine already: what ``_tessellate`` and ``_stl_triangles`` read."""
+    from OCP.BRepMesh import BRepMesh_IncrementalMesh
+    from OCP.BRepTools import BRepTools
+
+    if not BRepTools.Triangulation_s(shape, tolerance):
+        BRepMesh_IncrementalMesh(shape, tolerance, relative, angular_tolerance, False)
+
+
 def _tessellate(shape, tolerance: float, angular_tolerance: float, *,
                 relative: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (n, 3), triangles (m, 3)) of an OCP shape's triangulation, as build123d's
@@ -1041,15 +1051,12 @@ def _tessellate(shape, tolerance: float, angular_tolerance: float, *,
     read into numpy without a Python object per vertex. ``relative`` False: ``tolerance`` is the
     chord deviation in mm, not a fraction of each edge's size (build123d's)."""
     from OCP.BRep import BRep_Tool
-    from OCP.BRepMesh import BRepMesh_IncrementalMesh
-    from OCP.BRepTools import BRepTools
     from OCP.TopAbs import TopAbs_FACE, TopAbs_REVERSED
     from OCP.TopExp import TopExp_Explorer
     from OCP.TopLoc import TopLoc_Location
     from OCP.TopoDS import TopoDS
 
-    if not BRepTools.Triangulation_s(shape, tolerance):
-        BRepMesh_IncrementalMesh(shape, tolerance, relative, angular_tolerance, False)
+    _meshed(shape, tolerance, angular_tolerance, relative)
     vertices, triangles, offset = [], [], 0
     explorer = TopExp_Explorer(shape, TopAbs_FACE)
     while explorer.More():
@@ -1077,12 +1084,9 @@ def _stl_triangles(shape, tolerance: float, angular_tolerance: float, *,
     gives it: three vertices per triangle (float32, as an STL holds them), oriented with their
     faces, read into numpy at once. Reading the triangulation through the bindings took 4 s of the
     default job's 109 printed sockets; this, some 1 ms a socket."""
-    from OCP.BRepMesh import BRepMesh_IncrementalMesh
-    from OCP.BRepTools import BRepTools
     from OCP.StlAPI import StlAPI_Writer
 
-    if not BRepTools.Triangulation_s(shape, tolerance):
-        BRepMesh_IncrementalMesh(shape, tolerance, relative, angular_tolerance, False)
+    _meshed(shape, tolerance, angular_tolerance, relative)
     writer = StlAPI_Writer()
     writer.ASCIIMode = False
     handle, name = tempfile.mkstemp(suffix=".stl")
@@ -1107,10 +1111,10 @@ def _volume_mm3(shape) -> float:
     return float(props.Mass())
 
 
-def _watertight_stl(solid, path: Path, report: dict | None = None, volume_mm3: float | None = None) -> bool:
+def _watertight_stl(solid, path: Path, report: dict, volume_mm3: float) -> bool:
     """Tessellate (STL_CHORD_MM, STL_ANGLE_RAD), weld and write an STL; True when trimesh finds it
     watertight. ``report`` gets ``stl_triangles`` and ``stl_volume_error``, the mesh's volume over
-    the solid's (``volume_mm3`` where the caller knows it, else OCCT's integral), less 1."""
+    the solid's ``volume_mm3``, less 1."""
     import trimesh
 
     vertices, triangles = _stl_triangles(solid.wrapped, STL_CHORD_MM, STL_ANGLE_RAD, relative=False)
@@ -1124,10 +1128,8 @@ def _watertight_stl(solid, path: Path, report: dict | None = None, volume_mm3: f
     trimesh.repair.fix_normals(mesh)
     with atomic_path(path) as tmp:
         mesh.export(tmp, file_type="stl")
-    if report is not None:
-        report["stl_triangles"] = int(len(mesh.faces))
-        volume = _volume_mm3(solid.wrapped) if volume_mm3 is None else volume_mm3
-        report["stl_volume_error"] = float(mesh.volume / volume - 1.0)
+    report["stl_triangles"] = int(len(mesh.faces))
+    report["stl_volume_error"] = float(mesh.volume / volume_mm3 - 1.0)
     return bool(mesh.is_watertight)
 
 
@@ -1236,7 +1238,7 @@ def _build_and_write_checked(job: tuple, turned: tuple | None = None) -> tuple[d
     # the pockets engraved by faces remove their glyphs' area times the depth: a copy's solid is its
     # source's blank less them, without OCCT's volume integral (0.05 s of a printed socket)
     pocket_mm3 = report.pop("_pocket_mm3", None)
-    blank_mm3 = turned[2] if turned is not None and len(turned) > 2 else None
+    blank_mm3 = turned[2] if turned is not None else None
     solid_mm3 = blank_mm3 - pocket_mm3 if blank_mm3 is not None and pocket_mm3 is not None else None
     bores = 0.5 * geometry.sizes_mm + settings.clearance_mm
     report["max_axis_error_deg"] = (_axis_errors_deg(solid, geometry.directions, bores) if settings.kind == "socket"
