@@ -103,8 +103,12 @@ def _frame(origin_mm: np.ndarray, z: np.ndarray, x: np.ndarray | None = None) ->
 
 
 def write_gridshell_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: list[IfcPanel],
-                        joints: list[IfcJoint], beam_material: str, beam_category: str = "steel") -> Path:
-    """Write the IFC4 model (atomically); see the module docstring.
+                        joints: list[IfcJoint], beam_material: str, beam_category: str = "steel",
+                        site_origin_m: np.ndarray | None = None) -> Path:
+    """Write the IFC4 model (atomically); see the module docstring. ``site_origin_m``: where the
+    parts' frame starts (fabrication.site; they are given from it): the site is placed there and
+    every part relative to it, so the model stands where the roof does; None or zero: no site
+    placement.
 
     ifcopenshell appends its ``express`` folder to ``sys.path`` as it works, and that folder's
     ``templates.py`` then shadows the project's own ``templates`` package for every later import
@@ -113,7 +117,8 @@ def write_gridshell_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], 
     saved = list(sys.path)
     try:
         return _write_ifc(path, project_name=project_name, beams=beams, panels=panels, joints=joints,
-                          beam_material=beam_material, beam_category=beam_category)
+                          beam_material=beam_material, beam_category=beam_category,
+                          site_origin_m=np.zeros(3) if site_origin_m is None else np.asarray(site_origin_m, float))
     finally:
         sys.path[:] = saved
 
@@ -135,7 +140,7 @@ def _profile(model, beam: IfcBeam):
 
 
 def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: list[IfcPanel],
-               joints: list[IfcJoint], beam_material: str, beam_category: str) -> Path:
+               joints: list[IfcJoint], beam_material: str, beam_category: str, site_origin_m: np.ndarray) -> Path:
     import ifcopenshell
     import ifcopenshell.api.aggregate as aggregate
     import ifcopenshell.api.context as context
@@ -166,9 +171,17 @@ def _write_ifc(path: Path, *, project_name: str, beams: list[IfcBeam], panels: l
             Axis=model.create_entity("IfcDirection", DirectionRatios=tuple(float(c) for c in frame[:3, 2])),
             RefDirection=model.create_entity("IfcDirection", DirectionRatios=tuple(float(c) for c in frame[:3, 0])))
 
+    site_placement = None
+    if site_origin_m.any():  # the parts are given from the site's origin (fabrication.site)
+        site_frame = np.eye(4)
+        site_frame[:3, 3] = site_origin_m
+        site_placement = site.ObjectPlacement = model.create_entity("IfcLocalPlacement",
+                                                                    RelativePlacement=axes(site_frame))
+
     def place(product, frame: np.ndarray) -> None:
         # made here rather than by the placement API, whose entity order varied from run to run
-        product.ObjectPlacement = model.create_entity("IfcLocalPlacement", RelativePlacement=axes(frame))
+        product.ObjectPlacement = model.create_entity("IfcLocalPlacement", PlacementRelTo=site_placement,
+                                                      RelativePlacement=axes(frame))
 
     # the products, their shapes and property sets made as entities: ifcopenshell's API took some
     # 3 ms a product in its bookkeeping (37 s for the large job's 10 800 products)

@@ -53,6 +53,7 @@ from fabrication.joints import (
 from fabrication.limits import BuildLimits, default_min_cut_length_mm
 from fabrication.model3d import JointSolids, write_gridshell_3dm, write_gridshell_step
 from fabrication.nesting_bars import nest_bars
+from fabrication.site import site_origin_m
 from fabrication.tube_clearance import TUBE_CLASH_MM
 from fabrication.workers import run_steps
 
@@ -120,11 +121,18 @@ def run(surface: SurfaceResult, optimize: OptimizedGrid, analysis: AnalysisSumma
     sections = analysis.sections
     folder: Path = ctx.folder
     normals = grid_normals(polymesh, surface, project)  # mirror images across the symmetry planes
+    # a roof in site coordinates is built in a local frame (fabrication.site)
+    origin_m = site_origin_m(polymesh.nodes)
+    if origin_m.any():
+        polymesh = polymesh.replace_nodes(polymesh.nodes - origin_m)
+        optimize = replace(optimize, polymesh=polymesh)
+        ctx.step(f"the grid stands far from the coordinate origin: the files' coordinates start at "
+                 f"{', '.join(f'{c:.0f}' for c in origin_m)} m (site_origin_m)")
     # one outer size, or one per beam where the analysis sized the tubes
     size_mm = project.section.outer_size_mm() if sections is None else MM * sections.diameter
     limits = build_limits_of(project)
     summary: dict = {"nodes": polymesh.n_nodes, "beams": int(len(polymesh.edges)), "cells": polymesh.n_faces,
-                     "limits": limits.to_dict()}
+                     "limits": limits.to_dict(), "site_origin_m": origin_m.tolist()}
     findings: list[Finding] = []
     joint_settings = _joint_settings(project)
     summary.update({"joints": 0, "joint_problems": []})
@@ -581,7 +589,8 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     kind = material(project.material.name).kind
     write_gridshell_ifc(folder / "gridshell.ifc", project_name=project.project.name, beams=beams, panels=plates,
                         joints=joints, beam_material=grade_name(project.material.name),
-                        beam_category=IFC_MATERIAL_CATEGORY.get(kind, kind))
+                        beam_category=IFC_MATERIAL_CATEGORY.get(kind, kind),
+                        site_origin_m=np.asarray(summary["site_origin_m"], dtype=float))
     summary["ifc"] = "gridshell.ifc"
     clock.start("model: gridshell.3dm")
     write_gridshell_3dm(folder / "gridshell.3dm", beams, plates, joints)

@@ -330,6 +330,8 @@ def _fabrication_section(out_dir: Path) -> Section:
                     if k in ("min_cut_length_mm", "min_angle_deg", "shortest_beam_mm_at_120deg")})
     if "shortest_cut_length_mm" in fabrication:
         summary["shortest_cut_length_mm"] = fabrication["shortest_cut_length_mm"]
+    if any(fabrication.get("site_origin_m") or []):  # the files' frame (fabrication.site)
+        summary["site_origin_m"] = ", ".join(f"{c:.0f}" for c in fabrication["site_origin_m"])
     tables.insert(0, _figures_table("fabrication", "Fabrication", summary))
     sequence = _csv_table(folder / "assembly/sequence.csv", "assembly", "Assembly sequence", max_rows=10)
     if sequence:
