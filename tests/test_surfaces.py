@@ -127,6 +127,22 @@ def test_holes_and_several_patches_are_accepted():
     assert report.patches == 2 and report.boundary_loops == 3
 
 
+def test_a_stray_piece_is_removed_and_noted():
+    """A leftover triangle floating over the roof (and flagged) goes, with its vertices and flag; the
+    roof's faces, flags and area stay, and the notes say where the stray was."""
+    roof = parametric.hypar(divisions=8)
+    stray = np.array([[0.0, 0.0, 10.0], [0.1, 0.0, 10.0], [0.0, 0.1, 10.0]])
+    vertices = np.vstack([roof.vertices, stray])
+    faces = np.vstack([roof.faces, roof.n_vertices + np.array([[0, 1, 2]])])
+    flagged = np.r_[np.arange(roof.n_vertices) < 3, True, True, True]
+    clean, report = clean_mesh(vertices, faces, flagged)
+    assert report.stray_pieces == 1 and report.patches == 1
+    assert clean.n_faces == roof.n_faces and clean.n_vertices == roof.n_vertices
+    assert clean.area == pytest.approx(roof.area, rel=1e-12)
+    assert clean.flagged.sum() == 3
+    assert any("stray" in note and "10.000" in note for note in report.notes)
+
+
 @pytest.mark.parametrize("suffix", [".obj", ".ply", ".stl", ".off"])
 def test_mesh_formats_round_trip(tmp_path, suffix):
     source = parametric.hypar(divisions=6)

@@ -68,6 +68,7 @@ class CleanReport:
     duplicate_faces: int = 0
     unused_vertices: int = 0
     flipped_faces: int = 0
+    stray_pieces: int = 0
     patches: int = 0
     boundary_loops: int = 0
     notes: list[str] = field(default_factory=list)
@@ -80,6 +81,27 @@ def _where(points: np.ndarray) -> str:
     shown = ", ".join("(" + ", ".join(f"{c:.3f}" for c in p) + ")" for p in points[:3])
     more = f" and {len(points) - 3} more" if len(points) > 3 else ""
     return f"at {shown}{more}"
+
+
+#: A connected piece of the surface under this share of its largest piece's area is a stray (a
+#: leftover triangle or strip of an export): it is removed, and the cleaning notes say where.
+STRAY_SHARE = 0.01
+
+
+def _without_strays(faces: np.ndarray, patch: np.ndarray,
+                    vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[tuple[int, np.ndarray]]]:
+    """(faces, patch labels, [(face count, centre) of each stray removed]): ``faces`` less the pieces
+    (``patch`` labels) under STRAY_SHARE of the largest piece's area, labels renumbered."""
+    corners = vertices[faces]
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    per_patch = np.bincount(patch, weights=area)
+    stray = per_patch < STRAY_SHARE * per_patch.max()
+    if not stray.any():
+        return faces, patch, []
+    removed = [(int(np.sum(patch == p)), corners[patch == p].reshape(-1, 3).mean(axis=0))
+               for p in np.flatnonzero(stray)]
+    keep = ~stray[patch]
+    return faces[keep], (np.cumsum(~stray) - 1)[patch[keep]], removed
 
 
 def _merge_duplicates(vertices: np.ndarray, tolerance: float) -> np.ndarray:
@@ -232,6 +254,18 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, flagged: np.ndarray | No
                              "(fins, double layers) at those points")
 
     faces, report.flipped_faces, patch = _orient(faces, vertices)
+    faces, patch, stray = _without_strays(faces, patch, vertices)
+    if len(stray):
+        report.stray_pieces = len(stray)
+        report.notes.append(f"{len(stray)} stray piece(s) of {int(sum(n for n, _ in stray))} face(s) removed, each "
+                            f"under {100 * STRAY_SHARE:g} % of the surface's largest piece "
+                            f"{_where(np.array([c for _, c in stray]))}")
+        used = np.zeros(len(vertices), dtype=bool)
+        used[faces.ravel()] = True
+        new_index = np.cumsum(used) - 1
+        vertices, flagged, faces = vertices[used], flagged[used], new_index[faces]
+        key = np.sort(np.stack([faces, np.roll(faces, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1)
+        edges = np.unique(key, axis=0)
 
     faces_per_vertex = np.bincount(faces.ravel(), minlength=len(vertices))
     edges_per_vertex = np.bincount(edges.ravel(), minlength=len(vertices))

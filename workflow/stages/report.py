@@ -237,7 +237,9 @@ def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
     remesh = _json(out_dir / "04-remesh/remesh.json")
     optimize = _json(out_dir / "05-optimize/optimize.json")
     analysis = _json(out_dir / "06-analysis/analysis.json")
-    sections = [Section(title="1. Surface and supports", figures=_figures(out_dir, "surface"))]
+    cleaning = _json(out_dir / "01-surface/surface.json").get("cleaning") or {}
+    sections = [Section(title="1. Surface and supports", figures=_figures(out_dir, "surface"),
+                        text=" ".join(f"Cleaning: {note}." for note in cleaning.get("notes", [])))]
     shell_keys = ("load_case", "thickness_m", "max_displacement_m", "N1_max_N_per_m", "N2_min_N_per_m",
                   "total_load_N", "total_reaction_N", "equilibrium_error")
     sections.append(Section(title="2. Shell statics", figures=_figures(out_dir, "shell"),

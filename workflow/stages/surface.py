@@ -192,6 +192,8 @@ def _loads_json(cases: dict[str, LoadCase], combinations: dict[str, LoadCombinat
 def run(project: Project, ctx: StageContext) -> SurfaceResult:
     ctx.step("building the surface")
     mesh, info = build_surface(project)
+    for note in (info.get("cleaning") or {}).get("notes", []):
+        ctx.step(f"cleaning: {note}")
     ctx.step("selecting supports")
     supports = resolve_supports(mesh, project.supports)
     cases, combinations = resolve_loads(mesh, project)
