@@ -13,6 +13,9 @@ from ._common import pyplot, save_png
 __all__ = ["plot_principal_forces"]
 
 MAX_CROSSES = 1500
+#: The bars' colours: a red and a blue that stay apart in print, on screen at report size and for
+#: red-green colour blindness (the former navy tension, #1f4e9e, read as black beside the grey mesh).
+COMPRESSION, TENSION = "#c0392b", "#1f78d1"
 
 
 def plot_principal_forces(mesh: TriMesh, principal_forces: np.ndarray, principal_directions: np.ndarray,
@@ -43,7 +46,7 @@ def plot_principal_forces(mesh: TriMesh, principal_forces: np.ndarray, principal
         offset = axis[:, :2] * half[:, k:k + 1]
         c = centroids[picked, :2]
         segments.append(np.stack([c - offset, c + offset], axis=1))
-        colours.append(np.where(values[:, k] < 0, "#c0392b", "#1f4e9e"))
+        colours.append(np.where(values[:, k] < 0, COMPRESSION, TENSION))
     fig, ax = plt.subplots(figsize=(9, 8))
     ax.triplot(v[:, 0], v[:, 1], f, color=(0.6, 0.6, 0.6, 0.25), linewidth=0.3)
     ax.add_collection(LineCollection(np.concatenate(segments), colors=np.concatenate(colours), linewidths=1.1))
@@ -53,8 +56,8 @@ def plot_principal_forces(mesh: TriMesh, principal_forces: np.ndarray, principal
     if support_nodes is not None and len(support_nodes):
         s = v[np.asarray(support_nodes)]
         ax.scatter(s[:, 0], s[:, 1], marker="^", c="k", s=16, zorder=3)
-    ax.legend(handles=[Line2D([], [], color="#c0392b", label="compression"),
-                       Line2D([], [], color="#1f4e9e", label="tension"),
+    ax.legend(handles=[Line2D([], [], color=COMPRESSION, label="compression"),
+                       Line2D([], [], color=TENSION, label="tension"),
                        Line2D([], [], color="k", marker="^", linestyle="", label="supports")],
               loc="upper right", fontsize=8)
     ax.set_aspect("equal")
