@@ -171,6 +171,50 @@ def test_rhino_3dm_mesh_is_read_in_metres(tmp_path):
     assert mesh.area == pytest.approx(source.area, rel=1e-6)
 
 
+def _rhino_file(path, mesh, unit_system, scale):
+    """``mesh`` written as a .3dm with ``unit_system``, its coordinates times ``scale``."""
+    import rhino3dm
+
+    model = rhino3dm.File3dm()
+    model.Settings.ModelUnitSystem = unit_system
+    rmesh = rhino3dm.Mesh()
+    for x, y, z in mesh.vertices * scale:
+        rmesh.Vertices.Add(float(x), float(y), float(z))
+    for a, b, c in mesh.faces:
+        rmesh.Faces.AddFace(int(a), int(b), int(c))
+    model.Objects.AddMesh(rmesh)
+    model.Write(str(path), 7)
+    return path
+
+
+@pytest.mark.parametrize("unit, per_metre", [("Feet", 1 / 0.3048), ("Inches", 1 / 0.0254), ("Meters", 1.0)])
+def test_a_rhino_file_is_read_in_its_own_units_whatever_file_units_says(tmp_path, unit, per_metre):
+    """A roof drawn in feet (or inches) in Rhino comes in at its size in metres, before and whatever
+    [surface] file_units says: the .3dm states its unit (it was read as metres, 3.3 times too big)."""
+    rhino3dm = pytest.importorskip("rhino3dm")
+    from workflow.config import load_project
+    from workflow.stages.surface import build_surface
+
+    source = parametric.hypar(divisions=4)
+    _rhino_file(tmp_path / "roof.3dm", source, getattr(rhino3dm.UnitSystem, unit), per_metre)
+    (tmp_path / "p.toml").write_text('[surface]\nfile = "roof.3dm"\nfile_units = "mm"\n')
+    mesh, info = build_surface(load_project(tmp_path / "p.toml"))
+    assert mesh.area == pytest.approx(source.area, rel=1e-6)  # a Rhino mesh's vertices are single precision
+    assert info["units_from"] == "the file"
+
+
+def test_a_rhino_file_of_an_implausible_size_names_its_own_units(tmp_path, capsys):
+    """A .3dm saved in millimetres with the roof's numbers in metres is 16 mm across: the message
+    says that the file's units are used, not --surface-units, and no traceback."""
+    rhino3dm = pytest.importorskip("rhino3dm")
+    from workflow.cli import main
+
+    path = _rhino_file(tmp_path / "roof.3dm", parametric.hypar(divisions=4), rhino3dm.UnitSystem.Millimeters, 1.0)
+    code = main(["run", "--surface", str(path), "--out", str(tmp_path / "o"), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and "the .3dm file's own units (mm)" in err and "_Units" in err and "Traceback" not in err
+
+
 def test_written_ply_keeps_flags(tmp_path):
     mesh = parametric.hypar(divisions=4)
     flagged = np.zeros(mesh.n_vertices, dtype=bool)

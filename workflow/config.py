@@ -93,6 +93,8 @@ class SurfaceConfig(_Section):
 
     file: str | None = None
     file_units: Literal["m", "cm", "mm", "in", "ft"] = "m"
+    """The unit the file's numbers are in. A Rhino .3dm states its own (its model units), which are
+    used instead."""
     up_axis: Literal["z", "y", "x", "-z", "-y", "-x"] | None = None
     """The file's up axis, turned to +z before anything else (supports' boxes and planes are then in
     z-up coordinates). Unset: z, and a file that stands on its side is refused with a hint."""
@@ -980,19 +982,21 @@ def _file_across_m(project: Project, base_dir: Path | None) -> float | None:
         path = base_dir / path
     try:
         stat = path.resolve().stat()
-        raw = _raw_extent(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+        raw, stated = _raw_extent(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
     except (OSError, InputError):
         return None
-    return raw * _FILE_UNITS[project.surface.file_units] if raw > 0 else None
+    return raw * (1.0 if stated else _FILE_UNITS[project.surface.file_units]) if raw > 0 else None
 
 
 @functools.lru_cache(maxsize=32)
-def _raw_extent(path: str, mtime_ns: int, size: int) -> float:
-    """The largest side of the bounding box of the mesh file ``path``, in its own units (the file's
-    time and size key the cache: a sweep parses its project once per point)."""
-    from .surface_io import read_surface
+def _raw_extent(path: str, mtime_ns: int, size: int) -> tuple[float, str | None]:
+    """(the largest side of the bounding box of the mesh file ``path``, the unit the file states):
+    in metres where it states one (a .3dm), else in its own units (the file's time and size key the
+    cache: a sweep parses its project once per point)."""
+    from .surface_io import read_surface_with_unit
 
-    return _largest_side(read_surface(path)[0])
+    vertices, _, _, stated = read_surface_with_unit(path)
+    return _largest_side(vertices), stated
 
 
 def _largest_side(vertices: np.ndarray) -> float:
@@ -1142,7 +1146,7 @@ def check_inputs(project: Project, *, quick_start: bool = False) -> float | None
     and ``flagged`` supports have flagged vertices to select. ``quick_start``: the project came
     from ``--surface``, so messages name the command-line options. Returns the surface's size
     across in metres (None for a template surface). Raises ``ConfigError``."""
-    from .surface_io import read_surface
+    from .surface_io import read_surface_with_unit
 
     if project.design.size_sections:
         from engine.design.catalogue import catalogue
@@ -1162,13 +1166,19 @@ def check_inputs(project: Project, *, quick_start: bool = False) -> float | None
                               hint="give the path of a mesh file (OBJ, PLY, STL, OFF or 3DM)")
         raise ConfigError(f"[surface] file: {path} does not exist",
                           hint="a relative path is read from the project file's folder; correct [surface] file")
-    vertices, faces, flagged = read_surface(path)
+    vertices, faces, flagged, stated = read_surface_with_unit(path)
     if config.up_axis is None:
         _check_upright(vertices, faces, path, quick_start)
     raw = _largest_side(vertices)
     unit = config.file_units
-    across = raw * _FILE_UNITS[unit]
+    across = raw * (1.0 if stated else _FILE_UNITS[unit])
     low, high = SURFACE_EXTENT_M
+    if stated and not low <= across <= high:  # the file's own unit is used, not file_units
+        raise ConfigError(f"{'--surface' if quick_start else '[surface] file:'} {path}: the surface is "
+                          f"{_distance(across)} across in the .3dm file's own units ({stated})",
+                          hint="set the Rhino file's units to those it was drawn in (Rhino: _Units, without "
+                               "scaling) and save it again; a .3dm is read in its own units, not --surface-units "
+                               "or file_units")
     if raw > 0 and not low <= across <= high:
         likely = next((u for u in ("m", "mm", "cm", "ft", "in") if u != unit
                        and low <= raw * _FILE_UNITS[u] <= high), "mm" if across > high else "m")

@@ -14,9 +14,15 @@ from engine.errors import InputError
 from engine.mesh import TriMesh
 from fabrication.files import atomic_path
 
-__all__ = ["SURFACE_SUFFIXES", "read_surface", "write_surface_ply"]
+__all__ = ["SURFACE_SUFFIXES", "read_surface", "read_surface_with_unit", "write_surface_ply"]
 
 SURFACE_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".3dm")
+#: Rhino's model unit systems (rhino3dm.UnitSystem's values): name and metres per unit. A .3dm in
+#: none of them (no unit system, custom units) is read as its numbers, in [surface] file_units.
+RHINO_UNITS = {1: ("microns", 1e-6), 2: ("mm", 1e-3), 3: ("cm", 1e-2), 4: ("m", 1.0), 5: ("km", 1e3),
+               6: ("microinches", 2.54e-8), 7: ("mils", 2.54e-5), 8: ("in", 0.0254), 9: ("ft", 0.3048),
+               10: ("miles", 1609.344), 12: ("angstroms", 1e-10), 13: ("nm", 1e-9), 14: ("dm", 0.1),
+               15: ("dam", 10.0), 16: ("hm", 100.0), 19: ("yd", 0.9144)}
 
 
 def _red_flags(mesh, n_vertices: int) -> np.ndarray:
@@ -35,7 +41,9 @@ def _red_flags(mesh, n_vertices: int) -> np.ndarray:
     return np.zeros(n_vertices, dtype=bool)
 
 
-def _read_3dm(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _read_3dm(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, str | None]:
+    """(vertices, faces, flags, the file's unit): vertices in metres where the file states a unit
+    (RHINO_UNITS), else as written and the unit None."""
     import rhino3dm
 
     model = rhino3dm.File3dm.Read(str(path))
@@ -64,13 +72,21 @@ def _read_3dm(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         what = f" (it holds {', '.join(sorted(set(skipped)))})" if skipped else ""
         raise InputError(f"{path}: no mesh object in the .3dm file{what}",
                          hint="in Rhino, mesh the surface (_Mesh) and save the mesh")
-    scale = {2: 1e-3, 3: 1e-2, 4: 1.0}.get(int(model.Settings.ModelUnitSystem), 1.0)
+    unit, scale = RHINO_UNITS.get(int(model.Settings.ModelUnitSystem), (None, 1.0))
     v_all = np.concatenate(vertices) * scale
-    return v_all, np.concatenate(faces), np.zeros(len(v_all), dtype=bool)
+    return v_all, np.concatenate(faces), np.zeros(len(v_all), dtype=bool), unit
 
 
 def read_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Raw (vertices (n,3) m, faces (m,3), flagged (n,) bool) of a mesh file.
+    """(vertices (n,3), faces (m,3), flagged (n,) bool) of a mesh file: see read_surface_with_unit."""
+    return read_surface_with_unit(path)[:3]
+
+
+def read_surface_with_unit(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, str | None]:
+    """(vertices (n,3), faces (m,3), flagged (n,) bool, unit) of a mesh file. ``unit`` is the unit
+    the file states (a Rhino .3dm's model units), its vertices then in metres; None for formats
+    that state none (OBJ, PLY, STL, OFF), whose vertices are as written ([surface] file_units says
+    in what).
 
     Raises ``InputError`` for a missing file, an unknown suffix or an unreadable file.
     """
@@ -95,7 +111,7 @@ def read_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if len(vertices) == 0 or len(faces) == 0:
         raise InputError(f"surface file {path} holds no triangles",
                          hint="export the surface as a mesh, not as points or curves")
-    return vertices, faces, _red_flags(loaded, len(vertices))
+    return vertices, faces, _red_flags(loaded, len(vertices)), None
 
 
 def write_surface_ply(mesh: TriMesh, path: str | Path) -> Path:

@@ -36,7 +36,7 @@ from fabrication.files import write_text_atomic
 from ..config import Project, SupportSpec
 from ..plots.surface import plot_surface
 from ..runner import StageContext
-from ..surface_io import read_surface, write_surface_ply
+from ..surface_io import read_surface, read_surface_with_unit, write_surface_ply
 from ..units import to_si
 
 __all__ = ["SurfaceResult", "build_surface", "resolve_supports", "resolve_loads", "check_selections", "run", "load",
@@ -96,11 +96,13 @@ def build_surface(project: Project) -> tuple[TriMesh, dict]:
             return made.mesh, info
         mesh = getattr(parametric, config.template)(**parameters)
         return mesh, {"source": f"template {config.template}", "parameters": parameters}
-    vertices, faces, flagged = read_surface(config.file)
-    vertices = to_z_up(vertices * _UNIT_SCALE[config.file_units], config.up_axis or "z")
+    vertices, faces, flagged, stated = read_surface_with_unit(config.file)
+    # a file that states its unit (a Rhino .3dm) is read in it, in metres: file_units is for the others
+    vertices = to_z_up(vertices * (1.0 if stated else _UNIT_SCALE[config.file_units]), config.up_axis or "z")
     mesh, report = clean_mesh(vertices, faces, flagged, name=Path(config.file).stem,
                               merge_tolerance=config.merge_tolerance)
-    return mesh, {"source": str(config.file), "cleaning": report.to_json()}
+    return mesh, {"source": str(config.file), "units": stated or config.file_units,
+                  "units_from": "the file" if stated else "file_units", "cleaning": report.to_json()}
 
 
 def _select(mesh: TriMesh, spec: SupportSpec) -> np.ndarray:
