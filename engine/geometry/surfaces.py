@@ -104,6 +104,14 @@ def _without_strays(faces: np.ndarray, patch: np.ndarray,
     return faces[keep], (np.cumsum(~stray) - 1)[patch[keep]], removed
 
 
+def _used_only(vertices: np.ndarray, flagged: np.ndarray,
+               faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices, flags, faces) without the vertices no face uses, the faces renumbered."""
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.ravel()] = True
+    return vertices[used], flagged[used], (np.cumsum(used) - 1)[faces]
+
+
 def _merge_duplicates(vertices: np.ndarray, tolerance: float) -> np.ndarray:
     """Representative index per vertex: vertices closer than ``tolerance`` share one."""
     pairs = cKDTree(vertices).query_pairs(tolerance, output_type="ndarray")
@@ -241,8 +249,7 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, flagged: np.ndarray | No
     used = np.zeros(len(vertices), dtype=bool)
     used[faces.ravel()] = True
     report.unused_vertices = int(np.count_nonzero(~used & (representative == np.arange(len(vertices)))))
-    new_index = np.cumsum(used) - 1
-    vertices, flagged, faces = vertices[used], merged_flags[used], new_index[faces]
+    vertices, flagged, faces = _used_only(vertices, merged_flags, faces)
 
     key = np.sort(np.stack([faces, np.roll(faces, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1)
     edges, counts = np.unique(key, axis=0, return_counts=True)
@@ -260,10 +267,7 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, flagged: np.ndarray | No
         report.notes.append(f"{len(stray)} stray piece(s) of {int(sum(n for n, _ in stray))} face(s) removed, each "
                             f"under {100 * STRAY_SHARE:g} % of the surface's largest piece "
                             f"{_where(np.array([c for _, c in stray]))}")
-        used = np.zeros(len(vertices), dtype=bool)
-        used[faces.ravel()] = True
-        new_index = np.cumsum(used) - 1
-        vertices, flagged, faces = vertices[used], flagged[used], new_index[faces]
+        vertices, flagged, faces = _used_only(vertices, flagged, faces)
         key = np.sort(np.stack([faces, np.roll(faces, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1)
         edges = np.unique(key, axis=0)
 
