@@ -317,3 +317,61 @@ def test_a_picture_has_the_size_its_dpi_gives_read_from_raw_pixels_or_a_tight_pn
     assert sizes["{'dpi': 100}"] == (300, 200) and sizes["{'dpi': 'figure'}"] == (240, 160)
     tight = sizes["{'dpi': 100, 'bbox_inches': 'tight'}"]
     assert tight[0] <= 300 and tight[1] <= 200 and tight != (300, 200)
+
+
+def _strip(length: float = 50.0, depth: float = 5.0):
+    """A barrel canopy ``length`` x ``depth`` m, ten times as long as deep (as a station platform's)."""
+    from engine.geometry.parametric import grid_triangles
+    from engine.mesh import TriMesh
+
+    nx, ny = 60, 6
+    x, y = np.meshgrid(np.linspace(0, length, nx + 1), np.linspace(-depth / 2, depth / 2, ny + 1), indexing="ij")
+    z = 4.0 + 1.2 * (1 - (2 * y / depth) ** 2)
+    return TriMesh(vertices=np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1), faces=grid_triangles(nx, ny))
+
+
+def _plan_share(figure) -> float:
+    """The share of the picture's area that its plans (2-D axes at true scale) take."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(figure)
+    canvas.draw()
+    width, height = canvas.get_width_height()
+    plans = [ax.get_window_extent() for ax in figure.axes if ax.name == "rectilinear" and ax.get_aspect() == 1.0]
+    return sum(b.width * b.height for b in plans) / (width * height)
+
+
+def test_a_wide_roofs_plans_run_across_the_picture(drawn, tmp_path):
+    """A canopy ten times as long as deep: its plans take at least a quarter of each picture, a
+    tenth beside a 3-D view (drawn at the sizes for a square roof they took 2-10 %, the rest
+    white), and the force picture's legend stays off the plan."""
+    from engine.remeshing.field import GuidingField
+    from workflow.plots.field import plot_field
+    from workflow.plots.shell import plot_principal_forces
+    from workflow.plots.surface import plot_surface
+
+    mesh = _strip()
+    rng = np.random.default_rng(0)
+    forces = -np.abs(rng.normal(1e5, 2e4, (mesh.n_faces, 2)))
+    directions = np.tile([1.0, 0.0, 0.0], (mesh.n_faces, 1))
+    supports = np.asarray(mesh.boundary_loops[0])
+    plot_principal_forces(mesh, forces, directions, tmp_path / "stress.png", support_nodes=supports)
+    stress = drawn[-1]
+    n = mesh.n_vertices
+    field = GuidingField(size=np.linspace(0.5, 1.0, n), anisotropy=np.full(n, 1.5),
+                         direction=np.tile([1.0, 0.0, 0.0], (n, 1)), normals=np.tile([0.0, 0.0, 1.0], (n, 1)))
+    plot_field(mesh, field, tmp_path / "field.png")
+    plot_surface(mesh, supports, tmp_path / "surface.png")
+    support = np.zeros(n, dtype=bool)
+    support[supports] = True
+    grid = quad_grid(mesh, total_length=12.0 * np.sqrt(mesh.area), support_vertices=support)
+    plot_gridshell(grid, tmp_path / "grid.png")
+    plot_utilisation(grid.nodes, grid.edges, np.linspace(0, 1.2, len(grid.edges)), tmp_path / "utilisation.png")
+    shares = {name: _plan_share(figure) for name, figure in
+              zip(("stress", "field", "surface", "grid", "utilisation"), drawn)}
+    with_3d_view = {"surface", "grid"}  # a 3-D view above the plan takes its row
+    assert all(share >= (0.1 if name in with_3d_view else 0.25) for name, share in shares.items()), shares
+    plan = next(ax for ax in stress.axes if ax.get_aspect() == 1.0)
+    box = plan.get_window_extent()
+    legend = plan.get_legend().get_window_extent()
+    assert not box.overlaps(legend)

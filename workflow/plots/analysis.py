@@ -8,7 +8,7 @@ import numpy as np
 
 from fabrication.ids import beam_id
 
-from ._common import frame_3d, pyplot, save_png
+from ._common import frame_3d, is_wide_plan, plan_height_in, pyplot, save_png
 
 __all__ = ["plot_utilisation", "plot_axial_forces", "plot_buckling_modes", "plot_response", "plot_sections"]
 
@@ -17,11 +17,26 @@ def _segments(nodes: np.ndarray, beams: np.ndarray) -> np.ndarray:
     return np.stack([nodes[beams[:, 0], :2], nodes[beams[:, 1], :2]], axis=1)
 
 
+def _plan_figure(plt, nodes: np.ndarray, size: tuple[float, float]):
+    """(fig, ax, wide) of one plan: ``size`` inches, or across a wider picture as deep as a wide
+    plan (``_common.WIDE_PLAN``) needs, its colour bar or legend then below it."""
+    wide = is_wide_plan(nodes)
+    fig, ax = plt.subplots(figsize=(12, plan_height_in(nodes, 10.5, labels_in=2.0)) if wide else size)
+    return fig, ax, wide
+
+
+def _colour_bar(fig, lines, ax, wide: bool, **kwargs):
+    """A colour bar beside a plan, or under a wide one."""
+    if wide:
+        return fig.colorbar(lines, ax=ax, orientation="horizontal", shrink=0.5, pad=0.3, aspect=40, **kwargs)
+    return fig.colorbar(lines, ax=ax, shrink=0.8, **kwargs)
+
+
 def _frame(ax, nodes: np.ndarray) -> None:
     lo, hi = nodes[:, :2].min(axis=0), nodes[:, :2].max(axis=0)
-    pad = 0.04 * (hi - lo).max()
-    ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    pad = np.maximum(0.04 * (hi - lo), 0.01 * (hi - lo).max())  # a wide plan's depth is not padded by its length
+    ax.set_xlim(lo[0] - pad[0], hi[0] + pad[0])
+    ax.set_ylim(lo[1] - pad[1], hi[1] + pad[1])
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
 
@@ -32,18 +47,21 @@ def plot_utilisation(nodes: np.ndarray, beams: np.ndarray, utilisation: np.ndarr
     plt = pyplot()
     from matplotlib.collections import LineCollection
 
-    fig, ax = plt.subplots(figsize=(9, 8))
+    fig, ax, wide = _plan_figure(plt, nodes, (9, 8))
     utilisation = np.asarray(utilisation, dtype=float)
     cmap = plt.get_cmap("RdYlGn_r").with_extremes(over="#5b0000")
     lines = LineCollection(_segments(nodes, beams), cmap=cmap, norm=plt.Normalize(0.0, 1.0),
                            linewidths=1.5 + 2.5 * np.clip(utilisation, 0, 1.2))
     lines.set_array(utilisation)
     ax.add_collection(lines)
-    fig.colorbar(lines, ax=ax, shrink=0.8, extend="max", label="utilisation")
+    _colour_bar(fig, lines, ax, wide, extend="max", label="utilisation")
     worst = int(np.argmax(utilisation))
     middle = nodes[beams[worst]].mean(axis=0)
-    ax.annotate(f"{beam_id(worst)}: {utilisation[worst]:.2f}", middle[:2], xytext=(10, 10), textcoords="offset points",
-                fontsize=9, arrowprops={"arrowstyle": "->"})
+    inward = middle[0] > 0.5 * (nodes[:, 0].min() + nodes[:, 0].max())  # the label toward the middle, in the plot
+    ax.annotate(f"{beam_id(worst)}: {utilisation[worst]:.2f}", middle[:2], xytext=(-10 if inward else 10, 10),
+                textcoords="offset points", ha="right" if inward else "left", fontsize=9,
+                bbox={"boxstyle": "round,pad=0.2", "facecolor": "white", "edgecolor": "0.6", "alpha": 0.9},
+                arrowprops={"arrowstyle": "->"})
     _frame(ax, nodes)
     ax.set_title(title or "member utilisation")
     fig.tight_layout()
@@ -57,7 +75,7 @@ def plot_sections(nodes: np.ndarray, beams: np.ndarray, profiles: list[str], dia
     plt = pyplot()
     from matplotlib.collections import LineCollection
 
-    fig, ax = plt.subplots(figsize=(11, 8))
+    fig, ax, wide = _plan_figure(plt, nodes, (11, 8))
     diameters = np.asarray(diameters_m, dtype=float)
     names = np.asarray(profiles)
     order = sorted(set(names.tolist()), key=lambda n: -diameters[names == n].max())
@@ -69,7 +87,10 @@ def plot_sections(nodes: np.ndarray, beams: np.ndarray, profiles: list[str], dia
         ax.add_collection(LineCollection(segments[mine], colors=[colour],
                                          linewidths=1.0 + 4.0 * diameters[mine] / scale,
                                          label=f"{name} ({int(mine.sum())} beams)"))
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)  # beside, not over the grid
+    if wide:  # under a wide grid, not over it
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.35), ncol=3, fontsize=9, frameon=False)
+    else:  # beside, not over the grid
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)
     _frame(ax, nodes)
     ax.set_title(title or "sized sections")
     fig.tight_layout()
@@ -84,12 +105,12 @@ def plot_axial_forces(nodes: np.ndarray, beams: np.ndarray, axial_forces: np.nda
 
     axial_kN = np.asarray(axial_forces, dtype=float) / 1e3
     peak = max(float(np.abs(axial_kN).max()), 1e-9)
-    fig, ax = plt.subplots(figsize=(9, 8))
+    fig, ax, wide = _plan_figure(plt, nodes, (9, 8))
     lines = LineCollection(_segments(nodes, beams), cmap="coolwarm_r", norm=plt.Normalize(-peak, peak),
                            linewidths=0.8 + 4.0 * np.abs(axial_kN) / peak)
     lines.set_array(axial_kN)
     ax.add_collection(lines)
-    fig.colorbar(lines, ax=ax, shrink=0.8, label="axial force N (kN): compression < 0 < tension")
+    _colour_bar(fig, lines, ax, wide, label="axial force N (kN): compression < 0 < tension")
     _frame(ax, nodes)
     ax.set_title(title or "axial forces")
     fig.tight_layout()

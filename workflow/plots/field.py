@@ -9,7 +9,7 @@ import numpy as np
 from engine.mesh import TriMesh
 from engine.remeshing.field import GuidingField
 
-from ._common import pyplot, save_png
+from ._common import is_wide_plan, plan_height_in, pyplot, save_png
 
 __all__ = ["plot_field"]
 
@@ -24,13 +24,18 @@ def plot_field(mesh: TriMesh, field: GuidingField, path: Path, *, title: str = "
 
     v = mesh.vertices
     tri = Triangulation(v[:, 0], v[:, 1], mesh.faces)
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.8))
+    wide = is_wide_plan(v)  # then one plan above the other, across the picture
+    if wide:
+        fig, axes = plt.subplots(2, 1, figsize=(13, 2 * plan_height_in(v, 11.0, labels_in=1.1)))
+    else:
+        fig, axes = plt.subplots(1, 2, figsize=(13, 5.8))
+    bar = {"shrink": 0.8, "fraction": 0.03 if wide else 0.15}
     size_plot = axes[0].tripcolor(tri, field.size / field.size.min(), shading="gouraud", cmap="viridis_r")
-    fig.colorbar(size_plot, ax=axes[0], shrink=0.8, label="cell size h / h_min")
+    fig.colorbar(size_plot, ax=axes[0], label="cell size h / h_min", **bar)
     axes[0].set_title(f"size: h_max / h_min = {field.size.max() / field.size.min():.2f}")
     aspect_plot = axes[1].tripcolor(tri, field.anisotropy, shading="gouraud", cmap="magma_r",
                                     vmin=1.0, vmax=max(1.0 + 1e-6, float(field.anisotropy.max())))
-    fig.colorbar(aspect_plot, ax=axes[1], shrink=0.8, label="anisotropy a")
+    fig.colorbar(aspect_plot, ax=axes[1], label="anisotropy a", **bar)
     picked = np.arange(mesh.n_vertices)
     if len(picked) > MAX_TICKS:
         picked = np.random.default_rng(0).choice(picked, MAX_TICKS, replace=False)

@@ -8,7 +8,7 @@ import numpy as np
 
 from engine.mesh import TriMesh
 
-from ._common import pyplot, save_png
+from ._common import is_wide_plan, plan_height_in, pyplot, save_png
 
 __all__ = ["plot_principal_forces"]
 
@@ -47,7 +47,8 @@ def plot_principal_forces(mesh: TriMesh, principal_forces: np.ndarray, principal
         c = centroids[picked, :2]
         segments.append(np.stack([c - offset, c + offset], axis=1))
         colours.append(np.where(values[:, k] < 0, COMPRESSION, TENSION))
-    fig, ax = plt.subplots(figsize=(9, 8))
+    wide = is_wide_plan(v)  # then across the picture, the legend and the note below it
+    fig, ax = plt.subplots(figsize=(12, plan_height_in(v, 10.5, labels_in=1.8)) if wide else (9, 8))
     ax.triplot(v[:, 0], v[:, 1], f, color=(0.6, 0.6, 0.6, 0.25), linewidth=0.3)
     ax.add_collection(LineCollection(np.concatenate(segments), colors=np.concatenate(colours), linewidths=1.1))
     for loop in mesh.boundary_loops:
@@ -56,14 +57,19 @@ def plot_principal_forces(mesh: TriMesh, principal_forces: np.ndarray, principal
     if support_nodes is not None and len(support_nodes):
         s = v[np.asarray(support_nodes)]
         ax.scatter(s[:, 0], s[:, 1], marker="^", c="k", s=16, zorder=3)
-    ax.legend(handles=[Line2D([], [], color=COMPRESSION, label="compression"),
-                       Line2D([], [], color=TENSION, label="tension"),
-                       Line2D([], [], color="k", marker="^", linestyle="", label="supports")],
-              loc="upper right", fontsize=8)
+    handles = [Line2D([], [], color=COMPRESSION, label="compression"), Line2D([], [], color=TENSION, label="tension"),
+               Line2D([], [], color="k", marker="^", linestyle="", label="supports")]
+    note = (f"largest |N| = {peak / 1e3:.3g} kN/m; full bar = {reference / 1e3:.3g} kN/m "
+            f"(98th percentile), longer bars capped")
     ax.set_aspect("equal")
-    ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
-    ax.set_title(title or "principal membrane forces")
-    ax.text(0.01, 0.01, f"largest |N| = {peak / 1e3:.3g} kN/m; full bar = {reference / 1e3:.3g} kN/m "
-            f"(98th percentile), longer bars capped", transform=ax.transAxes, fontsize=8)
+    ax.set_ylabel("y (m)")
+    if wide:
+        ax.legend(handles=handles, loc="lower right", bbox_to_anchor=(1.0, 1.0), ncol=3, fontsize=8, frameon=False)
+        ax.set_xlabel(f"x (m)\n{note}", fontsize=9)
+    else:
+        ax.legend(handles=handles, loc="upper right", fontsize=8)
+        ax.set_xlabel("x (m)")
+        ax.text(0.01, 0.01, note, transform=ax.transAxes, fontsize=8)
+    ax.set_title(title or "principal membrane forces", loc="left" if wide else "center")
     fig.tight_layout()
     return save_png(fig, path, dpi=150)

@@ -8,7 +8,7 @@ import numpy as np
 
 from engine.mesh import TriMesh
 
-from ._common import frame_3d, save_png
+from ._common import frame_3d, is_wide_plan, plan_height_in, save_png
 
 __all__ = ["plot_surface"]
 
@@ -22,17 +22,26 @@ def plot_surface(mesh: TriMesh, support_nodes: np.ndarray, path: Path, *, title:
     from matplotlib.tri import Triangulation
 
     v, f = mesh.vertices, mesh.faces
-    fig = plt.figure(figsize=(12, 5.5), dpi=110)
-    ax3 = fig.add_subplot(1, 2, 1, projection="3d")
+    wide = is_wide_plan(v)  # then the plan below the 3D view, across the picture
+    if wide:
+        plan_in = plan_height_in(v, 10.0, labels_in=1.2)
+        fig = plt.figure(figsize=(12, 4.2 + plan_in), dpi=110)
+        grid = fig.add_gridspec(2, 1, height_ratios=[4.2, plan_in])
+        ax3, ax = fig.add_subplot(grid[0], projection="3d"), fig.add_subplot(grid[1])
+    else:
+        fig = plt.figure(figsize=(12, 5.5), dpi=110)
+        ax3, ax = fig.add_subplot(1, 2, 1, projection="3d"), fig.add_subplot(1, 2, 2)
     ax3.plot_trisurf(v[:, 0], v[:, 1], v[:, 2], triangles=f, cmap="Greys", linewidth=0.1,
                      edgecolor=(0.3, 0.3, 0.3, 0.3), alpha=0.9, shade=True)
     s = v[support_nodes]
     ax3.scatter(s[:, 0], s[:, 1], s[:, 2], c="crimson", s=8, depthshade=False, label="supports")
     frame_3d(ax3, v)
-    ax3.set_xlabel("x (m)"), ax3.set_ylabel("y (m)"), ax3.set_zlabel("z (m)")
-    ax3.legend(loc="upper left")
+    if wide:  # the plan below gives the scale; the short axes' ticks ran together
+        ax3.set_axis_off()
+    else:
+        ax3.set_xlabel("x (m)"), ax3.set_ylabel("y (m)"), ax3.set_zlabel("z (m)")
+        ax3.legend(loc="upper left")
 
-    ax = fig.add_subplot(1, 2, 2)
     tri = Triangulation(v[:, 0], v[:, 1], f)
     contour = ax.tricontourf(tri, v[:, 2], levels=14, cmap="viridis")
     ax.triplot(tri, color=(1, 1, 1, 0.25), linewidth=0.3)
@@ -42,12 +51,15 @@ def plot_surface(mesh: TriMesh, support_nodes: np.ndarray, path: Path, *, title:
     ax.scatter(s[:, 0], s[:, 1], c="crimson", s=14, zorder=3, label=f"{len(support_nodes)} supported nodes")
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
-    fig.colorbar(contour, ax=ax, label="height z (m)", shrink=0.8)
-    ax.legend(loc="upper right", fontsize=8)
+    fig.colorbar(contour, ax=ax, label="height z (m)", shrink=0.8, fraction=0.03 if wide else 0.15)
+    if wide:  # below the plan, not over its narrow depth
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.45), fontsize=8, frameon=False)
+    else:
+        ax.legend(loc="upper right", fontsize=8)
     ax.set_title("plan: height and supports")
     fig.suptitle(title or f"{mesh.name}: {mesh.n_vertices} vertices, {mesh.n_faces} triangles, "
                  f"{len(mesh.boundary_loops)} boundary loop(s)")
     # room between the two: tight_layout leaves out the 3D view's z label, which then ran into the
     # plan's y label on plans wider than deep (the courtyard template)
-    fig.tight_layout(w_pad=5.0)
+    fig.tight_layout(w_pad=5.0, h_pad=1.0)
     return save_png(fig, path, dpi=110)
