@@ -37,6 +37,7 @@ from engine.errors import InputError, MechanismError
 from engine.mesh import PolyMesh
 from fabrication.drawings import beam_id, node_id, panel_id
 from fabrication.files import save_figure_png, write_text_atomic
+from fabrication.plan_view import is_wide_plan, plan_height_in
 
 __all__ = ["AssemblyStep", "AssemblySequence", "plan_assembly", "write_assembly", "partial_frame_deflection",
            "deflections_without_props", "step_groups", "step_image_name", "MAX_STEP_IMAGES"]
@@ -589,9 +590,9 @@ def _draw_state(ax, sequence: AssemblySequence, polymesh: PolyMesh, k: int) -> N
 
 def _frame(ax, plan: np.ndarray) -> None:
     lo, hi = plan.min(0), plan.max(0)
-    pad = 0.04 * (hi - lo).max()
-    ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    pad = np.maximum(0.04 * (hi - lo), 0.01 * (hi - lo).max())  # a wide plan's depth is not padded by its length
+    ax.set_xlim(lo[0] - pad[0], hi[0] + pad[0])
+    ax.set_ylim(lo[1] - pad[1], hi[1] + pad[1])
 
 
 class _StepCanvas:
@@ -616,9 +617,13 @@ class _StepCanvas:
         # where each step's parts start in those orders
         self.panel_starts = np.cumsum([0] + [len(s.panels) for s in steps])
         self.beam_starts = np.cumsum([0] + [len(s.beams) for s in steps])
-        self.figure = Figure(figsize=(6, 6))
+        if is_wide_plan(plan):  # across a wider picture, as deep as the plan needs, the title above
+            height = plan_height_in(plan, 8.6, labels_in=0.9, least_in=0.8)
+            self.figure, box = Figure(figsize=(9, height)), (0.02, 0.02, 0.96, 1 - 0.85 / height)
+        else:
+            self.figure, box = Figure(figsize=(6, 6)), (0.02, 0.02, 0.96, 0.86)
         FigureCanvasAgg(self.figure)
-        ax = self.figure.add_axes((0.02, 0.02, 0.96, 0.86))
+        ax = self.figure.add_axes(box)
         ax.set_aspect("equal")
         ax.axis("off")
         self.built_panels = ax.add_collection(_showing("PolyCollection")([], facecolors="0.8", edgecolors="none"))
@@ -681,9 +686,12 @@ def _strip(sequence: AssemblySequence, polymesh: PolyMesh, target: Path) -> None
 
     n = len(sequence.steps)
     picks = np.unique(np.linspace(0, n - 1, min(8, n)).round().astype(int)) if n else []
-    cols = min(max(len(picks), 1), 4)
+    plan = polymesh.nodes[:, :2]
+    wide = is_wide_plan(plan)  # then two a row, each as deep as the plan needs
+    cols = min(max(len(picks), 1), 2 if wide else 4)
     rows = -(-max(len(picks), 1) // cols)
-    fig = Figure(figsize=(3.3 * cols, 3.3 * rows + 0.4))
+    cell = (6.0, plan_height_in(plan, 6.0, labels_in=0.4, least_in=0.6)) if wide else (3.3, 3.3)
+    fig = Figure(figsize=(cell[0] * cols, cell[1] * rows + 0.4))
     FigureCanvasAgg(fig)
     for j, k in enumerate(picks):
         _draw_state(fig.add_subplot(rows, cols, j + 1), sequence, polymesh, int(k))

@@ -237,16 +237,18 @@ def test_large_grids_are_planned_in_runs_whose_ends_stand(limit):
         assert value <= sequence.deflection_limit_m * (1 + 1e-9)
 
 
-@pytest.mark.parametrize("max_images", [None, 3])
-def test_each_step_image_shows_the_panels_built_before_in_grey_and_its_own_in_pink(tmp_path, max_images):
+@pytest.mark.parametrize("max_images, rows, cols", [(None, 3, 3), (3, 3, 3), (None, 2, 12)])
+def test_each_step_image_shows_the_panels_built_before_in_grey_and_its_own_in_pink(tmp_path, max_images, rows,
+                                                                                   cols):
     """The step pictures read back as pixels: at each panel's centre, grey where the panel went
     up in an earlier picture, pink where it goes up in this one, white where it is still to come
-    (one picture per step, and pictures of runs of steps)."""
+    (one picture per step, and pictures of runs of steps); a grid much wider than deep is drawn
+    across a picture as wide (it was a strip across a square one)."""
     from PIL import Image
 
     from fabrication.assembly import _StepCanvas
 
-    mesh = hex_polymesh(3, 3)
+    mesh = hex_polymesh(rows, cols)
     sequence = plan_assembly(mesh, np.flatnonzero(mesh.supports), TIMBER, panel_area_load=35.0)
     canvas = _StepCanvas(sequence, mesh)
     centres = np.array([mesh.nodes[f, :2].mean(axis=0) for f in mesh.faces])
@@ -257,6 +259,8 @@ def test_each_step_image_shows_the_panels_built_before_in_grey_and_its_own_in_pi
         canvas.save(group, target)
         with Image.open(target) as image:
             pixels = np.asarray(image.convert("RGB"), dtype=int)
+        height, width = pixels.shape[:2]
+        assert (width >= 2.5 * height) if cols > 2 * rows else (width == height)
         x, y = canvas.ax.transData.transform(centres).T
         seen = pixels[(pixels.shape[0] - y).astype(int), x.astype(int)]
         for f, colour in enumerate(seen):

@@ -7,13 +7,9 @@ from pathlib import Path
 import numpy as np
 
 from fabrication.files import save_figure_png
+from fabrication.plan_view import WIDE_PLAN, is_wide_plan, plan_depth_ratio, plan_height_in
 
 __all__ = ["pyplot", "save_png", "frame_3d", "WIDE_PLAN", "plan_depth_ratio", "is_wide_plan", "plan_height_in"]
-
-#: A plan at least this many times as wide (x) as it is deep (y) is drawn across the picture's
-#: width, its panels one above the other: side by side, or in a picture sized for a square roof, a
-#: 50 m x 5 m canopy was a thin strip across a picture mostly white.
-WIDE_PLAN = 2.0
 
 
 def pyplot():
@@ -50,19 +46,3 @@ def frame_3d(ax, points: np.ndarray) -> None:
 
     ax.zaxis.set_major_locator(MaxNLocator(nbins=int(np.clip(round(8 * height / max(span.max(), 1e-9)), 1, 6))))
 
-
-def plan_depth_ratio(points: np.ndarray) -> float:
-    """Depth (y extent) over width (x extent) of the plan of ``points`` (k, 2 or 3)."""
-    span = np.ptp(np.asarray(points, dtype=float)[:, :2], axis=0)
-    return float(max(span[1], 1e-9) / max(span[0], 1e-9))
-
-
-def is_wide_plan(points: np.ndarray) -> bool:
-    """Whether the plan of ``points`` is at least WIDE_PLAN times as wide as it is deep."""
-    return plan_depth_ratio(points) <= 1.0 / WIDE_PLAN
-
-
-def plan_height_in(points: np.ndarray, width_in: float, *, labels_in: float, least_in: float = 1.5) -> float:
-    """Height (inches) of a picture row holding the plan of ``points`` at true scale across
-    ``width_in``, with ``labels_in`` more for its title, axis labels and legend."""
-    return max(width_in * plan_depth_ratio(points), least_in) + labels_in
