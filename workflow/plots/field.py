@@ -26,10 +26,11 @@ def plot_field(mesh: TriMesh, field: GuidingField, path: Path, *, title: str = "
     tri = Triangulation(v[:, 0], v[:, 1], mesh.faces)
     wide = is_wide_plan(v)  # then one plan above the other, across the picture
     if wide:
-        fig, axes = plt.subplots(2, 1, figsize=(13, 2 * plan_height_in(v, 11.0, labels_in=1.1)))
+        fig, axes = plt.subplots(2, 1, figsize=(13, 2 * plan_height_in(v, 11.0, labels_in=1.6)))
     else:
         fig, axes = plt.subplots(1, 2, figsize=(13, 5.8))
-    bar = {"shrink": 0.8, "fraction": 0.03 if wide else 0.15}
+    # beside a plan, or under a wide one (beside it, the bar stood far off at the picture's edge)
+    bar = {"orientation": "horizontal", "shrink": 0.4, "pad": 0.25, "aspect": 40} if wide else {"shrink": 0.8}
     size_plot = axes[0].tripcolor(tri, field.size / field.size.min(), shading="gouraud", cmap="viridis_r")
     fig.colorbar(size_plot, ax=axes[0], label="cell size h / h_min", **bar)
     axes[0].set_title(f"size: h_max / h_min = {field.size.max() / field.size.min():.2f}")
