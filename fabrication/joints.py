@@ -213,31 +213,6 @@ SLEEVE_HUB_CLEARANCE_MM = 0.5
 SLEEVE_CONTAINED_DEG = 20.0
 
 
-#: A printed socket's sleeve starts up to this share of its outer radius out from the node, within
-#: the hub, instead of at the node: the solid is the same, but where every sleeve began at the node
-#: OCCT's fuse intersected each pair of them there, inside the hub, for nothing (15-20 % of a
-#: socket's build, measured on 25 sockets of a 60-cell saddle).
-SLEEVE_START_SHARE = 0.5
-
-
-def _sleeve_start_mm(direction: np.ndarray, axis: np.ndarray, outer: float, hub_radius: float,
-                     hub_height: float) -> float:
-    """How far from the node a sleeve of radius ``outer`` along ``direction`` may start and leave
-    the socket the same solid, mm: its stretch from the node and its start disc within the hub
-    (by the disc's reach, its centre's distance plus its radius, off the hub's axis and from its
-    mid-plane), SLEEVE_HUB_CLEARANCE_MM inside its faces, at most SLEEVE_START_SHARE of ``outer``;
-    0 where the hub has no such room (a hub radius given smaller than the sleeves)."""
-    sine = min(abs(float(direction @ axis)), 1.0)
-    cosine = np.sqrt(1.0 - sine * sine)
-    room = [SLEEVE_START_SHARE * outer]
-    if cosine > 1e-9:
-        room.append((hub_radius - SLEEVE_HUB_CLEARANCE_MM - outer) / cosine)
-    if sine > 1e-9:
-        room.append((0.5 * hub_height - SLEEVE_HUB_CLEARANCE_MM - outer) / sine)
-    start = min(room)
-    return start if start >= SLEEVE_HUB_CLEARANCE_MM else 0.0
-
-
 def geometry_hub_height_mm(settings: JointSettings, geometry: JointGeometry) -> float:
     """Height of a joint's hub along its axis, mm: ``joint_hub_height_mm``, and for printed sockets
     at least what keeps each sleeve rising up to SLEEVE_CONTAINED_DEG inside the hub, with
@@ -989,8 +964,7 @@ def build_joint_and_blank(geometry: JointGeometry, settings: JointSettings, *, b
             bore_k = 0.5 * own + settings.clearance_mm
             outer_k, sleeve_k = bore_k + settings.wall_mm, joint_sleeve_mm(settings, own)
             side = _upright(d, axis)
-            start = _sleeve_start_mm(d, axis, outer_k, hub_radius, hub_height)
-            sleeves.append(_cylinder(d * start, d, outer_k, setback + sleeve_k - start))
+            sleeves.append(_cylinder(np.zeros(3), d, outer_k, setback + sleeve_k))
             features.append(("sleeve", np.zeros(3), d * (setback + sleeve_k), outer_k))
             tools.append(_cylinder(d * setback, d, bore_k, sleeve_k + 1.0))
             features.append(("hole", d * setback, d * (setback + sleeve_k + 1.0), bore_k))

@@ -1502,25 +1502,3 @@ def test_a_joints_reach_is_its_solids_extent_along_each_direction(kind):
         np.testing.assert_allclose(reach, extent, atol=0.02)
     else:
         assert np.all(reach >= extent - 0.02) and np.all(reach <= extent + settings.plate_thickness_mm + 1e-9)
-
-
-@pytest.mark.parametrize("tilt_deg, beams, hub_radius_mm", [(0.0, 3, None), (15.0, 4, None), (35.0, 3, None),
-                                                             (0.0, 3, 9.0)])
-def test_sleeves_started_inside_the_hub_make_the_same_socket(monkeypatch, tilt_deg, beams, hub_radius_mm):
-    """A printed socket whose sleeves start inside the hub (SLEEVE_START_SHARE) is the solid whose
-    sleeves start at the node: equal volumes, and OCCT's cuts of each from the other leave nothing
-    (flat, rising and steep sleeves, and a hub given smaller than the sleeves, which starts them at
-    the node)."""
-    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
-
-    from fabrication import joints
-
-    geometry = _joint_geometry(tilt_deg, beams)
-    settings = joints.JointSettings(kind="socket", engrave=False, hub_radius_mm=hub_radius_mm)
-    started = joints.build_joint(geometry, settings)[0].wrapped
-    monkeypatch.setattr(joints, "SLEEVE_START_SHARE", 0.0)
-    at_node = joints.build_joint(geometry, settings)[0].wrapped
-    volume = _volume(at_node)
-    assert _volume(started) == pytest.approx(volume, rel=1e-7)
-    for a, b in ((started, at_node), (at_node, started)):
-        assert _volume(BRepAlgoAPI_Cut(a, b).Shape()) < 1e-6 * volume
