@@ -9,7 +9,11 @@ import numpy as np
 from fabrication.files import save_figure_png
 from fabrication.plan_view import WIDE_PLAN, is_wide_plan, plan_depth_ratio, plan_height_in
 
-__all__ = ["pyplot", "save_png", "frame_3d", "WIDE_PLAN", "plan_depth_ratio", "is_wide_plan", "plan_height_in"]
+__all__ = ["pyplot", "save_png", "frame_3d", "view_and_plan", "WIDE_PLAN", "plan_depth_ratio", "is_wide_plan",
+           "plan_height_in"]
+
+#: Height (inches) of the 3-D view's row above a wide plan (a 3-D axes keeps itself square).
+VIEW_ROW_IN = 4.2
 
 
 def pyplot():
@@ -46,3 +50,18 @@ def frame_3d(ax, points: np.ndarray) -> None:
 
     ax.zaxis.set_major_locator(MaxNLocator(nbins=int(np.clip(round(8 * height / max(span.max(), 1e-9)), 1, 6))))
 
+
+
+def view_and_plan(plt, points: np.ndarray, *, size_in: tuple[float, float], plan_width_in: float,
+                  dpi: float | None = None):
+    """(figure, 3-D axes, plan axes, wide): a 3-D view beside the plan of ``points`` in a
+    ``size_in`` picture, or, for a wide plan (WIDE_PLAN), above it, the plan then across
+    ``plan_width_in`` of the picture's width at its true scale."""
+    extra = {} if dpi is None else {"dpi": dpi}
+    if is_wide_plan(points):
+        plan_in = plan_height_in(points, plan_width_in, labels_in=1.25)
+        fig = plt.figure(figsize=(size_in[0], VIEW_ROW_IN + plan_in), **extra)
+        rows = fig.add_gridspec(2, 1, height_ratios=[VIEW_ROW_IN, plan_in])
+        return fig, fig.add_subplot(rows[0], projection="3d"), fig.add_subplot(rows[1]), True
+    fig = plt.figure(figsize=size_in, **extra)
+    return fig, fig.add_subplot(1, 2, 1, projection="3d"), fig.add_subplot(1, 2, 2), False

@@ -8,7 +8,7 @@ import numpy as np
 
 from engine.mesh import PolyMesh
 
-from ._common import frame_3d, is_wide_plan, plan_height_in, pyplot, save_png
+from ._common import frame_3d, pyplot, save_png, view_and_plan
 
 __all__ = ["plot_gridshell", "DEGREE_COLOURS"]
 
@@ -41,15 +41,7 @@ def plot_gridshell(polymesh: PolyMesh, path: Path, *, color_by: str = "degree", 
         mappable = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
     else:
         raise ValueError(f"color_by must be 'degree' or 'planarity', got {color_by!r}")
-    wide = is_wide_plan(nodes)  # then the plan below the 3D view, across the picture
-    if wide:
-        plan_in = plan_height_in(nodes, 11.0, labels_in=1.3)
-        fig = plt.figure(figsize=(13, 4.2 + plan_in))
-        grid = fig.add_gridspec(2, 1, height_ratios=[4.2, plan_in])
-        ax3, ax = fig.add_subplot(grid[0], projection="3d"), fig.add_subplot(grid[1])
-    else:
-        fig = plt.figure(figsize=(13, 6))
-        ax3, ax = fig.add_subplot(1, 2, 1, projection="3d"), fig.add_subplot(1, 2, 2)
+    fig, ax3, ax, wide = view_and_plan(plt, nodes, size_in=(13, 6), plan_width_in=11.0)
     # autolim=False: matplotlib 3.11 pads cells of fewer sides with uninitialised memory and takes the
     # axis limits from the padding too (limits of +-1e308 at random, then "Axis limits cannot be NaN or
     # Inf"); frame_3d sets the limits from the nodes
@@ -71,8 +63,9 @@ def plot_gridshell(polymesh: PolyMesh, path: Path, *, color_by: str = "degree", 
     if legend:
         ax.legend(handles=legend, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     if mappable is not None:
-        fig.colorbar(mappable, ax=ax, shrink=0.8, fraction=0.03 if wide else 0.15,
-                     label="planarity: largest distance to best-fit plane (mm)")
+        under = {"orientation": "horizontal", "shrink": 0.5, "pad": 0.3, "aspect": 40}  # (its label is long)
+        fig.colorbar(mappable, ax=ax, label="planarity: largest distance to best-fit plane (mm)",
+                     **(under if wide else {"shrink": 0.8}))
     fig.suptitle(title or f"grid-shell: {polymesh.n_nodes} nodes, {len(polymesh.edges)} beams, "
                           f"{polymesh.n_faces} cells")
     fig.tight_layout()

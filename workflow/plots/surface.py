@@ -8,7 +8,7 @@ import numpy as np
 
 from engine.mesh import TriMesh
 
-from ._common import frame_3d, is_wide_plan, plan_height_in, save_png
+from ._common import frame_3d, save_png, view_and_plan
 
 __all__ = ["plot_surface"]
 
@@ -22,15 +22,7 @@ def plot_surface(mesh: TriMesh, support_nodes: np.ndarray, path: Path, *, title:
     from matplotlib.tri import Triangulation
 
     v, f = mesh.vertices, mesh.faces
-    wide = is_wide_plan(v)  # then the plan below the 3D view, across the picture
-    if wide:
-        plan_in = plan_height_in(v, 10.0, labels_in=1.2)
-        fig = plt.figure(figsize=(12, 4.2 + plan_in), dpi=110)
-        grid = fig.add_gridspec(2, 1, height_ratios=[4.2, plan_in])
-        ax3, ax = fig.add_subplot(grid[0], projection="3d"), fig.add_subplot(grid[1])
-    else:
-        fig = plt.figure(figsize=(12, 5.5), dpi=110)
-        ax3, ax = fig.add_subplot(1, 2, 1, projection="3d"), fig.add_subplot(1, 2, 2)
+    fig, ax3, ax, wide = view_and_plan(plt, v, size_in=(12, 5.5), plan_width_in=10.0, dpi=110)
     ax3.plot_trisurf(v[:, 0], v[:, 1], v[:, 2], triangles=f, cmap="Greys", linewidth=0.1,
                      edgecolor=(0.3, 0.3, 0.3, 0.3), alpha=0.9, shade=True)
     s = v[support_nodes]
