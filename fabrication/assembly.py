@@ -37,7 +37,7 @@ from engine.errors import InputError, MechanismError
 from engine.mesh import PolyMesh
 from fabrication.drawings import beam_id, node_id, panel_id
 from fabrication.files import save_figure_png, write_text_atomic
-from fabrication.plan_view import is_wide_plan, plan_height_in
+from fabrication.plan_view import is_wide_plan, plan_height_in, plan_limits
 
 __all__ = ["AssemblyStep", "AssemblySequence", "plan_assembly", "write_assembly", "partial_frame_deflection",
            "deflections_without_props", "step_groups", "step_image_name", "MAX_STEP_IMAGES"]
@@ -589,10 +589,9 @@ def _draw_state(ax, sequence: AssemblySequence, polymesh: PolyMesh, k: int) -> N
 
 
 def _frame(ax, plan: np.ndarray) -> None:
-    lo, hi = plan.min(0), plan.max(0)
-    pad = np.maximum(0.04 * (hi - lo), 0.01 * (hi - lo).max())  # a wide plan's depth is not padded by its length
-    ax.set_xlim(lo[0] - pad[0], hi[0] + pad[0])
-    ax.set_ylim(lo[1] - pad[1], hi[1] + pad[1])
+    x_limits, y_limits = plan_limits(plan)
+    ax.set_xlim(*x_limits)
+    ax.set_ylim(*y_limits)
 
 
 class _StepCanvas:

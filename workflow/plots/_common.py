@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 
 from fabrication.files import save_figure_png
-from fabrication.plan_view import WIDE_PLAN, is_wide_plan, plan_depth_ratio, plan_height_in
+from fabrication.plan_view import WIDE_PLAN, is_wide_plan, plan_depth_ratio, plan_height_in, plan_limits
 
 __all__ = ["pyplot", "save_png", "frame_3d", "view_and_plan", "WIDE_PLAN", "plan_depth_ratio", "is_wide_plan",
-           "plan_height_in"]
+           "plan_height_in", "plan_limits"]
 
 #: Height (inches) of the 3-D view's row above a wide plan (a 3-D axes keeps itself square).
 VIEW_ROW_IN = 4.2

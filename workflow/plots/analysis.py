@@ -8,7 +8,7 @@ import numpy as np
 
 from fabrication.ids import beam_id
 
-from ._common import frame_3d, is_wide_plan, plan_height_in, pyplot, save_png
+from ._common import frame_3d, is_wide_plan, plan_height_in, plan_limits, pyplot, save_png
 
 __all__ = ["plot_utilisation", "plot_axial_forces", "plot_buckling_modes", "plot_response", "plot_sections"]
 
@@ -33,10 +33,9 @@ def _colour_bar(fig, lines, ax, wide: bool, **kwargs):
 
 
 def _frame(ax, nodes: np.ndarray) -> None:
-    lo, hi = nodes[:, :2].min(axis=0), nodes[:, :2].max(axis=0)
-    pad = np.maximum(0.04 * (hi - lo), 0.01 * (hi - lo).max())  # a wide plan's depth is not padded by its length
-    ax.set_xlim(lo[0] - pad[0], hi[0] + pad[0])
-    ax.set_ylim(lo[1] - pad[1], hi[1] + pad[1])
+    x_limits, y_limits = plan_limits(nodes)
+    ax.set_xlim(*x_limits)
+    ax.set_ylim(*y_limits)
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)")
 
