@@ -18,7 +18,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ..errors import MeshError
-from ..mesh import TriMesh, boundary_loops
+from ..mesh import TriMesh, boundary_loops, unique_edges
 
 __all__ = ["CleanReport", "clean_mesh", "UP_AXES", "to_z_up", "normal_shares"]
 
@@ -268,8 +268,7 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, flagged: np.ndarray | No
                             f"under {100 * STRAY_SHARE:g} % of the surface's largest piece "
                             f"{_where(np.array([c for _, c in stray]))}")
         vertices, flagged, faces = _used_only(vertices, flagged, faces)
-        key = np.sort(np.stack([faces, np.roll(faces, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1)
-        edges = np.unique(key, axis=0)
+        edges = unique_edges(faces)
 
     faces_per_vertex = np.bincount(faces.ravel(), minlength=len(vertices))
     edges_per_vertex = np.bincount(edges.ravel(), minlength=len(vertices))
