@@ -43,6 +43,7 @@ from fabrication.joints import JointKind, JointSettings
 from fabrication.limits import BuildLimits
 from fabrication.settings import BeamSettings, PanelSettings, SheetSettings
 
+from .surface_io import FILE_UNITS_M, file_scale_m
 from .units import AreaLoad, Density, Force, Length, Stress
 
 __all__ = ["ConfigError", "Project", "load_project", "parse_project", "read_toml", "project_from_surface",
@@ -985,7 +986,7 @@ def _file_across_m(project: Project, base_dir: Path | None) -> float | None:
         raw, stated = _raw_extent(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
     except (OSError, InputError):
         return None
-    return raw * (1.0 if stated else _FILE_UNITS[project.surface.file_units]) if raw > 0 else None
+    return raw * file_scale_m(stated, project.surface.file_units) if raw > 0 else None
 
 
 @functools.lru_cache(maxsize=32)
@@ -1086,8 +1087,8 @@ def project_from_surface(surface: str | Path, supports: str = "boundary", units:
 
     if supports not in ("boundary", "flagged"):
         raise ConfigError(f"--supports {supports!r}: allowed are boundary, flagged")
-    if units not in _FILE_UNITS:
-        raise ConfigError(f"--surface-units {units!r}: allowed are {', '.join(_FILE_UNITS)}")
+    if units not in FILE_UNITS_M:
+        raise ConfigError(f"--surface-units {units!r}: allowed are {', '.join(FILE_UNITS_M)}")
     if up is not None and up not in UP_AXES:
         raise ConfigError(f"--surface-up {up!r}: allowed are {', '.join(UP_AXES)}")
     data = {"project": {"name": Path(surface).stem},
@@ -1099,7 +1100,6 @@ def project_from_surface(surface: str | Path, supports: str = "boundary", units:
     return parse_project(data, source=_source(f"--surface {surface}", settings))
 
 
-_FILE_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
 SURFACE_EXTENT_M = (0.1, 1000.0)
 """The sizes a surface may have across, in metres; outside them its file_units are taken to be wrong."""
 
@@ -1171,7 +1171,7 @@ def check_inputs(project: Project, *, quick_start: bool = False) -> float | None
         _check_upright(vertices, faces, path, quick_start)
     raw = _largest_side(vertices)
     unit = config.file_units
-    across = raw * (1.0 if stated else _FILE_UNITS[unit])
+    across = raw * file_scale_m(stated, unit)
     low, high = SURFACE_EXTENT_M
     if stated and not low <= across <= high:  # the file's own unit is used, not file_units
         raise ConfigError(f"{'--surface' if quick_start else '[surface] file:'} {path}: the surface is "
@@ -1181,15 +1181,15 @@ def check_inputs(project: Project, *, quick_start: bool = False) -> float | None
                                "or file_units")
     if raw > 0 and not low <= across <= high:
         likely = next((u for u in ("m", "mm", "cm", "ft", "in") if u != unit
-                       and low <= raw * _FILE_UNITS[u] <= high), "mm" if across > high else "m")
+                       and low <= raw * FILE_UNITS_M[u] <= high), "mm" if across > high else "m")
         if quick_start:
             raise ConfigError(f"--surface {path}: the surface is {_distance(across)} across, read in {unit} "
                               f"(--surface-units {unit}); in {likely} it would be "
-                              f"{_distance(raw * _FILE_UNITS[likely])}",
+                              f"{_distance(raw * FILE_UNITS_M[likely])}",
                               hint=f"add --surface-units {likely} (the unit the mesh was modelled in: "
                                    "m, cm, mm, in or ft)")
         raise ConfigError(f'[surface] file_units = "{unit}": the surface {path.name} is {_distance(across)} across; '
-                          f'with file_units = "{likely}" it would be {_distance(raw * _FILE_UNITS[likely])}',
+                          f'with file_units = "{likely}" it would be {_distance(raw * FILE_UNITS_M[likely])}',
                           hint=f'set [surface] file_units = "{likely}" (the unit the mesh was modelled in: '
                                "m, cm, mm, in or ft)")
     if not flagged.any():

@@ -14,9 +14,12 @@ from engine.errors import InputError
 from engine.mesh import TriMesh
 from fabrication.files import atomic_path
 
-__all__ = ["SURFACE_SUFFIXES", "read_surface", "read_surface_with_unit", "write_surface_ply"]
+__all__ = ["SURFACE_SUFFIXES", "FILE_UNITS_M", "read_surface", "read_surface_with_unit", "file_scale_m",
+           "write_surface_ply"]
 
 SURFACE_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".3dm")
+#: Metres per unit of a mesh file's numbers, by [surface] file_units (--surface-units).
+FILE_UNITS_M = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
 #: Rhino's model unit systems (rhino3dm.UnitSystem's values): name and metres per unit. A .3dm in
 #: none of them (no unit system, custom units) is read as its numbers, in [surface] file_units.
 RHINO_UNITS = {1: ("microns", 1e-6), 2: ("mm", 1e-3), 3: ("cm", 1e-2), 4: ("m", 1.0), 5: ("km", 1e3),
@@ -75,6 +78,12 @@ def _read_3dm(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, str | Non
     unit, scale = RHINO_UNITS.get(int(model.Settings.ModelUnitSystem), (None, 1.0))
     v_all = np.concatenate(vertices) * scale
     return v_all, np.concatenate(faces), np.zeros(len(v_all), dtype=bool), unit
+
+
+def file_scale_m(stated: str | None, file_units: str) -> float:
+    """Metres per unit of the vertices read_surface_with_unit gives: 1 where the file stated its
+    unit (they are in metres already), else those of ``file_units``."""
+    return 1.0 if stated else FILE_UNITS_M[file_units]
 
 
 def read_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -36,13 +36,12 @@ from fabrication.files import write_text_atomic
 from ..config import Project, SupportSpec
 from ..plots.surface import plot_surface
 from ..runner import StageContext
-from ..surface_io import read_surface, read_surface_with_unit, write_surface_ply
+from ..surface_io import file_scale_m, read_surface, read_surface_with_unit, write_surface_ply
 from ..units import to_si
 
 __all__ = ["SurfaceResult", "build_surface", "resolve_supports", "resolve_loads", "check_selections", "run", "load",
            "external"]
 
-_UNIT_SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
 _COUNT_PARAMETERS = {"divisions", "rings"}
 _RATIO_PARAMETERS = {"span_to_rise"}
 
@@ -98,7 +97,7 @@ def build_surface(project: Project) -> tuple[TriMesh, dict]:
         return mesh, {"source": f"template {config.template}", "parameters": parameters}
     vertices, faces, flagged, stated = read_surface_with_unit(config.file)
     # a file that states its unit (a Rhino .3dm) is read in it, in metres: file_units is for the others
-    vertices = to_z_up(vertices * (1.0 if stated else _UNIT_SCALE[config.file_units]), config.up_axis or "z")
+    vertices = to_z_up(vertices * file_scale_m(stated, config.file_units), config.up_axis or "z")
     mesh, report = clean_mesh(vertices, faces, flagged, name=Path(config.file).stem,
                               merge_tolerance=config.merge_tolerance)
     return mesh, {"source": str(config.file), "units": stated or config.file_units,
