@@ -9,8 +9,8 @@ import numpy as np
 from fabrication.files import save_figure_png
 from fabrication.plan_view import WIDE_PLAN, is_wide_plan, plan_depth_ratio, plan_height_in, plan_limits
 
-__all__ = ["pyplot", "save_png", "frame_3d", "view_and_plan", "WIDE_PLAN", "plan_depth_ratio", "is_wide_plan",
-           "plan_height_in", "plan_limits"]
+__all__ = ["pyplot", "save_png", "frame_3d", "view_and_plan", "plan_figure", "colour_bar", "WIDE_PLAN",
+           "plan_depth_ratio", "is_wide_plan", "plan_height_in", "plan_limits"]
 
 #: Height (inches) of the 3-D view's row above a wide plan (a 3-D axes keeps itself square).
 VIEW_ROW_IN = 4.2
@@ -65,3 +65,21 @@ def view_and_plan(plt, points: np.ndarray, *, size_in: tuple[float, float], plan
         return fig, fig.add_subplot(rows[0], projection="3d"), fig.add_subplot(rows[1]), True
     fig = plt.figure(figsize=size_in, **extra)
     return fig, fig.add_subplot(1, 2, 1, projection="3d"), fig.add_subplot(1, 2, 2), False
+
+
+def plan_figure(plt, points: np.ndarray, size_in: tuple[float, float], *, labels_in: float):
+    """(figure, axes, wide) of one plan of ``points``: a ``size_in`` picture, or for a wide plan
+    (WIDE_PLAN) one 12 inches wide and as deep as the plan needs across 10.5 of them, with
+    ``labels_in`` more for its title, labels and what goes under it."""
+    wide = is_wide_plan(points)
+    fig, ax = plt.subplots(figsize=(12, plan_height_in(points, 10.5, labels_in=labels_in)) if wide else size_in)
+    return fig, ax, wide
+
+
+def colour_bar(fig, mappable, ax, wide: bool, **kwargs):
+    """A colour bar beside a plan, or under a wide one (beside it, a bar stood far off at the
+    picture's edge, and a long label did not fit its height); ``kwargs`` go to ``fig.colorbar``."""
+    if wide:
+        return fig.colorbar(mappable, ax=ax, **{"orientation": "horizontal", "shrink": 0.5, "pad": 0.3, "aspect": 40,
+                                                **kwargs})
+    return fig.colorbar(mappable, ax=ax, **{"shrink": 0.8, **kwargs})

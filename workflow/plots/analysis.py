@@ -8,28 +8,13 @@ import numpy as np
 
 from fabrication.ids import beam_id
 
-from ._common import frame_3d, is_wide_plan, plan_height_in, plan_limits, pyplot, save_png
+from ._common import colour_bar, frame_3d, plan_figure, plan_limits, pyplot, save_png
 
 __all__ = ["plot_utilisation", "plot_axial_forces", "plot_buckling_modes", "plot_response", "plot_sections"]
 
 
 def _segments(nodes: np.ndarray, beams: np.ndarray) -> np.ndarray:
     return np.stack([nodes[beams[:, 0], :2], nodes[beams[:, 1], :2]], axis=1)
-
-
-def _plan_figure(plt, nodes: np.ndarray, size: tuple[float, float]):
-    """(fig, ax, wide) of one plan: ``size`` inches, or across a wider picture as deep as a wide
-    plan (``_common.WIDE_PLAN``) needs, its colour bar or legend then below it."""
-    wide = is_wide_plan(nodes)
-    fig, ax = plt.subplots(figsize=(12, plan_height_in(nodes, 10.5, labels_in=2.0)) if wide else size)
-    return fig, ax, wide
-
-
-def _colour_bar(fig, lines, ax, wide: bool, **kwargs):
-    """A colour bar beside a plan, or under a wide one."""
-    if wide:
-        return fig.colorbar(lines, ax=ax, orientation="horizontal", shrink=0.5, pad=0.3, aspect=40, **kwargs)
-    return fig.colorbar(lines, ax=ax, shrink=0.8, **kwargs)
 
 
 def _frame(ax, nodes: np.ndarray) -> None:
@@ -46,14 +31,14 @@ def plot_utilisation(nodes: np.ndarray, beams: np.ndarray, utilisation: np.ndarr
     plt = pyplot()
     from matplotlib.collections import LineCollection
 
-    fig, ax, wide = _plan_figure(plt, nodes, (9, 8))
+    fig, ax, wide = plan_figure(plt, nodes, (9, 8), labels_in=2.0)
     utilisation = np.asarray(utilisation, dtype=float)
     cmap = plt.get_cmap("RdYlGn_r").with_extremes(over="#5b0000")
     lines = LineCollection(_segments(nodes, beams), cmap=cmap, norm=plt.Normalize(0.0, 1.0),
                            linewidths=1.5 + 2.5 * np.clip(utilisation, 0, 1.2))
     lines.set_array(utilisation)
     ax.add_collection(lines)
-    _colour_bar(fig, lines, ax, wide, extend="max", label="utilisation")
+    colour_bar(fig, lines, ax, wide, extend="max", label="utilisation")
     worst = int(np.argmax(utilisation))
     middle = nodes[beams[worst]].mean(axis=0)
     inward = middle[0] > 0.5 * (nodes[:, 0].min() + nodes[:, 0].max())  # the label toward the middle, in the plot
@@ -74,7 +59,7 @@ def plot_sections(nodes: np.ndarray, beams: np.ndarray, profiles: list[str], dia
     plt = pyplot()
     from matplotlib.collections import LineCollection
 
-    fig, ax, wide = _plan_figure(plt, nodes, (11, 8))
+    fig, ax, wide = plan_figure(plt, nodes, (11, 8), labels_in=2.0)
     diameters = np.asarray(diameters_m, dtype=float)
     names = np.asarray(profiles)
     order = sorted(set(names.tolist()), key=lambda n: -diameters[names == n].max())
@@ -104,12 +89,12 @@ def plot_axial_forces(nodes: np.ndarray, beams: np.ndarray, axial_forces: np.nda
 
     axial_kN = np.asarray(axial_forces, dtype=float) / 1e3
     peak = max(float(np.abs(axial_kN).max()), 1e-9)
-    fig, ax, wide = _plan_figure(plt, nodes, (9, 8))
+    fig, ax, wide = plan_figure(plt, nodes, (9, 8), labels_in=2.0)
     lines = LineCollection(_segments(nodes, beams), cmap="coolwarm_r", norm=plt.Normalize(-peak, peak),
                            linewidths=0.8 + 4.0 * np.abs(axial_kN) / peak)
     lines.set_array(axial_kN)
     ax.add_collection(lines)
-    _colour_bar(fig, lines, ax, wide, label="axial force N (kN): compression < 0 < tension")
+    colour_bar(fig, lines, ax, wide, label="axial force N (kN): compression < 0 < tension")
     _frame(ax, nodes)
     ax.set_title(title or "axial forces")
     fig.tight_layout()

@@ -9,7 +9,7 @@ import numpy as np
 from engine.mesh import TriMesh
 from engine.remeshing.field import GuidingField
 
-from ._common import is_wide_plan, plan_height_in, pyplot, save_png
+from ._common import colour_bar, is_wide_plan, plan_height_in, pyplot, save_png
 
 __all__ = ["plot_field"]
 
@@ -29,14 +29,13 @@ def plot_field(mesh: TriMesh, field: GuidingField, path: Path, *, title: str = "
         fig, axes = plt.subplots(2, 1, figsize=(13, 2 * plan_height_in(v, 11.0, labels_in=1.6)))
     else:
         fig, axes = plt.subplots(1, 2, figsize=(13, 5.8))
-    # beside a plan, or under a wide one (beside it, the bar stood far off at the picture's edge)
-    bar = {"orientation": "horizontal", "shrink": 0.4, "pad": 0.25, "aspect": 40} if wide else {"shrink": 0.8}
+    bar = {"shrink": 0.4, "pad": 0.25} if wide else {}  # two plans stacked: shorter bars, closer
     size_plot = axes[0].tripcolor(tri, field.size / field.size.min(), shading="gouraud", cmap="viridis_r")
-    fig.colorbar(size_plot, ax=axes[0], label="cell size h / h_min", **bar)
+    colour_bar(fig, size_plot, axes[0], wide, label="cell size h / h_min", **bar)
     axes[0].set_title(f"size: h_max / h_min = {field.size.max() / field.size.min():.2f}")
     aspect_plot = axes[1].tripcolor(tri, field.anisotropy, shading="gouraud", cmap="magma_r",
                                     vmin=1.0, vmax=max(1.0 + 1e-6, float(field.anisotropy.max())))
-    fig.colorbar(aspect_plot, ax=axes[1], label="anisotropy a", **bar)
+    colour_bar(fig, aspect_plot, axes[1], wide, label="anisotropy a", **bar)
     picked = np.arange(mesh.n_vertices)
     if len(picked) > MAX_TICKS:
         picked = np.random.default_rng(0).choice(picked, MAX_TICKS, replace=False)

@@ -8,7 +8,7 @@ import numpy as np
 
 from engine.mesh import PolyMesh
 
-from ._common import frame_3d, pyplot, save_png, view_and_plan
+from ._common import colour_bar, frame_3d, pyplot, save_png, view_and_plan
 
 __all__ = ["plot_gridshell", "DEGREE_COLOURS"]
 
@@ -63,9 +63,7 @@ def plot_gridshell(polymesh: PolyMesh, path: Path, *, color_by: str = "degree", 
     if legend:
         ax.legend(handles=legend, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     if mappable is not None:
-        under = {"orientation": "horizontal", "shrink": 0.5, "pad": 0.3, "aspect": 40}  # (its label is long)
-        fig.colorbar(mappable, ax=ax, label="planarity: largest distance to best-fit plane (mm)",
-                     **(under if wide else {"shrink": 0.8}))
+        colour_bar(fig, mappable, ax, wide, label="planarity: largest distance to best-fit plane (mm)")
     fig.suptitle(title or f"grid-shell: {polymesh.n_nodes} nodes, {len(polymesh.edges)} beams, "
                           f"{polymesh.n_faces} cells")
     fig.tight_layout()

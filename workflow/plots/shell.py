@@ -8,7 +8,7 @@ import numpy as np
 
 from engine.mesh import TriMesh
 
-from ._common import is_wide_plan, plan_height_in, pyplot, save_png
+from ._common import plan_figure, pyplot, save_png
 
 __all__ = ["plot_principal_forces"]
 
@@ -47,8 +47,7 @@ def plot_principal_forces(mesh: TriMesh, principal_forces: np.ndarray, principal
         c = centroids[picked, :2]
         segments.append(np.stack([c - offset, c + offset], axis=1))
         colours.append(np.where(values[:, k] < 0, COMPRESSION, TENSION))
-    wide = is_wide_plan(v)  # then across the picture, the legend and the note below it
-    fig, ax = plt.subplots(figsize=(12, plan_height_in(v, 10.5, labels_in=1.8)) if wide else (9, 8))
+    fig, ax, wide = plan_figure(plt, v, (9, 8), labels_in=1.8)  # wide: the legend above, the note below
     ax.triplot(v[:, 0], v[:, 1], f, color=(0.6, 0.6, 0.6, 0.25), linewidth=0.3)
     ax.add_collection(LineCollection(np.concatenate(segments), colors=np.concatenate(colours), linewidths=1.1))
     for loop in mesh.boundary_loops:
