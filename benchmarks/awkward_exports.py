@@ -87,8 +87,8 @@ def _two_triangles(path: Path) -> None:  # a hypar of two triangles
     _save(np.array([[0, 0, 0], [10, 0, 3], [10, 10, 0], [0, 10, 3.0]]), np.array([[0, 1, 2], [0, 2, 3]]), path)
 
 
-def _fine(path: Path) -> None:  # 320 000 triangles
-    v, t, _ = _grid(400, 400, 20, 20, lambda x, y: 0.02 * (x * x - y * y) + 4)
+def _fine(path: Path, divisions: int = 400) -> None:  # 2 x divisions^2 triangles, 320 000 by default
+    v, t, _ = _grid(divisions, divisions, 20, 20, lambda x, y: 0.02 * (x * x - y * y) + 4)
     _save(v, t, path)
 
 
@@ -226,6 +226,7 @@ CASES = [
     Case("quads_y_up", ".obj", _quads_y_up, ["--surface-up", "y"]),
     Case("two_triangles", ".ply", _two_triangles),
     Case("fine_320k", ".ply", _fine),
+    Case("scan_1280k", ".ply", lambda p: _fine(p, 800)),
     Case("stray_triangle", ".ply", _stray),
     Case("non_manifold_fin", ".ply", _fin, refused="non-manifold edge"),
     Case("hemisphere", ".ply", _hemisphere),

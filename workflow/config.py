@@ -312,13 +312,16 @@ def _mm(value: float) -> str:
 
 
 class ShellConfig(_Section):
-    """Continuous-shell analysis of the surface (METHOD.md 1). thickness None: span / 100."""
+    """Continuous-shell analysis of the surface (METHOD.md 1). thickness None: span / 100.
+    max_triangles: a surface with more triangles is analysed on a coarser copy of about that many
+    (engine.remeshing.analysis_mesh), its forces carried back to the surface."""
 
     thickness: Length | None = None
     E: Stress = 210e9
     nu: float = Field(0.3, ge=0.0, lt=0.5)
     density: Density = 7850.0
     combination: str | None = None
+    max_triangles: int = Field(50_000, ge=1_000)
 
 
 class SymmetryPlane(_Section):

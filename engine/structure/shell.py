@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.spatial import cKDTree
 
 from ..errors import InputError, MechanismError
 from ..linalg import assemble_blocks, block_diagonal, congruent, count_free_rigid_modes, node_dofs
@@ -58,7 +59,9 @@ class ShellResult:
     vertex_principal_forces (n, 2) and vertex_principal_directions (n, 3) of those;
     load_total (6,): resultant force and moment about the origin of the applied loads;
     equilibrium_error: |loads + reactions| (forces and moments) / |loads|; solver: the library
-    that factored the stiffness (engine.structure.solvers).
+    that factored the stiffness (engine.structure.solvers); analysed_triangles: the triangles of the
+    mesh the stiffness was built on (a coarsened copy's when fewer than the mesh's, see
+    ``analyse_shell``).
     """
 
     displacements: np.ndarray
@@ -74,6 +77,7 @@ class ShellResult:
     load_total: np.ndarray
     equilibrium_error: float
     solver: str = "superlu"
+    analysed_triangles: int = 0
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -252,21 +256,37 @@ def _principal(tensors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([centre + radius, centre - radius], axis=1), angle
 
 
+def _global_tensors(frames: np.ndarray, components: np.ndarray) -> np.ndarray:
+    """(m,3,3) global tensors of the facets' [xx, yy, xy] components in their frames."""
+    e1, e2 = frames[:, 0], frames[:, 1]
+    return (components[:, 0, None, None] * np.einsum("mi,mj->mij", e1, e1)
+            + components[:, 1, None, None] * np.einsum("mi,mj->mij", e2, e2)
+            + components[:, 2, None, None] * (np.einsum("mi,mj->mij", e1, e2) + np.einsum("mi,mj->mij", e2, e1)))
+
+
+def _local_components(frames: np.ndarray, tensors: np.ndarray) -> np.ndarray:
+    """(m,3) [xx, yy, xy] components of global tensors (m,3,3) in the facets' frames."""
+    e1, e2 = frames[:, 0], frames[:, 1]
+    return np.stack([np.einsum("mi,mij,mj->m", e1, tensors, e1), np.einsum("mi,mij,mj->m", e2, tensors, e2),
+                     np.einsum("mi,mij,mj->m", e1, tensors, e2)], axis=1)
+
+
+def _tangent(tensors: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Tensors (n,3,3) projected onto the tangent planes of the unit normals (n,3)."""
+    P = np.eye(3)[None] - np.einsum("ni,nj->nij", normals, normals)
+    return np.einsum("nij,njk,nkl->nil", P, tensors, P)
+
+
 def _vertex_tensors(mesh: TriMesh, frames: np.ndarray, forces: np.ndarray, area: np.ndarray) -> np.ndarray:
     """(n,3,3) area-weighted vertex averages of the facet tensors, in each vertex's tangent plane."""
-    e1, e2 = frames[:, 0], frames[:, 1]
-    tensor = (forces[:, 0, None, None] * np.einsum("mi,mj->mij", e1, e1)
-              + forces[:, 1, None, None] * np.einsum("mi,mj->mij", e2, e2)
-              + forces[:, 2, None, None] * (np.einsum("mi,mj->mij", e1, e2) + np.einsum("mi,mj->mij", e2, e1)))
+    tensor = _global_tensors(frames, forces)
     total = np.zeros((mesh.n_vertices, 3, 3))
     weight = np.zeros(mesh.n_vertices)
     for k in range(3):
         np.add.at(total, mesh.faces[:, k], tensor * area[:, None, None])
         np.add.at(weight, mesh.faces[:, k], area)
     total /= np.maximum(weight, 1e-300)[:, None, None]
-    normals = mesh.vertex_normals
-    P = np.eye(3)[None] - np.einsum("ni,nj->nij", normals, normals)
-    return np.einsum("nij,njk,nkl->nil", P, total, P)
+    return _tangent(total, mesh.vertex_normals)
 
 
 def _tangent_principal(tensors: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -282,11 +302,14 @@ def _tangent_principal(tensors: np.ndarray, normals: np.ndarray) -> tuple[np.nda
 
 
 def analyse_shell(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, thickness: float,
-                  material: ShellMaterial) -> ShellResult:
+                  material: ShellMaterial, max_triangles: int | None = None) -> ShellResult:
     """Linear static analysis of ``mesh`` as a shell of uniform ``thickness`` (m).
 
     loads: (n, 6) nodal forces and moments in global axes. Raises MechanismError (with the
     number of free rigid-body modes) when the supports do not hold the shell.
+
+    max_triangles: a mesh with more triangles is analysed on a coarser copy of about that many
+    (engine.remeshing.analysis_mesh), and the results are carried back to its own vertices and faces.
     """
     if not (np.isfinite(thickness) and thickness > 0):
         raise InputError(f"shell thickness must be positive, got {thickness}")
@@ -296,6 +319,9 @@ def analyse_shell(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, thick
         raise InputError(f"shell loads must be a finite ({n}, 6) array, got shape {loads.shape}")
     if len(supports.nodes) and (supports.nodes.max() >= n or supports.nodes.min() < 0):
         raise InputError(f"a support node is out of range 0..{n - 1}")
+    if max_triangles is not None and mesh.n_faces > max_triangles:
+        return _analyse_on_copy(mesh, supports, loads, thickness=thickness, material=material,
+                                triangles=max_triangles)
     restrained = np.asarray(supports.dof_mask(n), dtype=bool).ravel()
     free_rigid = count_free_rigid_modes(mesh.vertices, restrained)
     if free_rigid:
@@ -333,7 +359,47 @@ def analyse_shell(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, thick
                        face_membrane_forces=membrane, face_moments=moments, face_principal_forces=principal,
                        face_principal_directions=direction, vertex_membrane_forces=vertex_tensors,
                        vertex_principal_forces=vertex_values, vertex_principal_directions=vertex_directions,
-                       load_total=total, equilibrium_error=error, solver=factor.library)
+                       load_total=total, equilibrium_error=error, solver=factor.library,
+                       analysed_triangles=mesh.n_faces)
+
+
+def _analyse_on_copy(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, thickness: float,
+                     material: ShellMaterial, triangles: int) -> ShellResult:
+    """``analyse_shell`` on a coarser copy of ``mesh`` (about ``triangles``), carried back to ``mesh``.
+
+    Loads go to the copy by the interpolation's transpose (forces conserved); each support vertex
+    restrains its nearest vertex of the copy; displacements and vertex forces are interpolated back,
+    each face takes the forces and moments of the copy's facet under its centroid, and the copy's
+    reactions land on the mesh's support vertices nearest to them (totals conserved).
+    """
+    from ..geometry.surface_map import surface_map
+    from ..remeshing.analysis_mesh import analysis_mesh
+
+    link = surface_map(mesh, analysis_mesh(mesh, triangles))
+    copy = link.coarse
+    patterns, which = np.unique(supports.restraints, axis=0, return_inverse=True)
+    copy_supports = Supports.merge([(np.unique(link.nearest[supports.nodes[which.ravel() == k]]), flags)
+                                    for k, flags in enumerate(patterns)])
+    done = analyse_shell(copy, copy_supports, link.to_coarse(loads), thickness=thickness, material=material)
+    reactions = np.zeros((mesh.n_vertices, 6))
+    if len(supports.nodes):
+        held = done.reactions[copy_supports.nodes]
+        _, landing = cKDTree(mesh.vertices[supports.nodes]).query(copy.vertices[copy_supports.nodes])
+        np.add.at(reactions, supports.nodes[landing], held)
+    frames = _frames(mesh.vertices, mesh.faces)[0]
+    under = link.face_faces
+    membrane = _local_components(frames, _global_tensors(done.face_frames, done.face_membrane_forces)[under])
+    moments = _local_components(frames, _global_tensors(done.face_frames, done.face_moments)[under])
+    principal, angle = _principal(membrane)
+    direction = np.cos(angle)[:, None] * frames[:, 0] + np.sin(angle)[:, None] * frames[:, 1]
+    vertex_tensors = _tangent(link.to_fine(done.vertex_membrane_forces), mesh.vertex_normals)
+    vertex_values, vertex_directions = _tangent_principal(vertex_tensors, mesh.vertex_normals)
+    return ShellResult(displacements=link.to_fine(done.displacements), reactions=reactions, face_frames=frames,
+                       face_membrane_forces=membrane, face_moments=moments, face_principal_forces=principal,
+                       face_principal_directions=direction, vertex_membrane_forces=vertex_tensors,
+                       vertex_principal_forces=vertex_values, vertex_principal_directions=vertex_directions,
+                       load_total=resultant(mesh.vertices, loads), equilibrium_error=done.equilibrium_error,
+                       solver=done.solver, analysed_triangles=copy.n_faces)
 
 
 # ----------------------------------------------------------------------------- JSON interface

@@ -2,7 +2,8 @@
 
 Artifacts (02-shell/): shell.npz (every field of ``engine.structure.shell.ShellResult``),
 shell.json (the load combination used, thickness, largest displacement, force ranges,
-equilibrium check) and stress.png (principal membrane force crosses).
+equilibrium check, the surface's triangles and those analysed: a surface of more than
+``shell.max_triangles`` is analysed on a coarser copy) and stress.png (principal membrane force crosses).
 """
 
 from __future__ import annotations
@@ -56,9 +57,14 @@ def run(surface: SurfaceResult, project: Project, ctx: StageContext) -> ShellRes
     material = ShellMaterial(E=project.shell.E, nu=project.shell.nu, density=project.shell.density)
     ctx.step("loads")
     loads = shell_nodal_loads(mesh, case, thickness=thickness, density=project.shell.density)
-    ctx.step(f"solving {mesh.n_vertices * 6} DOF")
+    limit = project.shell.max_triangles
+    if mesh.n_faces > limit:
+        ctx.step(f"{mesh.n_faces} triangles: solving a copy of about {limit}")
+    else:
+        ctx.step(f"solving {mesh.n_vertices * 6} DOF")
     try:
-        result = analyse_shell(mesh, surface.supports, loads, thickness=thickness, material=material)
+        result = analyse_shell(mesh, surface.supports, loads, thickness=thickness, material=material,
+                               max_triangles=limit)
     except MechanismError as error:
         error.hint = ('support more of the surface or restrain more directions: [[supports]] select and '
                       'restraint = "pinned" instead of rollers (with --surface: --supports boundary)')
@@ -71,7 +77,8 @@ def run(surface: SurfaceResult, project: Project, ctx: StageContext) -> ShellRes
                "N1_max_N_per_m": float(n1.max()), "N2_min_N_per_m": float(n2.min()),
                "equilibrium_error": float(result.equilibrium_error), "solver": result.solver,
                "total_load_N": [float(x) for x in result.load_total[:3]],
-               "total_reaction_N": [float(x) for x in result.reactions[:, :3].sum(axis=0)]}
+               "total_reaction_N": [float(x) for x in result.reactions[:, :3].sum(axis=0)],
+               "surface_triangles": mesh.n_faces, "analysed_triangles": result.analysed_triangles}
     write_text_atomic(ctx.folder / "shell.json", json.dumps(summary, indent=1))
     ctx.step("drawing")
     plot_principal_forces(mesh, result.face_principal_forces, result.face_principal_directions,
