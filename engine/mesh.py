@@ -25,6 +25,28 @@ def _readonly(array: np.ndarray) -> np.ndarray:
     return array
 
 
+def unique_rows(rows: np.ndarray, **options):
+    """``np.unique(rows, axis=0, **options)`` for rows of non-negative integers, on one int64 key per
+    row where the keys fit (a row-wise unique sorts structured rows, several times slower: 27 s of
+    a 1.28 million-triangle surface's cleaning went there)."""
+    rows = np.asarray(rows)
+    if rows.ndim != 2 or not len(rows) or not np.issubdtype(rows.dtype, np.integer) or rows.min() < 0:
+        return np.unique(rows, axis=0, **options)
+    base = int(rows.max()) + 1
+    if base ** rows.shape[1] >= 2**63:
+        return np.unique(rows, axis=0, **options)
+    key = np.zeros(len(rows), dtype=np.int64)
+    for column in rows.T.astype(np.int64):
+        key = key * base + column
+    found = np.unique(key, **options)
+    keys = found[0] if isinstance(found, tuple) else found
+    unique = np.empty((len(keys), rows.shape[1]), dtype=rows.dtype)
+    for j in range(rows.shape[1] - 1, -1, -1):
+        unique[:, j] = keys % base
+        keys = keys // base
+    return (unique, *found[1:]) if isinstance(found, tuple) else unique
+
+
 def unique_edges(faces: list[np.ndarray] | np.ndarray) -> np.ndarray:
     """Unique undirected edges of triangles (m, 3) or of polygon loops, as (e, 2) int64, sorted."""
     if isinstance(faces, np.ndarray) and faces.ndim == 2:
@@ -40,7 +62,7 @@ def unique_edges(faces: list[np.ndarray] | np.ndarray) -> np.ndarray:
         else:
             directed = np.zeros((0, 2), dtype=np.int64)
     edges = np.sort(directed.astype(np.int64), axis=1)
-    return np.unique(edges, axis=0) if len(edges) else edges
+    return unique_rows(edges) if len(edges) else edges
 
 
 def node_adjacency(edges: np.ndarray, n: int):
@@ -66,7 +88,7 @@ def _used_once(start: np.ndarray, end: np.ndarray) -> np.ndarray:
     """(k,) bool: which of the directed edges start[i] -> end[i] no other edge shares, either way
     round (the boundary edges of faces given by their edges in turn)."""
     key = np.sort(np.stack([start, end], axis=1), axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    _, inverse, counts = unique_rows(key, return_inverse=True, return_counts=True)
     return counts[inverse.ravel()] == 1
 
 

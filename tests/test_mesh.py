@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.mesh import PolyMesh, unique_edges
+from engine.mesh import PolyMesh, unique_edges, unique_rows
 
 
 def _loops(seed: int) -> list[np.ndarray]:
@@ -91,3 +91,15 @@ def test_vector_areas_and_node_normals_over_all_corners_at_once():
     assert np.allclose(node_normals(grid)[used], unit, atol=1e-12)
     assert np.allclose(node_normals(grid)[~used], [0.0, 0.0, 1.0])
     assert np.allclose(grid.replace_nodes(2 * nodes).face_vector_areas(), 4 * looped, rtol=0, atol=1e-13)
+
+
+@pytest.mark.parametrize("shape, largest", [((1000, 2), 50), ((4000, 3), 30), ((2000, 3), 3_000_000), ((7, 2), 2)])
+def test_unique_rows_are_numpys_row_wise_unique(shape, largest):
+    """Rows keyed as one integer (or, past int64, numpy's own row-wise unique): the same rows, first
+    indices, inverse and counts as np.unique(axis=0)."""
+    rows = np.random.default_rng(largest).integers(0, largest, size=shape)
+    ours = unique_rows(rows, return_index=True, return_inverse=True, return_counts=True)
+    numpys = np.unique(rows, axis=0, return_index=True, return_inverse=True, return_counts=True)
+    for mine, theirs in zip(ours, numpys):
+        assert np.array_equal(np.ravel(mine), np.ravel(theirs))
+    assert np.array_equal(unique_rows(rows), np.unique(rows, axis=0))

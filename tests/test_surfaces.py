@@ -82,6 +82,34 @@ def test_inconsistent_orientation_is_fixed_with_normals_up(square_grid):
     assert np.allclose(mesh.face_normals, [0, 0, 1])
 
 
+def test_orientation_is_made_consistent_on_a_winding_surface_and_a_moebius_band_refused():
+    """A helical strip (a long breadth-first walk) with a third of its faces wound back comes out with
+    every inner edge run both ways; the same strip closed with a half twist has no two sides."""
+    turns, n = 3, 240
+    t = np.linspace(0, 2 * np.pi * turns, n + 1)
+    rows = [np.c_[(10 + w) * np.cos(t), (10 + w) * np.sin(t), 0.5 * t] for w in (-1.0, 1.0)]
+    vertices = np.vstack(rows)
+    a, b = np.arange(n), np.arange(n) + 1
+    faces = np.r_[np.c_[a, b, b + n + 1], np.c_[a, b + n + 1, a + n + 1]]
+    faces[::3] = faces[::3, ::-1]
+    mesh, report = clean_mesh(vertices, faces)
+    assert report.flipped_faces > 0
+    directed = np.stack([mesh.faces, np.roll(mesh.faces, -1, axis=1)], axis=-1).reshape(-1, 2)
+    assert len(np.unique(directed, axis=0)) == len(directed)  # no edge run the same way twice
+
+    u = np.linspace(0, 2 * np.pi, 61)[:-1]
+    band = np.vstack([np.c_[(5 + w * np.cos(u / 2)) * np.cos(u), (5 + w * np.cos(u / 2)) * np.sin(u),
+                            w * np.sin(u / 2)] for w in (-1.0, 1.0)])
+    i = np.arange(60)
+    j = (i + 1) % 60
+    top, bottom = i, i + 60
+    top_next = np.where(j == 0, 60, j)  # the half twist: the last edge joins the other row
+    bottom_next = np.where(j == 0, 0, j + 60)
+    moebius = np.r_[np.c_[top, top_next, bottom_next], np.c_[top, bottom_next, bottom]]
+    with pytest.raises(MeshError, match="not orientable"):
+        clean_mesh(band, moebius)
+
+
 def test_non_manifold_edge_is_reported_with_its_place(square_grid):
     vertices, faces = square_grid
     vertices = np.vstack([vertices, [[0.06, 0.06, 0.5]]])
