@@ -375,3 +375,22 @@ def test_a_wide_roofs_plans_run_across_the_picture(drawn, tmp_path):
     box = plan.get_window_extent()
     legend = plan.get_legend().get_window_extent()
     assert not box.overlaps(legend)
+
+
+def test_crosses_and_ticks_are_spread_evenly_over_a_fine_mesh():
+    """From 250 000 points crowded into one corner and sparse elsewhere: about the asked number, every
+    point of the plan within one square's diagonal of a picked one (no gaps), and no two picked
+    points closer than a tenth of the spacing (no clumps), where a random choice clumps and gaps."""
+    from scipy.spatial import cKDTree
+
+    from workflow.plots._common import spread_sample
+
+    rng = np.random.default_rng(3)
+    points = np.r_[rng.random((200_000, 2)) * 2.0, rng.random((50_000, 2)) * 10.0]
+    ids, spacing = spread_sample(points, 900, plan_area=100.0)
+    assert 800 <= len(ids) <= 1000 and len(np.unique(ids)) == len(ids)
+    gaps, _ = cKDTree(points[ids]).query(points)
+    assert gaps.max() < np.sqrt(2) * spacing
+    closest, _ = cKDTree(points[ids]).query(points[ids], k=2)
+    assert closest[:, 1].min() > 0.1 * spacing
+    assert np.array_equal(spread_sample(points[:500], 900, plan_area=4.0)[0], np.arange(500))

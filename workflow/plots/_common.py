@@ -9,11 +9,28 @@ import numpy as np
 from fabrication.files import save_figure_png
 from fabrication.plan_view import WIDE_PLAN, is_wide_plan, plan_depth_ratio, plan_height_in, plan_limits
 
-__all__ = ["pyplot", "save_png", "frame_3d", "view_and_plan", "plan_figure", "colour_bar", "WIDE_PLAN",
-           "plan_depth_ratio", "is_wide_plan", "plan_height_in", "plan_limits"]
+__all__ = ["pyplot", "save_png", "frame_3d", "view_and_plan", "plan_figure", "colour_bar", "spread_sample",
+           "WIDE_PLAN", "plan_depth_ratio", "is_wide_plan", "plan_height_in", "plan_limits"]
 
 #: Height (inches) of the 3-D view's row above a wide plan (a 3-D axes keeps itself square).
 VIEW_ROW_IN = 4.2
+
+
+def spread_sample(points: np.ndarray, count: int, plan_area: float) -> tuple[np.ndarray, float]:
+    """(ids, spacing m): at most about ``count`` of the plan ``points`` (k, 2), spread evenly: the
+    plan is cut into squares of side ``spacing`` (``count`` of them over ``plan_area``) and the point
+    nearest each square's centre is kept. All points when there are no more than ``count``.
+    A random choice clumped and left gaps where the mesh is fine (a scan of a million triangles)."""
+    points = np.asarray(points, dtype=float)[:, :2]
+    spacing = float(np.sqrt(max(plan_area, 1e-300) / max(count, 1)))
+    if len(points) <= count:
+        return np.arange(len(points)), float(np.sqrt(max(plan_area, 1e-300) / max(len(points), 1)))
+    cell = np.floor((points - points.min(axis=0)) / spacing).astype(np.int64)
+    key = cell[:, 0] * (int(cell[:, 1].max()) + 1) + cell[:, 1]
+    off_centre = np.linalg.norm(points - points.min(axis=0) - (cell + 0.5) * spacing, axis=1)
+    order = np.lexsort((off_centre, key))
+    first = np.r_[True, key[order][1:] != key[order][:-1]]
+    return np.sort(order[first]), spacing
 
 
 def pyplot():

@@ -9,7 +9,7 @@ import numpy as np
 from engine.mesh import TriMesh
 from engine.remeshing.field import GuidingField
 
-from ._common import colour_bar, is_wide_plan, plan_height_in, pyplot, save_png
+from ._common import colour_bar, is_wide_plan, plan_height_in, pyplot, save_png, spread_sample
 
 __all__ = ["plot_field"]
 
@@ -33,13 +33,16 @@ def plot_field(mesh: TriMesh, field: GuidingField, path: Path, *, title: str = "
     size_plot = axes[0].tripcolor(tri, field.size / field.size.min(), shading="gouraud", cmap="viridis_r")
     colour_bar(fig, size_plot, axes[0], wide, label="cell size h / h_min", **bar)
     axes[0].set_title(f"size: h_max / h_min = {field.size.max() / field.size.min():.2f}")
-    aspect_plot = axes[1].tripcolor(tri, field.anisotropy, shading="gouraud", cmap="magma_r",
+    # magma_r without its darkest third: the dark ticks stayed visible over the most anisotropic parts
+    import matplotlib
+    from matplotlib.colors import ListedColormap
+
+    lighter = ListedColormap(matplotlib.colormaps["magma_r"](np.linspace(0.0, 0.65, 256)), name="magma_r_light")
+    aspect_plot = axes[1].tripcolor(tri, field.anisotropy, shading="gouraud", cmap=lighter,
                                     vmin=1.0, vmax=max(1.0 + 1e-6, float(field.anisotropy.max())))
     colour_bar(fig, aspect_plot, axes[1], wide, label="anisotropy a", **bar)
-    picked = np.arange(mesh.n_vertices)
-    if len(picked) > MAX_TICKS:
-        picked = np.random.default_rng(0).choice(picked, MAX_TICKS, replace=False)
-    length = 0.4 * np.sqrt(mesh.area / max(len(picked), 1))
+    picked, spacing = spread_sample(v, MAX_TICKS, float(mesh.face_plan_areas.sum()))
+    length = 0.4 * spacing
     offset = field.direction[picked, :2] * length
     centre = v[picked, :2]
     axes[1].add_collection(LineCollection(np.stack([centre - offset, centre + offset], axis=1),

@@ -8,7 +8,7 @@ import numpy as np
 
 from engine.mesh import TriMesh
 
-from ._common import plan_figure, pyplot, save_png
+from ._common import plan_figure, pyplot, save_png, spread_sample
 
 __all__ = ["plot_principal_forces"]
 
@@ -20,10 +20,10 @@ COMPRESSION, TENSION = "#c0392b", "#1f78d1"
 
 def plot_principal_forces(mesh: TriMesh, principal_forces: np.ndarray, principal_directions: np.ndarray,
                           path: Path, *, support_nodes: np.ndarray | None = None, title: str = "") -> Path:
-    """Plan view with one cross per facet (thinned to about 1500): N1 along its direction, N2
-    across it (in the facet plane), bar lengths proportional to |N| up to the 98th percentile of
-    |N| (longer bars are capped, so that a singular peak at a support does not shrink the rest);
-    compression red, tension blue. principal_forces (m,2) N/m, principal_directions (m,3) of N1."""
+    """Plan view with one cross per facet (thinned to about 1500, spread evenly over the plan): N1
+    along its direction, N2 across it (in the facet plane), bar lengths proportional to |N| up to the
+    98th percentile of |N| (longer bars are capped, so that a singular peak at a support does not
+    shrink the rest); compression red, tension blue. principal_forces (m,2) N/m, principal_directions (m,3) of N1."""
     plt = pyplot()
     from matplotlib.collections import LineCollection
     from matplotlib.lines import Line2D
@@ -31,15 +31,12 @@ def plot_principal_forces(mesh: TriMesh, principal_forces: np.ndarray, principal
     v, f = mesh.vertices, mesh.faces
     centroids = mesh.face_centroids
     normals = mesh.face_normals
-    picked = np.arange(mesh.n_faces)
-    if len(picked) > MAX_CROSSES:
-        picked = np.random.default_rng(0).choice(picked, MAX_CROSSES, replace=False)
+    picked, spacing = spread_sample(centroids, MAX_CROSSES, float(mesh.face_plan_areas.sum()))
     first = principal_directions[picked]
     second = np.cross(normals[picked], first)
     values = principal_forces[picked]
     peak = max(float(np.abs(principal_forces).max()), 1e-300)
     reference = max(float(np.percentile(np.abs(principal_forces[:, 0]), 98.0)), 1e-9 * peak)
-    spacing = np.sqrt(mesh.area / max(len(picked), 1))
     half = 0.45 * spacing * np.minimum(np.abs(values) / reference, 1.0)
     segments, colours = [], []
     for k, axis in enumerate((first, second)):
