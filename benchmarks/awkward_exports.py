@@ -92,6 +92,14 @@ def _fine(path: Path, divisions: int = 400) -> None:  # 2 x divisions^2 triangle
     _save(v, t, path)
 
 
+def _seams(path: Path) -> None:  # a roof meshed face by face: its seam divided 30 / 43 on its two sides
+    left, t, _ = _grid(20, 30, 8, 12, _dome)
+    right, u, _ = _grid(30, 43, 8, 12, _dome)
+    vertices = np.r_[left + [-4, 0, 0], right + [4, 0, 0]]
+    vertices[:, 2] = _dome(vertices[:, 0], vertices[:, 1])
+    _save(vertices, np.r_[t, u + len(left)], path, file_type="obj")
+
+
 def _stray(path: Path) -> None:  # a leftover triangle floating over the roof
     v, t, _ = _grid(40, 30, 16, 12, _dome)
     stray = np.array([[0, 0, 10.0], [0.1, 0, 10.0], [0, 0.1, 10.0]])
@@ -228,6 +236,7 @@ CASES = [
     Case("fine_320k", ".ply", _fine),
     Case("scan_1280k", ".ply", lambda p: _fine(p, 800)),
     Case("stray_triangle", ".ply", _stray),
+    Case("seams_t_junctions", ".obj", _seams),
     Case("non_manifold_fin", ".ply", _fin, refused="non-manifold edge"),
     Case("hemisphere", ".ply", _hemisphere),
     Case("big_flat", ".ply", _big_flat),

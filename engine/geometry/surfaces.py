@@ -18,6 +18,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import MeshError
 from ..mesh import TriMesh, boundary_loops, unique_edges, unique_rows
+from .seams import stitch_seams
 
 __all__ = ["CleanReport", "clean_mesh", "UP_AXES", "to_z_up", "normal_shares"]
 
@@ -68,6 +69,7 @@ class CleanReport:
     unused_vertices: int = 0
     flipped_faces: int = 0
     stray_pieces: int = 0
+    stitched_vertices: int = 0
     patches: int = 0
     boundary_loops: int = 0
     notes: list[str] = field(default_factory=list)
@@ -249,6 +251,14 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, flagged: np.ndarray | No
     faces = faces[np.sort(keep)]
     if len(faces) == 0:
         raise MeshError(f"{name}: no valid face is left after removing degenerate ones")
+
+    vertices, faces, stitched = stitch_seams(vertices, faces)
+    if stitched:
+        report.stitched_vertices = stitched
+        merged_flags = np.r_[merged_flags, np.zeros(len(vertices) - len(merged_flags), dtype=bool)]
+        representative = np.r_[representative, np.arange(len(representative), len(vertices))]
+        report.notes.append(f"{stitched} vertex(es) of seams between separately meshed parts stitched (T-junctions: "
+                            f"a vertex of one part on an edge of the other)")
 
     used = np.zeros(len(vertices), dtype=bool)
     used[faces.ravel()] = True
