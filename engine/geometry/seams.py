@@ -55,7 +55,7 @@ def stitch_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
     border_vertices = np.unique(directed[border])
     # the parts each border vertex belongs to: (vertex, part) pairs of its border edges
     pairs = np.unique(np.c_[np.r_[a, b], np.r_[edge_part, edge_part]], axis=0)
-    vertex_parts = {int(v): set() for v in border_vertices}
+    vertex_parts: dict[int, set[int]] = {int(v): set() for v in border_vertices}
     for v, p in pairs.tolist():
         vertex_parts[v].add(p)
     length = np.linalg.norm(vertices[b] - vertices[a], axis=1)
@@ -81,13 +81,14 @@ def stitch_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
     by_face: dict[int, dict[int, list[int]]] = {}
     for k, points in splits.items():
         by_face.setdefault(k // 3, {})[k % 3] = [v for _, v in sorted(points)]
-    new_faces, new_vertices = [], []
+    new_faces: list[list[int]] = []
+    new_vertices: list[np.ndarray] = []
     n = len(vertices)
     for f, edges in by_face.items():
         corners = faces[f].tolist()
         if len(edges) == 1:
-            (j, points), = edges.items()
-            chain = [corners[j], *points, corners[(j + 1) % 3]]
+            (j, inside), = edges.items()
+            chain = [corners[j], *inside, corners[(j + 1) % 3]]
             apex = corners[(j + 2) % 3]
             new_faces += [[chain[i], chain[i + 1], apex] for i in range(len(chain) - 1)]
         else:
