@@ -313,8 +313,9 @@ def _mm(value: float) -> str:
 
 class ShellConfig(_Section):
     """Continuous-shell analysis of the surface (METHOD.md 1). thickness None: span / 100.
-    max_triangles: a surface with more triangles is analysed on a coarser copy of about that many
-    (engine.remeshing.analysis_mesh), its forces carried back to the surface."""
+    max_triangles: a surface with more triangles is analysed on a coarser copy of about that many, and
+    one of slivers (a coarse CAD tessellation) on a well-shaped copy (engine.remeshing.analysis_mesh),
+    its forces carried back to the surface."""
 
     thickness: Length | None = None
     E: Stress = 210e9

@@ -12,6 +12,7 @@ Units: any consistent set; SI (m, N, Pa) in the workflow.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -302,14 +303,20 @@ def _tangent_principal(tensors: np.ndarray, normals: np.ndarray) -> tuple[np.nda
 
 
 def analyse_shell(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, thickness: float,
-                  material: ShellMaterial, max_triangles: int | None = None) -> ShellResult:
+                  material: ShellMaterial, max_triangles: int | None = None,
+                  distributed: Callable[[TriMesh], np.ndarray] | None = None) -> ShellResult:
     """Linear static analysis of ``mesh`` as a shell of uniform ``thickness`` (m).
 
     loads: (n, 6) nodal forces and moments in global axes. Raises MechanismError (with the
     number of free rigid-body modes) when the supports do not hold the shell.
 
-    max_triangles: a mesh with more triangles is analysed on a coarser copy of about that many
-    (engine.remeshing.analysis_mesh), and the results are carried back to its own vertices and faces.
+    max_triangles: a mesh with more triangles is analysed on a coarser copy of about that many, and one
+    whose triangles are mostly slivers on a well-shaped copy (engine.remeshing.analysis_mesh); the
+    results are carried back to its own vertices and faces. None: the mesh as it is.
+    distributed: the nodal loads of the distributed part of ``loads`` (area loads, self-weight) on
+    any mesh of the surface; a copy gets them from its own facets, and the rest of ``loads`` (point
+    loads) from the mesh's vertices. Without it, all of ``loads`` is carried from the vertices, which
+    on a mesh of slivers puts a whole strip's load on its two ends.
     """
     if not (np.isfinite(thickness) and thickness > 0):
         raise InputError(f"shell thickness must be positive, got {thickness}")
@@ -319,9 +326,13 @@ def analyse_shell(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, thick
         raise InputError(f"shell loads must be a finite ({n}, 6) array, got shape {loads.shape}")
     if len(supports.nodes) and (supports.nodes.max() >= n or supports.nodes.min() < 0):
         raise InputError(f"a support node is out of range 0..{n - 1}")
-    if max_triangles is not None and mesh.n_faces > max_triangles:
-        return _analyse_on_copy(mesh, supports, loads, thickness=thickness, material=material,
-                                triangles=max_triangles)
+    if max_triangles is not None:
+        from ..remeshing.analysis_mesh import copy_triangles
+
+        triangles = copy_triangles(mesh, max_triangles)
+        if triangles is not None:
+            return _analyse_on_copy(mesh, supports, loads, thickness=thickness, material=material,
+                                    triangles=triangles, distributed=distributed)
     restrained = np.asarray(supports.dof_mask(n), dtype=bool).ravel()
     free_rigid = count_free_rigid_modes(mesh.vertices, restrained)
     if free_rigid:
@@ -364,10 +375,12 @@ def analyse_shell(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, thick
 
 
 def _analyse_on_copy(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, thickness: float,
-                     material: ShellMaterial, triangles: int) -> ShellResult:
-    """``analyse_shell`` on a coarser copy of ``mesh`` (about ``triangles``), carried back to ``mesh``.
+                     material: ShellMaterial, triangles: int,
+                     distributed: Callable[[TriMesh], np.ndarray] | None) -> ShellResult:
+    """``analyse_shell`` on a well-shaped copy of ``mesh`` (about ``triangles``), carried back to ``mesh``.
 
-    Loads go to the copy by the interpolation's transpose (forces conserved); each support vertex
+    Distributed loads are those of the copy's facets, the rest go to the copy by the interpolation's
+    transpose (forces conserved); each support vertex
     restrains its nearest vertex of the copy; displacements and vertex forces are interpolated back,
     each face takes the forces and moments of the copy's facet under its centroid, and the copy's
     reactions land on the mesh's support vertices nearest to them (totals conserved).
@@ -380,7 +393,13 @@ def _analyse_on_copy(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, th
     patterns, which = np.unique(supports.restraints, axis=0, return_inverse=True)
     copy_supports = Supports.merge([(np.unique(link.nearest[supports.nodes[which.ravel() == k]]), flags)
                                     for k, flags in enumerate(patterns)])
-    done = analyse_shell(copy, copy_supports, link.to_coarse(loads), thickness=thickness, material=material)
+    if distributed is None:
+        copy_loads = link.to_coarse(loads)
+    else:  # the copy's own facets' loads, scaled to the surface's total (their areas differ slightly)
+        spread, own = distributed(mesh), distributed(copy)
+        total, copy_total = np.linalg.norm(spread[:, :3].sum(axis=0)), np.linalg.norm(own[:, :3].sum(axis=0))
+        copy_loads = own * (total / copy_total if copy_total > 0 else 1.0) + link.to_coarse(loads - spread)
+    done = analyse_shell(copy, copy_supports, copy_loads, thickness=thickness, material=material)
     reactions = np.zeros((mesh.n_vertices, 6))
     if len(supports.nodes):
         held = done.reactions[copy_supports.nodes]

@@ -243,6 +243,7 @@ def _stage_sections(out_dir: Path, project: Project) -> list[Section]:
     shell_keys = ("load_case", "thickness_m", "max_displacement_m", "N1_max_N_per_m", "N2_min_N_per_m",
                   "total_load_N", "total_reaction_N", "equilibrium_error", "surface_triangles", "analysed_triangles")
     sections.append(Section(title="2. Shell statics", figures=_figures(out_dir, "shell"),
+                            text=f"Analysed on {shell['analysed_on']}." if shell.get("analysed_on") else "",
                             tables=[_figures_table("shell", "Continuous shell under the serviceability load", shell,
                                                    shell_keys)]))
     sections.append(Section(title="3. Guiding field", figures=_figures(out_dir, "field"),

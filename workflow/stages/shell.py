@@ -2,18 +2,22 @@
 
 Artifacts (02-shell/): shell.npz (every field of ``engine.structure.shell.ShellResult``),
 shell.json (the load combination used, thickness, largest displacement, force ranges,
-equilibrium check, the surface's triangles and those analysed: a surface of more than
-``shell.max_triangles`` is analysed on a coarser copy) and stress.png (principal membrane force crosses).
+equilibrium check, the surface's triangles and those analysed, and ``analysed_on``: why a copy was
+analysed, where one was: a surface of more than ``shell.max_triangles``, or of slivers, is
+analysed on a well-shaped copy) and stress.png (principal membrane force crosses).
 """
 
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from engine.errors import MechanismError
+from engine.geometry.edge_split import sliver_share
+from engine.remeshing.analysis_mesh import copy_triangles
 from engine.structure.loads import LoadCase, LoadCombination, combine
 from engine.structure.shell import ShellMaterial, ShellResult, analyse_shell, shell_nodal_loads
 from fabrication.files import write_text_atomic
@@ -58,13 +62,21 @@ def run(surface: SurfaceResult, project: Project, ctx: StageContext) -> ShellRes
     ctx.step("loads")
     loads = shell_nodal_loads(mesh, case, thickness=thickness, density=project.shell.density)
     limit = project.shell.max_triangles
-    if mesh.n_faces > limit:
-        ctx.step(f"{mesh.n_faces} triangles: solving a copy of about {limit}")
+    copy = copy_triangles(mesh, limit)
+    why = None
+    if copy is not None:
+        why = (f"the surface's {mesh.n_faces} triangles are more than [shell] max_triangles = {limit}"
+               if mesh.n_faces > limit else
+               f"{100 * sliver_share(mesh.vertices, mesh.faces):.0f} % of the surface's area is in slivers "
+               f"(triangles over about 6 times longer than wide), far too stiff as flat shell facets")
+        ctx.step(f"{mesh.n_faces} triangles: solving a well-shaped copy of about {copy}")
     else:
         ctx.step(f"solving {mesh.n_vertices * 6} DOF")
     try:
+        spread = replace(case, point_nodes=None, point_forces=None)  # the loads over the area
         result = analyse_shell(mesh, surface.supports, loads, thickness=thickness, material=material,
-                               max_triangles=limit)
+                               max_triangles=limit, distributed=lambda facets: shell_nodal_loads(
+                                   facets, spread, thickness=thickness, density=project.shell.density))
     except MechanismError as error:
         error.hint = ('support more of the surface or restrain more directions: [[supports]] select and '
                       'restraint = "pinned" instead of rollers (with --surface: --supports boundary)')
@@ -79,6 +91,8 @@ def run(surface: SurfaceResult, project: Project, ctx: StageContext) -> ShellRes
                "total_load_N": [float(x) for x in result.load_total[:3]],
                "total_reaction_N": [float(x) for x in result.reactions[:, :3].sum(axis=0)],
                "surface_triangles": mesh.n_faces, "analysed_triangles": result.analysed_triangles}
+    if why is not None:
+        summary["analysed_on"] = f"a well-shaped copy of {result.analysed_triangles} triangles: {why}"
     write_text_atomic(ctx.folder / "shell.json", json.dumps(summary, indent=1))
     ctx.step("drawing")
     plot_principal_forces(mesh, result.face_principal_forces, result.face_principal_directions,

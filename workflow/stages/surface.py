@@ -17,8 +17,10 @@ import numpy as np
 
 from engine.errors import GridshellError, InputError
 from engine.geometry import parametric
+from engine.geometry.edge_split import SLIVER_SHARE, sliver_share
 from engine.geometry.surfaces import clean_mesh, to_z_up
 from engine.mesh import TriMesh
+from engine.remeshing.analysis_mesh import SLIVER_COPY_TRIANGLES, analysis_mesh
 from engine.structure.loads import LimitState, LoadCase, LoadCombination
 from engine.structure.supports import (
     Supports,
@@ -100,8 +102,17 @@ def build_surface(project: Project) -> tuple[TriMesh, dict]:
     vertices = to_z_up(vertices * file_scale_m(stated, config.file_units), config.up_axis or "z")
     mesh, report = clean_mesh(vertices, faces, flagged, name=Path(config.file).stem,
                               merge_tolerance=config.merge_tolerance)
+    cleaning = report.to_json()
+    share = sliver_share(mesh.vertices, mesh.faces)
+    if share > SLIVER_SHARE:  # a coarse CAD tessellation: mesh it again, well shaped
+        sliver_faces = mesh.n_faces
+        mesh = analysis_mesh(mesh, SLIVER_COPY_TRIANGLES)
+        cleaning["remeshed_slivers"] = sliver_faces
+        cleaning["notes"] = [*cleaning["notes"], f"{100 * share:.0f} % of the area in slivers (triangles over about 6 "
+                             f"times longer than wide, as a coarse CAD tessellation gives): its {sliver_faces} "
+                             f"triangles meshed again into {mesh.n_faces} well-shaped ones on the same surface"]
     return mesh, {"source": str(config.file), "units": stated or config.file_units,
-                  "units_from": "the file" if stated else "file_units", "cleaning": report.to_json()}
+                  "units_from": "the file" if stated else "file_units", "cleaning": cleaning}
 
 
 def _select(mesh: TriMesh, spec: SupportSpec) -> np.ndarray:
