@@ -61,7 +61,7 @@ class ShellResult:
     load_total (6,): resultant force and moment about the origin of the applied loads;
     equilibrium_error: |loads + reactions| (forces and moments) / |loads|; solver: the library
     that factored the stiffness (engine.structure.solvers); analysed_triangles: the triangles of the
-    mesh the stiffness was built on (a coarsened copy's when fewer than the mesh's, see
+    mesh the stiffness was built on (a well-shaped copy's where they differ from the mesh's, see
     ``analyse_shell``).
     """
 
@@ -380,10 +380,10 @@ def _analyse_on_copy(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, th
     """``analyse_shell`` on a well-shaped copy of ``mesh`` (about ``triangles``), carried back to ``mesh``.
 
     Distributed loads are those of the copy's facets, the rest go to the copy by the interpolation's
-    transpose (forces conserved); each support vertex
-    restrains its nearest vertex of the copy; displacements and vertex forces are interpolated back,
-    each face takes the forces and moments of the copy's facet under its centroid, and the copy's
-    reactions land on the mesh's support vertices nearest to them (totals conserved).
+    transpose (forces conserved); each support vertex restrains its nearest vertex of the copy;
+    displacements and vertex forces are interpolated back, each face takes the forces and moments of
+    the copy's facet under its centroid, and the copy's reactions land on the mesh's support
+    vertices nearest to them (totals conserved).
     """
     from ..geometry.surface_map import surface_map
     from ..remeshing.analysis_mesh import analysis_mesh
