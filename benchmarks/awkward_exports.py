@@ -100,6 +100,13 @@ def _seams(path: Path) -> None:  # a roof meshed face by face: its seam divided 
     _save(vertices, np.r_[t, u + len(left)], path, file_type="obj")
 
 
+def _open_seam(path: Path) -> None:  # two halves left unjoined at a modeller's tolerance: 0.5 mm apart
+    half, t, _ = _grid(20, 30, 8, 12, _dome)
+    vertices = np.r_[half + [-4, 0, 0], half + [4.0005, 0, 0]]
+    vertices[:, 2] = _dome(vertices[:, 0], vertices[:, 1])
+    _save(vertices, np.r_[t, t + len(half)], path)
+
+
 def _stray(path: Path) -> None:  # a leftover triangle floating over the roof
     v, t, _ = _grid(40, 30, 16, 12, _dome)
     stray = np.array([[0, 0, 10.0], [0.1, 0, 10.0], [0, 0.1, 10.0]])
@@ -237,6 +244,7 @@ CASES = [
     Case("scan_1280k", ".ply", lambda p: _fine(p, 800)),
     Case("stray_triangle", ".ply", _stray),
     Case("seams_t_junctions", ".obj", _seams),
+    Case("seam_open_0_5mm", ".ply", _open_seam),
     Case("non_manifold_fin", ".ply", _fin, refused="non-manifold edge"),
     Case("hemisphere", ".ply", _hemisphere),
     Case("big_flat", ".ply", _big_flat),

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.geometry.seams import SEAM_SAG, stitch_seams
+from engine.geometry.seams import SEAM_SAG, stitch_seams, weld_seams
 from engine.geometry.surfaces import clean_mesh
 
 
@@ -47,9 +47,24 @@ def test_a_curved_seam_divided_differently_on_each_side_is_stitched(left, right)
     assert mesh.area == pytest.approx(_area(vertices, faces), rel=5e-5)
 
 
+@pytest.mark.parametrize("left, right", [(30, 30), (30, 43)])
+def test_a_seam_left_open_at_a_modellers_tolerance_is_closed(left, right):
+    """The right half 0.5 mm off the left (Rhino's 1 mm tolerance on a roof in metres): its seam
+    vertices are welded to the other side's (and those on its edges stitched): one patch, one
+    boundary loop, all on the outline. Before, the two halves made two grids whose joints clashed."""
+    vertices, faces = _two_parts(left, right, gap=0.0005)
+    mesh, report = clean_mesh(vertices, faces)
+    assert report.welded_vertices > 0 and any("welded" in note for note in report.notes)
+    assert report.patches == 1 and report.boundary_loops == 1
+    edge = mesh.vertices[mesh.boundary_vertices]
+    assert np.all(np.isclose(np.abs(edge[:, 0]), 8.0) | np.isclose(np.abs(edge[:, 1]), 6.0))
+
+
 def test_parts_apart_are_not_stitched():
-    """A gap of twice the sag bound between the parts is a gap: nothing is split."""
+    """A gap of twice the sag bound between the parts is a gap: nothing is welded or split."""
     vertices, faces = _two_parts(30, 43, gap=2 * SEAM_SAG * 12 / 30)
+    representative, welded = weld_seams(vertices, faces)
+    assert welded == 0 and np.array_equal(representative, np.arange(len(vertices)))
     stitched_vertices, stitched_faces, count = stitch_seams(vertices, faces)
     assert count == 0 and np.array_equal(stitched_faces, faces)
 

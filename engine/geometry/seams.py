@@ -5,10 +5,13 @@ exports) meets itself along seams whose two sides are divided differently: a ver
 lies on an edge of the other (a T-junction) instead of being shared. Welding coincident vertices
 joins such parts at a few points only, and what is left is neither one surface nor separate ones.
 
-``stitch_seams`` finds every boundary vertex that lies on a boundary edge of another part (an
-edge-connected piece of the mesh), within ``SEAM_SAG`` of that edge's length (a curved seam's
-vertices stand off the other side's chords by their sag), and splits the edge's triangle at those
-vertices, so the two sides share every vertex and edge of the seam. Vertices are never moved.
+``weld_seams`` first joins the boundary vertices of different parts (edge-connected pieces of the
+mesh) that lie within ``SEAM_SAG`` of their boundary edges' length of each other: a seam left
+unjoined at a modeller's tolerance (Rhino's 1 mm on a roof modelled in metres). ``stitch_seams``
+then finds every boundary vertex that lies on a boundary edge of another part, within ``SEAM_SAG``
+of that edge's length (a curved seam's vertices stand off the other side's chords by their sag),
+and splits the edge's triangle at those vertices, so the two sides share every vertex and edge of
+the seam. Stitched vertices are not moved; a welded one takes its partner's place.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from scipy.spatial import cKDTree
 
 from ..mesh import unique_rows
 
-__all__ = ["SEAM_SAG", "stitch_seams"]
+__all__ = ["SEAM_SAG", "weld_seams", "stitch_seams"]
 
 #: Largest distance of a vertex from another part's boundary edge, relative to the edge's length,
 #: at which it is taken to lie on that edge: the sag of a chord of length L on a radius R is
@@ -40,24 +43,64 @@ def _parts(faces: np.ndarray) -> np.ndarray:
     return connected_components(incidence @ incidence.T, directed=False)[1]
 
 
-def stitch_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
-    """(vertices, faces, vertices stitched): ``faces`` (m, 3) with each triangle that has other parts'
-    boundary vertices on its boundary edges split at them (fanned from the opposite corner, or from
-    a new centre vertex, appended to ``vertices``, where more than one of its edges is split)."""
+def _borders(faces: np.ndarray):
+    """The boundary's directed edges k = 3 * face + corner, their ends a -> b, each edge's part, the
+    boundary vertices and the parts each belongs to; None when there is no boundary."""
     directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=-1).reshape(-1, 2)
     _, inverse, counts = unique_rows(np.sort(directed, axis=1), return_inverse=True, return_counts=True)
-    border = np.flatnonzero(counts[inverse.ravel()] == 1)  # directed edge k = 3 * face + corner
+    border = np.flatnonzero(counts[inverse.ravel()] == 1)
     if len(border) == 0:
-        return vertices, faces, 0
+        return None
     part = _parts(faces)
     a, b = directed[border, 0], directed[border, 1]
     edge_part = part[border // 3]
     border_vertices = np.unique(directed[border])
-    # the parts each border vertex belongs to: (vertex, part) pairs of its border edges
     pairs = np.unique(np.c_[np.r_[a, b], np.r_[edge_part, edge_part]], axis=0)
     vertex_parts: dict[int, set[int]] = {int(v): set() for v in border_vertices}
     for v, p in pairs.tolist():
         vertex_parts[v].add(p)
+    return border, a, b, edge_part, border_vertices, vertex_parts
+
+
+def weld_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, int]:
+    """(representative per vertex, vertices welded): boundary vertices of different parts closer than
+    SEAM_SAG of their shorter boundary edge (an unjoined seam left at a modeller's tolerance, a
+    millimetre where the mesh's edges are decimetres) share the lowest id of the group."""
+    representative = np.arange(len(vertices))
+    found = _borders(faces)
+    if found is None:
+        return representative, 0
+    _, a, b, _, border_vertices, vertex_parts = found
+    length = np.linalg.norm(vertices[b] - vertices[a], axis=1)
+    shortest = np.full(len(vertices), np.inf)
+    np.minimum.at(shortest, a, length)
+    np.minimum.at(shortest, b, length)
+    reach = SEAM_SAG * shortest[border_vertices]
+    close = cKDTree(vertices[border_vertices]).query_pairs(float(reach.max()), output_type="ndarray")
+    if not len(close):
+        return representative, 0
+    i, j = border_vertices[close[:, 0]], border_vertices[close[:, 1]]
+    near = np.linalg.norm(vertices[i] - vertices[j], axis=1) <= SEAM_SAG * np.minimum(shortest[i], shortest[j])
+    apart = np.array([not (vertex_parts[int(x)] & vertex_parts[int(y)]) for x, y in zip(i, j)], dtype=bool)
+    keep = near & apart if len(i) else near
+    if not keep.any():
+        return representative, 0
+    graph = sp.csr_matrix((np.ones(int(keep.sum())), (i[keep], j[keep])), shape=(len(vertices), len(vertices)))
+    _, group = connected_components(graph, directed=False)
+    lowest = np.full(group.max() + 1, len(vertices))
+    np.minimum.at(lowest, group, np.arange(len(vertices)))
+    representative = lowest[group]
+    return representative, int(np.count_nonzero(representative != np.arange(len(vertices))))
+
+
+def stitch_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """(vertices, faces, vertices stitched): ``faces`` (m, 3) with each triangle that has other parts'
+    boundary vertices on its boundary edges split at them (fanned from the opposite corner, or from
+    a new centre vertex, appended to ``vertices``, where more than one of its edges is split)."""
+    found = _borders(faces)
+    if found is None:
+        return vertices, faces, 0
+    border, a, b, edge_part, border_vertices, vertex_parts = found
     length = np.linalg.norm(vertices[b] - vertices[a], axis=1)
     tree = cKDTree(vertices[border_vertices])
     nearby = tree.query_ball_point(0.5 * (vertices[a] + vertices[b]), 0.5 * length * (1 + SEAM_SAG))
