@@ -23,7 +23,7 @@ from scipy.spatial import cKDTree
 
 from ..mesh import unique_rows
 
-__all__ = ["SEAM_SAG", "weld_seams", "stitch_seams"]
+__all__ = ["SEAM_SAG", "join_seams", "weld_seams", "stitch_seams"]
 
 #: Largest distance of a vertex from another part's boundary edge, relative to the edge's length,
 #: at which it is taken to lie on that edge: the sag of a chord of length L on a radius R is
@@ -33,11 +33,9 @@ SEAM_SAG = 0.025
 _END = 1e-3
 
 
-def _parts(faces: np.ndarray) -> np.ndarray:
-    """Label per face of the pieces connected through shared edges."""
-    m = len(faces)
-    directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=-1).reshape(-1, 2)
-    _, edge_id = unique_rows(np.sort(directed, axis=1), return_inverse=True)
+def _parts(edge_id: np.ndarray) -> np.ndarray:
+    """Label per face of the pieces connected through shared edges; edge_id (m, 3): each corner's edge."""
+    m = len(edge_id)
     owner = np.repeat(np.arange(m), 3)
     incidence = sp.csr_matrix((np.ones(3 * m), (owner, edge_id.ravel())), shape=(m, int(edge_id.max()) + 1))
     return connected_components(incidence @ incidence.T, directed=False)[1]
@@ -45,13 +43,17 @@ def _parts(faces: np.ndarray) -> np.ndarray:
 
 def _borders(faces: np.ndarray):
     """The boundary's directed edges k = 3 * face + corner, their ends a -> b, each edge's part, the
-    boundary vertices and the parts each belongs to; None when there is no boundary."""
+    boundary vertices and the parts each belongs to; None when there is nothing to join: no
+    boundary, or a single part."""
     directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=-1).reshape(-1, 2)
     _, inverse, counts = unique_rows(np.sort(directed, axis=1), return_inverse=True, return_counts=True)
-    border = np.flatnonzero(counts[inverse.ravel()] == 1)
+    inverse = inverse.ravel()
+    border = np.flatnonzero(counts[inverse] == 1)
     if len(border) == 0:
         return None
-    part = _parts(faces)
+    part = _parts(inverse.reshape(faces.shape))
+    if part.max() == 0:
+        return None
     a, b = directed[border, 0], directed[border, 1]
     edge_part = part[border // 3]
     border_vertices = np.unique(directed[border])
@@ -62,12 +64,29 @@ def _borders(faces: np.ndarray):
     return border, a, b, edge_part, border_vertices, vertex_parts
 
 
+def join_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+    """(vertices, faces, representative per input vertex, vertices welded, vertices stitched): the
+    seams welded (``weld_seams``), the faces renumbered and those left with a repeated corner
+    dropped, then stitched (``stitch_seams``); the boundary is found once unless welding changed it."""
+    found = _borders(faces)
+    representative, welded = _weld(vertices, found)
+    if welded:
+        faces = representative[faces]
+        faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])]
+        found = _borders(faces)
+    vertices, faces, stitched = _stitch(vertices, faces, found)
+    return vertices, faces, representative, welded, stitched
+
+
 def weld_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, int]:
     """(representative per vertex, vertices welded): boundary vertices of different parts closer than
     SEAM_SAG of their shorter boundary edge (an unjoined seam left at a modeller's tolerance, a
     millimetre where the mesh's edges are decimetres) share the lowest id of the group."""
+    return _weld(vertices, _borders(faces))
+
+
+def _weld(vertices: np.ndarray, found) -> tuple[np.ndarray, int]:
     representative = np.arange(len(vertices))
-    found = _borders(faces)
     if found is None:
         return representative, 0
     _, a, b, _, border_vertices, vertex_parts = found
@@ -97,7 +116,10 @@ def stitch_seams(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
     """(vertices, faces, vertices stitched): ``faces`` (m, 3) with each triangle that has other parts'
     boundary vertices on its boundary edges split at them (fanned from the opposite corner, or from
     a new centre vertex, appended to ``vertices``, where more than one of its edges is split)."""
-    found = _borders(faces)
+    return _stitch(vertices, faces, _borders(faces))
+
+
+def _stitch(vertices: np.ndarray, faces: np.ndarray, found) -> tuple[np.ndarray, np.ndarray, int]:
     if found is None:
         return vertices, faces, 0
     border, a, b, edge_part, border_vertices, vertex_parts = found

@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import MeshError
 from ..mesh import TriMesh, boundary_loops, unique_edges, unique_rows
-from .seams import SEAM_SAG, stitch_seams, weld_seams
+from .seams import SEAM_SAG, join_seams
 
 __all__ = ["CleanReport", "clean_mesh", "UP_AXES", "to_z_up", "normal_shares"]
 
@@ -253,16 +253,13 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray, flagged: np.ndarray | No
     if len(faces) == 0:
         raise MeshError(f"{name}: no valid face is left after removing degenerate ones")
 
-    joined, welded = weld_seams(vertices, faces)
+    vertices, faces, joined, welded, stitched = join_seams(vertices, faces)
     if welded:
         report.welded_vertices = welded
         np.logical_or.at(merged_flags, joined, merged_flags.copy())
         representative = joined[representative]
-        faces = joined[faces]
-        faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])]
         report.notes.append(f"{welded} vertex(es) of seams left open between parts welded to the other side, each "
                             f"closer to it than {100 * SEAM_SAG:g} % of its edges' length")
-    vertices, faces, stitched = stitch_seams(vertices, faces)
     if stitched:
         report.stitched_vertices = stitched
         merged_flags = np.r_[merged_flags, np.zeros(len(vertices) - len(merged_flags), dtype=bool)]
