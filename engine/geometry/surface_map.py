@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..mesh import TriMesh, boundary_loops
+from ..mesh import TriMesh
 from .proximity import closest_points
 
 __all__ = ["SurfaceMap", "surface_map"]
@@ -89,18 +89,13 @@ def _under(coarse: TriMesh, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return faces, closest
 
 
-def _boundary_vertices(mesh: TriMesh) -> np.ndarray:
-    loops = boundary_loops(mesh.faces)
-    return np.concatenate(loops) if loops else np.zeros(0, dtype=np.int64)
-
-
 def surface_map(fine: TriMesh, coarse: TriMesh) -> SurfaceMap:
     """The map between ``fine`` and ``coarse``, a coarser mesh of the same surface."""
     vertex_faces, closest = _under(coarse, fine.vertices)
     weights = _barycentric(closest, coarse.vertices[coarse.faces[vertex_faces]])
     face_faces, _ = _under(coarse, fine.vertices[fine.faces].mean(axis=1))
     _, nearest = cKDTree(coarse.vertices).query(fine.vertices)
-    fine_border, coarse_border = _boundary_vertices(fine), _boundary_vertices(coarse)
+    fine_border, coarse_border = np.flatnonzero(fine.boundary_vertices), np.flatnonzero(coarse.boundary_vertices)
     if len(fine_border) and len(coarse_border):
         _, on_border = cKDTree(coarse.vertices[coarse_border]).query(fine.vertices[fine_border])
         nearest[fine_border] = coarse_border[on_border]
