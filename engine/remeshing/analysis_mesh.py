@@ -25,7 +25,7 @@ from ..geometry.edge_split import SLIVER_SHARE, sliver_share, split_long_edges
 from ..geometry.fine_mesh import MAX_FINE_VERTICES
 from ..geometry.proximity import closest_points
 from ..mesh import TriMesh
-from .field import GuidingField
+from .field import GuidingField, tangent_basis
 from .voronoi import RemeshSettings, remesh
 
 __all__ = ["TRIANGLES_PER_CELL", "SLIVER_COPY_TRIANGLES", "copy_triangles", "analysis_mesh"]
@@ -39,12 +39,8 @@ SLIVER_COPY_TRIANGLES = 20_000
 def _uniform_field(mesh: TriMesh) -> GuidingField:
     """Size 1 and no anisotropy everywhere (the direction is any tangent)."""
     normals = mesh.vertex_normals
-    direction = np.cross(normals, [0.0, 0.0, 1.0])
-    direction = np.where(np.linalg.norm(direction, axis=1)[:, None] < 1e-6, np.cross(normals, [1.0, 0.0, 0.0]),
-                         direction)
-    direction /= np.linalg.norm(direction, axis=1)[:, None]
-    return GuidingField(size=np.ones(mesh.n_vertices), anisotropy=np.ones(mesh.n_vertices), direction=direction,
-                        normals=normals)
+    return GuidingField(size=np.ones(mesh.n_vertices), anisotropy=np.ones(mesh.n_vertices),
+                        direction=tangent_basis(normals)[0], normals=normals)
 
 
 def copy_triangles(mesh: TriMesh, max_triangles: int) -> int | None:
