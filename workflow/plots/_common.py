@@ -22,9 +22,9 @@ def spread_sample(points: np.ndarray, count: int, plan_area: float) -> tuple[np.
     nearest each square's centre is kept. All points when there are no more than ``count``.
     A random choice clumped and left gaps where the mesh is fine (a scan of a million triangles)."""
     points = np.asarray(points, dtype=float)[:, :2]
-    spacing = float(np.sqrt(max(plan_area, 1e-300) / max(count, 1)))
     if len(points) <= count:
         return np.arange(len(points)), float(np.sqrt(max(plan_area, 1e-300) / max(len(points), 1)))
+    spacing = float(np.sqrt(max(plan_area, 1e-300) / count))
     cell = np.floor((points - points.min(axis=0)) / spacing).astype(np.int64)
     key = cell[:, 0] * (int(cell[:, 1].max()) + 1) + cell[:, 1]
     off_centre = np.linalg.norm(points - points.min(axis=0) - (cell + 0.5) * spacing, axis=1)
