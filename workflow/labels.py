@@ -27,7 +27,7 @@ LABELS: dict[str, tuple[str, str, float]] = {
     "total_load_N": ("total load", "kN", 1e-3),
     "total_reaction_N": ("total reaction", "kN", 1e-3),
     "surface_triangles": ("triangles of the surface", "", 1.0),
-    "analysed_triangles": ("triangles analysed (a coarser copy when fewer)", "", 1.0),
+    "analysed_triangles": ("triangles analysed (a well-shaped copy where they differ)", "", 1.0),
     # field
     "max_size_ratio_D": ("size ratio bound D", "", 1.0),
     "max_aspect_A": ("aspect bound A", "", 1.0),
