@@ -84,6 +84,11 @@ def height_field_roofs() -> list[Path]:
     return roofs
 
 
+#: The study's tube (diameter, wall; mm): the cap template's when the study was run (2026-12-06).
+#: The template has CHS 168.3 x 6.3 since, so that it passes its own checks; the study keeps its own.
+STUDY_TUBE_MM = (114.3, 6.3)
+
+
 def _cap_text() -> str:
     return (ROOT / "templates" / "cap.toml").read_text(encoding="utf-8")
 
@@ -93,12 +98,12 @@ def project_text(surface: Path | None, name: str, total_length_m: float,
     """The study's project: the cap template with the surface (None: the cap itself) and its
     flagged supports, no symmetry planes but the cap's, a total-length target (set per point) and no
     coarsening for the joints (which would change L_tot); ``section_mm``: the tube's diameter and
-    wall instead of the cap's (``stiff_section``)."""
+    wall (``stiff_section``), else STUDY_TUBE_MM."""
     lines = _cap_text().splitlines()
-    if section_mm is not None:
-        lines = [f'diameter = "{section_mm[0]:g} mm"' if line.startswith("diameter = ")
-                 else f'thickness = "{section_mm[1]:g} mm"' if line.startswith("thickness = ") else line
-                 for line in lines]
+    section_mm = STUDY_TUBE_MM if section_mm is None else section_mm
+    lines = [f'diameter = "{section_mm[0]:g} mm"' if line.startswith("diameter = ")
+             else f'thickness = "{section_mm[1]:g} mm"' if line.startswith("thickness = ") else line
+             for line in lines]
     out = []
     skip = None
     for line in lines:
@@ -151,11 +156,8 @@ def stiff_section(reference: Path) -> tuple[str, float, float, float] | None:
         encoding="utf-8"))["deflection_limit_m"]
     over = float(middle["delta_L_m"].median()) / limit
     catalogue = pd.read_csv(ROOT / "engine" / "data" / "en10210_chs.csv", comment="#")
-    from workflow.config import load_project
-
-    tube = load_project(ROOT / "templates" / "cap.toml").section           # the cap's tube, in m
-    cap = catalogue[np.isclose(catalogue["diameter_mm"], 1000 * tube.diameter)
-                    & np.isclose(catalogue["thickness_mm"], 1000 * tube.thickness)].iloc[0]
+    cap = catalogue[np.isclose(catalogue["diameter_mm"], STUDY_TUBE_MM[0])
+                    & np.isclose(catalogue["thickness_mm"], STUDY_TUBE_MM[1])].iloc[0]
     enough = catalogue[catalogue["I_cm4"] >= cap["I_cm4"] * over].sort_values("mass_kg_per_m")
     pick = cap if over <= 1.0 else enough.iloc[0] if not enough.empty else catalogue.sort_values("I_cm4").iloc[-1]
     return str(pick["name"]), float(pick["diameter_mm"]), float(pick["thickness_mm"]), over

@@ -162,8 +162,8 @@ def test_compare_on_the_courtyard_template(tmp_path, capsys):
     assert main(["init", str(tmp_path / "roof"), "--template", "courtyard"]) == 0
     project_file = tmp_path / "roof" / "project.toml"
     text = project_file.read_text()
-    assert "n_cells = 200" in text
-    project_file.write_text(text.replace("n_cells = 200", "n_cells = 60"))
+    assert "n_cells = 150" in text
+    project_file.write_text(text.replace("n_cells = 150", "n_cells = 60"))
     out = tmp_path / "out"
     assert main(["compare", str(project_file), "--out", str(out), "--quiet", "--grids", "triangular,quad,voronoi"]) == 0
     assert "Traceback" not in capsys.readouterr().err

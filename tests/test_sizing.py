@@ -355,8 +355,9 @@ def test_the_grid_is_made_again_for_tubes_larger_than_the_section(tmp_path, caps
     from workflow.cli import main
 
     text = (Path(templates.__file__).parent / "cap.toml").read_text(encoding="utf-8")
-    text = text.replace('diameter = "114.3 mm"', 'diameter = "48.3 mm"').replace('thickness = "6.3 mm"',
+    text = text.replace('diameter = "168.3 mm"', 'diameter = "48.3 mm"').replace('thickness = "6.3 mm"',
                                                                                   'thickness = "3.2 mm"')
+    assert 'diameter = "48.3 mm"' in text
     text = text.replace("n_cells = 150", "n_cells = 40").replace("[analysis]\n", "[analysis]\nnonlinear = false\n", 1)
     text += "\n[design]\nsize_sections = true\nfit_grid_to_tubes = true\n"
     project = tmp_path / "project.toml"
@@ -443,7 +444,8 @@ def test_the_last_refit_sizes_within_its_grids_tube(tmp_path, monkeypatch):
     monkeypatch.setattr(workflow.runner, "run_project", run_project)
     base = load_project(resources.files("templates") / "courtyard.toml")
     project = base.model_copy(update={"design": base.design.model_copy(
-        update={"size_sections": True, "fit_grid_to_tubes": True})})
+        update={"size_sections": True, "fit_grid_to_tubes": True}),
+        "section": base.section.model_copy(update={"diameter": 0.1143, "thickness": 0.0063})})
     stages = [SimpleNamespace(name=n) for n in ("surface", "remesh", "analysis", "fabrication", "report")]
     said = []
     final, _ = run_with_fitted_grid(project, tmp_path, stages, say=said.append)
