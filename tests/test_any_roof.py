@@ -184,6 +184,34 @@ def test_a_grid_too_fine_for_its_joints_is_remeshed_with_fewer_cells(tmp_path):
     assert not optimize["buildable"]["too_fine"]
 
 
+def test_a_roof_too_small_for_its_joints_is_coarsened_no_further_than_the_remesher_goes(tmp_path):
+    """A 5 m dome in glulam 200 x 160 on steel nodes: its joints take beams of 0.9-1.2 m, so the
+    remesh asked 4 cells of a roof the remesher cannot divide in four and the stage failed ("the
+    tessellation degenerated", with a hint to ask for more cells). It now stops at
+    MIN_COARSENED_CELLS, and the stage finishes with the grid_coarsened and grid_too_fine findings
+    naming the section's keys."""
+    from workflow.progress import Progress
+    from workflow.runner import run_project
+    from workflow.stages import STAGES
+    from workflow.stages.polymesh_io import read_polymesh_obj
+    from workflow.stages.remesh import MIN_COARSENED_CELLS
+
+    project = _generated_project(460, 80, tmp_path)
+    project = project.model_copy(update={
+        "material": project.material.model_copy(update={"name": "glulam_gl24h"}),
+        "section": project.section.model_copy(update={"kind": "solid_rectangle", "height": 0.2, "width": 0.16,
+                                                      "diameter": None, "thickness": None})})
+    out = tmp_path / "out"
+    summary = run_project(project, out, STAGES, until="optimize", progress=Progress(enabled=False))
+    assert summary.message is None, summary.message
+    grid = read_polymesh_obj(out / "04-remesh" / "gridshell.obj")
+    assert 3 <= grid.n_faces and json.loads((out / "04-remesh" / "remesh.json").read_text())["coarsened"][
+        "cells_built"] >= MIN_COARSENED_CELLS - 2
+    findings = {f["kind"]: f for f in summary.findings}
+    assert findings["grid_coarsened"]["limit"] == 80
+    assert "[section] height, width" in findings["grid_coarsened"]["fix"]
+
+
 def test_a_panel_larger_than_every_sheet_is_a_finding_with_its_dxf(tmp_path):
     """Sheets of 0.3 x 0.2 m: panels that fit none are findings, their DXFs are still written, the
     others are nested and the report is written."""

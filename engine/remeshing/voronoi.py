@@ -55,7 +55,11 @@ from .grid_quality import polymesh_quality, size_and_aspect
 
 # polymesh_quality is engine/remeshing/grid_quality.py's, exported here too for the callers that
 # import it from the remesher
-__all__ = ["RemeshSettings", "RemeshResult", "remesh", "polymesh_quality"]
+__all__ = ["RemeshSettings", "RemeshResult", "DegenerateTessellation", "remesh", "polymesh_quality"]
+
+
+class DegenerateTessellation(InputError):
+    """The remesh left fewer than three cells (too few cells asked for the surface and its field)."""
 
 Progress = Callable[[str, "float | None"], None]
 #: The grid as a caller will make it buildable (collapses of the beams its joints cannot take).
@@ -605,7 +609,7 @@ def _remesh(mesh: TriMesh, field: GuidingField, settings: RemeshSettings, *,
         quality["total_length_target_m"] = settings.total_length
         quality["total_length_error"] = polymesh.total_length / settings.total_length - 1.0
     if quality["n_faces"] < 3:
-        raise InputError("remesh: the tessellation degenerated", hint="lower D or A, or ask for more cells")
+        raise DegenerateTessellation("remesh: the tessellation degenerated", hint="lower D or A, or ask for more cells")
     return RemeshResult(polymesh=polymesh, quality=quality)
 
 

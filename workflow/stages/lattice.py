@@ -1,7 +1,9 @@
 """Lattice grids in the remesh and optimize stages (``[remesh] grid`` = quad, quad45, triangular or
-statics_quad): the reference grids of engine.remeshing.grids built for the project, and passed through the
-optimiser unchanged, as ``gridshell compare`` analyses them (the optimiser's regularity and
-grading targets are a Voronoi grid's; a lattice is already regular and planar where flat).
+statics_quad): the reference grids of engine.remeshing.grids built for the project, made buildable
+for their joints in the remesh stage as a Voronoi grid is (coarsened, short beams collapsed), and
+passed through the optimiser unchanged (the optimiser's regularity and grading targets are a
+Voronoi grid's; a lattice is already regular and planar where flat). ``gridshell compare``
+analyses its lattices as laid out, at the Voronoi grid's length.
 
 Artifacts as the Voronoi grid's: 04-remesh/gridshell.obj, remesh.json (with ``grid``, the length
 asked for and how near it is), degree.png; 05-optimize/gridshell.obj (the same grid), panels.obj,
@@ -71,23 +73,49 @@ def build_lattice(surface: SurfaceResult, field: GuidingField, project: Project,
 
 
 def run_remesh(surface: SurfaceResult, field: GuidingField, project: Project, ctx: StageContext) -> PolyMesh:
-    """The remesh stage for a lattice: built, written and measured (against the field too)."""
+    """The remesh stage for a lattice: built, made buildable as a Voronoi grid is (coarsened where
+    most beams are shorter than their joints take, unless [remesh] coarsen_for_joints is false,
+    then its short beams flipped or collapsed, the lines cut short by the outline most of all;
+    findings say so), written and measured (against the field too)."""
+    from types import SimpleNamespace
+
     from engine.remeshing.grid_quality import polymesh_quality
+    from engine.remeshing.local_global import ClosestSurfacePoints
 
     from .polymesh_io import write_polymesh_obj
-    from .remesh import grid_figures, short_share
+    from .remesh import COARSEN_SHARE, buildable_grid, coarsened_finding, fitted_to_joints, too_fine_finding
 
     kind = GridKind(project.remesh.grid)
     length = target_length(surface, project)
     ctx.step(f"{NAMES[kind]} lattice of {length:.1f} m of beams")
-    polymesh = build_lattice(surface, field, project, length)
+    built = SimpleNamespace(polymesh=build_lattice(surface, field, project, length))
+    asked, remeshes = project.remesh.n_cells or built.polymesh.n_faces, 0
+    if project.remesh.coarsen_for_joints:
+        def coarser(n_cells: int) -> SimpleNamespace:
+            nonlocal length
+            length = lattice_total_length(surface.mesh, kind, n_cells=n_cells)
+            return SimpleNamespace(polymesh=build_lattice(surface, field, project, length))
+
+        built, remeshes = fitted_to_joints(built, project, coarser, progress=ctx.step)
+    if remeshes:
+        ctx.report_findings([coarsened_finding(asked, built, project.section.size_key())])
+    # no optimiser follows to lengthen them: every beam shorter than its joints take is collapsed or
+    # flipped, up to the share that coarsening leaves (the lines the outline cuts short are many: a
+    # quarter of the beams of a 5 m dome's square lattice of 80 cells, the lattice's own beams twice
+    # as long as their joints take)
+    ctx.step("collapsing beams shorter than the joints and the shortest cut take")
+    closest = ClosestSurfacePoints(surface.mesh)
+    polymesh, buildable = buildable_grid(built.polymesh, project, max_share=COARSEN_SHARE,
+                                         normals=lambda points: closest.closest_normals(points)[1])
+    if buildable["too_fine"]:
+        ctx.report_findings([too_fine_finding(buildable, "remesh", project.section.size_key())])
     write_polymesh_obj(polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: {NAMES[kind]} lattice grid-shell (remesh)")
     quality = polymesh_quality(polymesh, mesh=surface.mesh, field=field)
     quality.update({"grid": kind.value, "total_length_target_m": length,
-                    "total_length_error": polymesh.total_length / length - 1.0,
-                    "buildable": {"short_share_before": short_share(polymesh, project), "collapsed_beams": 0,
-                                  "flipped_beams": 0, **grid_figures(polymesh)}})
+                    "total_length_error": polymesh.total_length / length - 1.0, "buildable": buildable,
+                    "coarsened": {"cells_asked": int(asked), "cells_built": int(polymesh.n_faces),
+                                  "remeshes": remeshes}})
     write_text_atomic(ctx.folder / "remesh.json", json.dumps(quality, indent=1, default=float))
     ctx.step("drawing")
     plot_gridshell(polymesh, ctx.folder / "degree.png", color_by="degree",
@@ -117,7 +145,7 @@ def run_optimize(surface: SurfaceResult, field: GuidingField, remesh: PolyMesh, 
     split = sorted({p.cell for p in pieces if p.piece})
     built = grid_figures(polymesh)
     quality = {"grid": kind.value, "optimised": False,
-               "note": "a lattice grid goes through unchanged, as gridshell compare analyses it",
+               "note": "a lattice grid goes through unchanged (made buildable in the remesh stage)",
                "before": figures, "after": figures,
                "buildable": {"collapsed_beams": 0, "flipped_beams": 0, "removed_beams": 0,
                              "short_beams_left": short_count(polymesh, project), **built},
