@@ -85,8 +85,32 @@ def rigid_body_modes(vertices: np.ndarray) -> np.ndarray:
 
 def count_free_rigid_modes(vertices: np.ndarray, restrained: np.ndarray) -> int:
     """How many rigid-body motions the restrained DOFs (6n,) bool leave free."""
+    return len(_free_rigid_motions(vertices, restrained))
+
+
+#: The rigid-body motions of rigid_body_modes, as free_rigid_motions names them.
+RIGID_MOTIONS = ("sliding along x", "sliding along y", "sliding along z",
+                 "turning about x", "turning about y", "turning about z")
+
+
+def _free_rigid_motions(vertices: np.ndarray, restrained: np.ndarray) -> np.ndarray:
+    """(k, 6) an orthonormal basis of the rigid-body motions (coefficients of rigid_body_modes)
+    that the restrained DOFs (6n,) bool leave free."""
     constrained = rigid_body_modes(vertices)[restrained]
     if constrained.size == 0:
-        return 6
-    singular = np.linalg.svd(constrained, compute_uv=False)
-    return int(6 - np.sum(singular > 1e-9 * max(singular.max(), 1e-300)))
+        return np.eye(6)
+    _, singular, vt = np.linalg.svd(constrained)
+    rank = int(np.sum(singular > 1e-9 * max(singular.max(), 1e-300)))
+    return vt[rank:]
+
+
+def free_rigid_motions(vertices: np.ndarray, restrained: np.ndarray) -> list[str]:
+    """The rigid-body motions the restrained DOFs (6n,) bool leave free, named (RIGID_MOTIONS;
+    rotations about axes through the vertices' centroid): each translation or rotation that lies
+    mostly (over half its length) among the free ones; empty when none is free."""
+    free = _free_rigid_motions(vertices, restrained)
+    if not len(free):
+        return []
+    share = np.linalg.norm(free, axis=0)  # how much of each unit motion the free ones hold
+    names = [RIGID_MOTIONS[i] for i in np.flatnonzero(share > 0.5)]
+    return names or ["sliding and turning at once"]

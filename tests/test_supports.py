@@ -103,3 +103,42 @@ def test_combinations_are_factored_sums():
     assert uls.point_load_array(5)[3, 2] == pytest.approx(-7.5)
     with pytest.raises(InputError, match="wind"):
         combine(cases, LoadCombination(name="x", limit_state=LimitState.SLS, factors={"wind": 1.0}))
+
+
+def test_the_free_rigid_motions_of_a_plane_held_in_its_plane_are_named():
+    """Nodes in the plane z = 0 held in x and y only (rollers along z) can still slide along z and
+    turn about x and y, which move them along z alone; held in z as well at three nodes not on a
+    line, nothing is free."""
+    from engine.linalg import count_free_rigid_modes, free_rigid_motions
+
+    rng = np.random.default_rng(3)
+    nodes = np.c_[rng.uniform(-5, 5, (20, 2)), np.zeros(20)]
+    held = np.zeros((20, 6), dtype=bool)
+    held[:, :2] = True
+    assert free_rigid_motions(nodes, held.ravel()) == ["sliding along z", "turning about x", "turning about y"]
+    assert count_free_rigid_modes(nodes, held.ravel()) == 3
+    held[:3, 2] = True
+    assert free_rigid_motions(nodes, held.ravel()) == [] and count_free_rigid_modes(nodes, held.ravel()) == 0
+
+
+def test_a_column_inside_the_roof_holds_the_grid_node_nearest_it():
+    """A cap on its edge and on a column under its crown: the remeshed grid is held at its edge
+    and at the node nearest the crown, inside the grid (the crown's support used to go to the
+    nearest edge node, and the grid to the analysis without its column)."""
+    from engine.remeshing.field import GuidingField
+    from engine.remeshing.voronoi import RemeshSettings, remesh
+
+    mesh = parametric.cap(span=10.0, span_to_rise=5.0, rings=10)
+    crown = int(np.argmax(mesh.vertices[:, 2]))
+    held = mesh.boundary_vertices.copy()
+    held[crown] = True
+    n = mesh.n_vertices
+    field = GuidingField(size=np.ones(n), anisotropy=np.ones(n), direction=np.tile([1.0, 0, 0], (n, 1)),
+                         normals=mesh.vertex_normals)
+    grid = remesh(mesh, field, RemeshSettings(n_cells=40), support_vertices=held).polymesh
+    inside = np.flatnonzero(grid.supports & ~grid.boundary)
+    assert len(inside) == 1
+    nearest = np.linalg.norm(grid.nodes - mesh.vertices[crown], axis=1).argmin()
+    assert inside[0] == nearest
+    assert np.linalg.norm(grid.nodes[nearest] - mesh.vertices[crown]) < grid.beam_lengths.mean()
+    assert np.all(grid.supports[grid.boundary])

@@ -395,8 +395,10 @@ def _polygons(mesh: TriMesh, fine: _Fine, labels: np.ndarray, centroids: np.ndar
 
 def support_nodes(mesh: TriMesh, nodes: np.ndarray, boundary: np.ndarray, support_vertices: np.ndarray | None,
                   *, boundary_ids: np.ndarray | None = None) -> np.ndarray:
-    """Boundary nodes whose nearest boundary vertex of the surface is supported, and the node
-    nearest to each supported vertex (``boundary_ids``: the surface's boundary vertices, when known)."""
+    """Boundary nodes whose nearest boundary vertex of the surface is supported, the boundary node
+    nearest to each supported boundary vertex, and the node nearest to each supported vertex inside
+    the surface (a column under the roof: held at its nearest node, not moved to the edge)
+    (``boundary_ids``: the surface's boundary vertices, when known)."""
     supports = np.zeros(len(nodes), dtype=bool)
     if support_vertices is None or not np.any(support_vertices):
         return supports
@@ -406,7 +408,22 @@ def support_nodes(mesh: TriMesh, nodes: np.ndarray, boundary: np.ndarray, suppor
     if len(boundary_ids) and np.any(boundary):
         _, nearest = cKDTree(mesh.vertices[boundary_ids]).query(nodes[boundary])
         supports[np.flatnonzero(boundary)[support_vertices[boundary_ids[nearest]]]] = True
+    # a supported vertex within half an edge of the surface's boundary is on it (a modeller's
+    # flag one vertex in from the edge: hyperbol2 has six 1-2 mm in)
+    on_edge = np.zeros(len(support_vertices), dtype=bool)
+    on_edge[boundary_ids] = True
+    if len(boundary_ids):
+        edges = mesh.edges
+        half_edge = 0.5 * float(np.median(np.linalg.norm(mesh.vertices[edges[:, 1]] - mesh.vertices[edges[:, 0]],
+                                                          axis=1)))
+        flagged = np.flatnonzero(support_vertices & ~on_edge)
+        distance, _ = cKDTree(mesh.vertices[boundary_ids]).query(mesh.vertices[flagged])
+        on_edge[flagged[distance <= half_edge]] = True
+    inside = support_vertices & ~on_edge
     candidates = np.flatnonzero(boundary) if np.any(boundary) else np.arange(len(nodes))
-    _, nearest_node = cKDTree(nodes[candidates]).query(mesh.vertices[support_vertices])
+    _, nearest_node = cKDTree(nodes[candidates]).query(mesh.vertices[support_vertices & on_edge])
     supports[candidates[nearest_node]] = True
+    if inside.any():
+        _, nearest_node = cKDTree(nodes).query(mesh.vertices[inside])
+        supports[nearest_node] = True
     return supports

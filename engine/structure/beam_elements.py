@@ -16,7 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InputError, MechanismError
-from ..linalg import assemble_blocks, block_diagonal, count_free_rigid_modes, node_dofs
+from ..linalg import assemble_blocks, block_diagonal, count_free_rigid_modes, free_rigid_motions, node_dofs
 from .condensed import CondensedFactor, FillOrdering
 from .supports import Supports
 
@@ -255,9 +255,11 @@ def restrained_dofs(supports: Supports, n_original: int, n_all: int) -> np.ndarr
 
 
 def check_rigid_modes(nodes: np.ndarray, restrained: np.ndarray) -> None:
+    """Raise MechanismError when the restrained DOFs (6n,) bool leave rigid-body motions free, naming them."""
     free_modes = count_free_rigid_modes(nodes, restrained)
     if free_modes:
-        raise MechanismError(f"the frame is a mechanism: its supports leave {free_modes} rigid-body mode(s) free",
+        raise MechanismError(f"the frame is a mechanism: its supports leave {free_modes} rigid-body mode(s) free "
+                             f"({', '.join(free_rigid_motions(nodes, restrained))})",
                              n_modes=free_modes, hint="support more nodes or restrain more directions")
 
 

@@ -20,7 +20,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from ..errors import InputError, MechanismError
-from ..linalg import assemble_blocks, block_diagonal, congruent, count_free_rigid_modes, node_dofs
+from ..linalg import assemble_blocks, block_diagonal, congruent, count_free_rigid_modes, free_rigid_motions, node_dofs
 from ..mesh import TriMesh
 from .loads import GRAVITY, LoadCase, equilibrium_error, resultant
 from .supports import Supports
@@ -337,7 +337,8 @@ def analyse_shell(mesh: TriMesh, supports: Supports, loads: np.ndarray, *, thick
     free_rigid = count_free_rigid_modes(mesh.vertices, restrained)
     if free_rigid:
         raise MechanismError(f"the shell is a mechanism: its supports leave {free_rigid} rigid-body "
-                             f"mode(s) free", n_modes=free_rigid,
+                             f"mode(s) free ({', '.join(free_rigid_motions(mesh.vertices, restrained))})",
+                             n_modes=free_rigid,
                              hint="support more nodes or restrain more directions (e.g. pinned instead of rollers)")
     K, data = shell_stiffness(mesh.vertices, mesh.faces, thickness, material)
     free = np.flatnonzero(~restrained)

@@ -24,6 +24,7 @@ from engine.design.sizing import size_sections
 from engine.design.verdicts import VerdictFixes, design_verdicts, findings_of
 from engine.errors import ConvergenceError, MechanismError
 from engine.findings import Finding
+from engine.linalg import free_rigid_motions
 from engine.mesh import PolyMesh
 from engine.structure.frame import FrameModel, factor_stiffness, linear_buckling, linear_static
 from engine.structure.grid_model import (
@@ -100,6 +101,12 @@ def grid_normals(polymesh: PolyMesh, surface: SurfaceResult, project: Project | 
     return node_normals(polymesh, surface.mesh, symmetry_planes=planes)
 
 
+#: What a mechanism's message says to do.
+SUPPORTS_HINT = ('hold more nodes or more directions in [[supports]] (select, restraint): roller_x, roller_y and '
+                 'roller_z leave that axis free; a support that holds the roof up and lets it slide is '
+                 'restraint = [0, 0, 1, 0, 0, 0]; with --surface: --supports boundary')
+
+
 def build_frame(polymesh: PolyMesh, surface: SurfaceResult, props: BeamProperties,
                 elements_per_beam: int, project: Project | None = None) -> tuple[FrameModel, Supports, np.ndarray]:
     """(FrameModel, Supports, node normals) of the grid-shell (``project``: its symmetry planes for
@@ -117,7 +124,12 @@ def build_frame(polymesh: PolyMesh, surface: SurfaceResult, props: BeamPropertie
         raise MechanismError("the grid-shell has no supported node, so it is a free body",
                              n_modes=6, hint="check the supports of the surface: they must lie on the "
                                              "grid-shell's boundary")
-    return model, Supports(nodes=nodes, restraints=flags), normals
+    supports = Supports(nodes=nodes, restraints=flags)
+    free = free_rigid_motions(polymesh.nodes, supports.dof_mask(polymesh.n_nodes).ravel())
+    if free:  # the surface's supports can hold the shell and not the grid's fewer nodes
+        raise MechanismError(f"the grid-shell is a mechanism: its {len(nodes)} supported nodes leave it free "
+                             f"({', '.join(free)})", n_modes=len(free), hint=SUPPORTS_HINT)
+    return model, supports, normals
 
 
 def _plan_span(polymesh) -> float:
