@@ -252,14 +252,15 @@ def _tube_clashes(polymesh: PolyMesh, table, geometries: list[JointGeometry], jo
     return [c.to_dict() for c in clashes]
 
 
-def _tube_clash_finding(clash: dict) -> Finding:
+def _tube_clash_finding(clash: dict, size_key: str = "[section] diameter") -> Finding:
+    """The finding of a tube that runs into a joint or tube (``size_key``: the section's size keys)."""
     beam, other = clash["parts"]
     what = f"joint {other}, which it does not end in" if other.startswith("J") else f"beam {other}"
     return Finding(kind="tube_clash", parts=[beam, other], measure=clash["depth_mm"], limit=TUBE_CLASH_MM,
                    unit="mm", stage="fabrication",
                    message=f"beam {beam} runs {clash['depth_mm']:.1f} mm into {what}, near {clash['at_mm']} mm",
-                   fix="a smaller [section] diameter, or fewer cells ([remesh] n_cells) so that the cells are wider "
-                       "than the tubes; where the surface folds, smooth it or move its supports")
+                   fix=f"a smaller beam ({size_key}), or fewer cells ([remesh] n_cells) so that the cells are wider "
+                       "than the beams; where the surface folds, smooth it or move its supports")
 
 
 def _beam_shapes(project: Project, polymesh: PolyMesh, normals: np.ndarray,
@@ -448,7 +449,7 @@ def _beams_panels_drawings_assembly(project: Project, ctx: StageContext, clock: 
     write_cut_list(table, folder / "beams")
     clock.start("beams: clearance")
     summary["tube_clashes"] = _tube_clashes(polymesh, table, geometries, joint_settings, sizes_mm, rectangle)
-    findings += [_tube_clash_finding(c) for c in summary["tube_clashes"]]
+    findings += [_tube_clash_finding(c, project.section.size_key()) for c in summary["tube_clashes"]]
     # the saw's files: round tubes, and rectangular hollow sections (not solid bars, nor timber)
     if tubes is not None or (rectangle is not None and solid_walls_mm is not None):
         clock.start("beams: NC1 files")
