@@ -213,3 +213,58 @@ def test_node_normals_of_a_symmetric_grid_are_mirror_images_and_nearer_the_surfa
     exact /= np.linalg.norm(exact, axis=1)[:, None]
     error = lambda normals: np.degrees(np.arccos(np.clip(np.sum(normals * exact, axis=1), -1, 1))).mean()  # noqa: E731
     assert not np.allclose(raw, symmetric) and error(symmetric) < error(raw)
+
+
+def test_a_plane_the_surface_is_not_symmetric_about_is_refused_naming_a_plane_that_is(tmp_path, capsys):
+    """The cap modelled 5 m off the origin with its planes left through the origin: the field was
+    averaged with the mirror images of unrelated points and the grid made without symmetry, without
+    a word. validate and run now stop with one message naming [field] symmetry_planes[0], the gap
+    measured here by reflecting the vertices, and the plane through the surface's centre, about
+    which it is symmetric."""
+    from engine.geometry.parametric import cap
+    from workflow.cli import main
+
+    mesh = cap(span=20.0, span_to_rise=21.43, rings=12)
+    moved = mesh.vertices + [5.0, 0.0, 0.0]
+    path = tmp_path / "cap.obj"
+    path.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in moved)
+                    + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in mesh.faces))
+    text = (resources.files("templates") / "cap.toml").read_text(encoding="utf-8")
+    surface = text[text.index("[surface]"):text.index("[[supports]]")]
+    project = tmp_path / "project.toml"
+    project.write_text(text.replace(surface, f'[surface]\nfile = "{path}"\n\n'), encoding="utf-8")
+    gap = cKDTree(moved).query(moved * [-1.0, 1.0, 1.0])[0].max()
+    for command in (["validate", str(project)], ["run", str(project), "--out", str(tmp_path / "out"), "--quiet"]):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert "Traceback" not in err and err.count("error:") == 1, err
+        assert "[field] symmetry_planes[0]" in err and f"{gap:.3g} m" in err
+        assert "point = [5.000, 0.000," in err
+
+
+def test_a_symmetric_surface_meshed_otherwise_gets_a_grid_of_its_own_and_a_finding(tmp_path):
+    """The cap turned 7 degrees about its axis is still symmetric about both planes, but its mesh
+    is not its own mirror image vertex by vertex, which the remesher needs: the run goes on (the
+    surface passes the field's check), and the grid, not symmetric (measured here), comes with the
+    grid_not_symmetric finding naming the keys."""
+    from engine.geometry.parametric import cap
+
+    mesh = cap(span=20.0, span_to_rise=21.43, rings=8)
+    a = np.radians(7.0)
+    turned = mesh.vertices @ np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]]).T
+    path = tmp_path / "cap.obj"
+    path.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in turned)
+                    + "".join(f"f {p + 1} {q + 1} {r + 1}\n" for p, q, r in mesh.faces))
+    template = load_project(resources.files("templates") / "cap.toml")
+    project = template.model_copy(update={
+        "surface": template.surface.model_copy(update={"template": None, "parameters": {}, "file": str(path)}),
+        "remesh": template.remesh.model_copy(update={"n_cells": 40})})
+    out = tmp_path / "out"
+    summary = run_project(project, out, STAGES, until="remesh", progress=Progress(enabled=False))
+    assert summary.message is None, summary.message
+    grid = read_polymesh_obj(out / "04-remesh" / "gridshell.obj")
+    deviations = [_deviation(grid.nodes, grid.beam_lengths, p.normal) for p in project.field.symmetry_planes]
+    assert max(deviations) > TOLERANCE
+    finding = next(f for f in summary.findings if f["kind"] == "grid_not_symmetric")
+    assert finding["measure"] == pytest.approx(max(deviations), rel=1e-6)
+    assert "[field] symmetry_planes" in finding["fix"]

@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 from ..mesh import PolyMesh
 
 __all__ = ["SYMMETRY_TOLERANCE", "Plane", "reflect", "mirror_partners", "symmetrise_points", "symmetrise_directions",
-           "symmetry_deviation", "symmetry_record", "symmetrised_grid"]
+           "symmetry_deviation", "symmetry_record", "symmetrised_grid", "mirror_gap"]
 
 Plane = tuple[Sequence[float], Sequence[float]]
 
@@ -91,6 +91,14 @@ def symmetry_deviation(points: np.ndarray, planes: Sequence[Plane], length: floa
     ``length`` (the mean beam length, m)."""
     tree = cKDTree(np.asarray(points, dtype=float))
     return [float(tree.query(reflect(points, plane))[0].max() / max(length, 1e-300)) for plane in planes]
+
+
+def mirror_gap(vertices: np.ndarray, plane: Plane) -> float:
+    """The largest distance (m) from a vertex's mirror image through ``plane`` to the nearest vertex:
+    0 for a surface meshed symmetrically, up to about an edge for a symmetric surface meshed
+    otherwise, and as large as the surface's own asymmetry beyond that."""
+    vertices = np.asarray(vertices, dtype=float)
+    return float(cKDTree(vertices).query(reflect(vertices, plane))[0].max())
 
 
 def symmetry_record(points: np.ndarray, planes: Sequence[Plane], length: float) -> dict:

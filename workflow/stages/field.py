@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from engine.errors import InputError
+from engine.mesh import TriMesh
 from engine.remeshing.field import GuidingField, guiding_field
 from engine.structure.shell import ShellResult
 from fabrication.files import atomic_path, write_text_atomic
@@ -21,11 +23,48 @@ from ..plots.field import plot_field
 from ..runner import StageContext
 from .surface import SurfaceResult
 
-__all__ = ["run", "load", "save_field", "load_field"]
+__all__ = ["run", "load", "save_field", "load_field", "check_symmetry_planes"]
+
+
+#: A surface is taken for symmetric about a [field] symmetry plane while its vertices' mirror images
+#: lie within this share of its size across (the diagonal of its box), plus two of its median
+#: edges (a symmetric surface meshed otherwise), of a vertex.
+SYMMETRY_GAP_SHARE = 0.02
+
+
+def check_symmetry_planes(mesh: TriMesh, project: Project) -> None:
+    """Raise InputError, naming [field] symmetry_planes and a plane that would do, where the surface
+    is not symmetric about one of them (a plane through the origin of a roof modelled elsewhere,
+    or on a roof that has none): the field would be averaged with unrelated points, and the grid
+    made without symmetry, without a word."""
+    from engine.geometry.symmetry import mirror_gap
+
+    planes = project.field.to_settings().symmetry_planes
+    if not planes:
+        return
+    edges = mesh.edges
+    edge = float(np.median(np.linalg.norm(mesh.vertices[edges[:, 1]] - mesh.vertices[edges[:, 0]], axis=1)))
+    low, high = mesh.bounds
+    allowed = SYMMETRY_GAP_SHARE * float(np.linalg.norm(high - low)) + 2.0 * edge
+    centre = 0.5 * (low + high)
+    for index, (point, normal) in enumerate(planes):
+        gap = mirror_gap(mesh.vertices, (point, normal))
+        if gap <= allowed:
+            continue
+        there = mirror_gap(mesh.vertices, (centre, normal))
+        where = ", ".join(f"{c:.6g}" for c in point)
+        hint = (f"point = [{', '.join(f'{c:.3f}' for c in centre)}], the centre of the surface's box, where it is "
+                f"symmetric within {there:.3g} m" if there <= allowed else
+                "the surface is not symmetric about a plane of that normal through its centre either: remove the plane")
+        raise InputError(f"[field] symmetry_planes[{index}]: the surface is not symmetric about the plane through "
+                         f"[{where}] m with normal {list(map(float, normal))}: a vertex's mirror image lies "
+                         f"{gap:.3g} m from the surface's nearest vertex (at most {allowed:.3g} m taken for symmetric)",
+                         hint=hint)
 
 
 def run(surface: SurfaceResult, shell: ShellResult, project: Project, ctx: StageContext) -> GuidingField:
     mesh = surface.mesh
+    check_symmetry_planes(mesh, project)
     ctx.step("stress to metric")
     field = guiding_field(mesh, shell.vertex_membrane_forces, project.field.to_settings())
     save_field(field, ctx.folder / "field.npz")

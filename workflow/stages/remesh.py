@@ -20,7 +20,7 @@ import numpy as np
 
 from engine.findings import Finding
 from engine.geometry.symmetry import symmetrised_grid, symmetry_record
-from engine.mesh import PolyMesh
+from engine.mesh import PolyMesh, TriMesh
 from engine.remeshing.collapse import CollapseReport, Normals, collapse_short_beams
 from engine.remeshing.field import GuidingField, guiding_field
 from engine.remeshing.grid_quality import polymesh_quality
@@ -111,6 +111,8 @@ def _voronoi(surface: SurfaceResult, field: GuidingField, project: Project, ctx:
         quality["statics_rounds"] = rounds
     if planes:  # of the grid as written
         quality["symmetry"] = symmetry_record(polymesh.nodes, planes, float(polymesh.beam_lengths.mean()))
+        if not quality["symmetry"]["symmetric"]:
+            ctx.report_findings([asymmetric_finding(quality["symmetry"], surface.mesh)])
     if grid != GridKind.VORONOI:  # recorded where set: the default grid's remesh.json is as before
         quality["grid"] = grid.value
     write_text_atomic(ctx.folder / "remesh.json", json.dumps(quality, indent=1, default=float))
@@ -291,6 +293,26 @@ def too_fine_finding(record: dict, stage: str, size_key: str = "[section] diamet
                             "they are not collapsed"),
                    fix=f"fewer cells ([remesh] n_cells), a smaller beam ({size_key}) or smaller joints "
                        "([fabrication.joints] kind, hub_radius, sleeve_length)").to_dict()
+
+
+def asymmetric_finding(record: dict, mesh: TriMesh) -> dict:
+    """The finding that the grid came out without the symmetry [field] symmetry_planes ask for
+    (``record``: symmetry_record of the grid): the remesher mirrors the surface's mesh vertex by
+    vertex, so a symmetric surface meshed otherwise (or symmetric only roughly) gets a grid of its
+    own (JSON-ready)."""
+    from engine.geometry.symmetry import mirror_gap
+
+    planes = [(p["point"], p["normal"]) for p in record["planes"]]
+    worst = int(np.argmax(record["deviation"]))
+    gap = mirror_gap(mesh.vertices, planes[worst])
+    return Finding(kind="grid_not_symmetric", parts=["grid"], measure=float(record["deviation"][worst]),
+                   limit=float(record["tolerance"]), unit="mean beams", stage="remesh",
+                   message=(f"the grid is not symmetric about [field] symmetry_planes[{worst}]: a node's mirror image "
+                            f"lies {record['deviation'][worst]:.2f} mean beams from a node. The surface's mesh is "
+                            f"not its own mirror image vertex by vertex (a vertex's lies {gap:.3g} m from a "
+                            "vertex), which the remesher needs"),
+                   fix="mesh the surface symmetrically (mirror one half of it in the modeller), or remove "
+                       "[field] symmetry_planes").to_dict()
 
 
 def load(folder: Path, project: Project) -> RemeshedGrid:

@@ -180,10 +180,14 @@ def resolve_loads(mesh: TriMesh, project: Project) -> tuple[dict[str, LoadCase],
 
 def check_selections(project: Project) -> int:
     """What the surface stage rejects before it writes anything, for ``validate``: the surface
-    builds (a template in milliseconds; a file read and cleaned), every support selection matches
-    a node and every point load finds its node. Returns the number of supported nodes. Raises the
-    stage's GridshellError, with the same message."""
+    builds (a template in milliseconds; a file read and cleaned), it is symmetric about the
+    [field] symmetry planes (the field stage's check_symmetry_planes), every support selection
+    matches a node and every point load finds its node. Returns the number of supported nodes.
+    Raises the stage's GridshellError, with the same message."""
+    from .field import check_symmetry_planes
+
     mesh, _ = build_surface(project)
+    check_symmetry_planes(mesh, project)
     supports = resolve_supports(mesh, project.supports)
     resolve_loads(mesh, project)
     return int(len(supports.nodes))
