@@ -68,6 +68,18 @@ def single_threaded_blas():
     return threadpool_limits(limits=1, user_api="blas")
 
 
+def tangent_projectors(normals: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) P = I - n n^T of the unit ``normals`` (n, 3): each projects onto its tangent plane."""
+    normals = np.asarray(normals, dtype=float)
+    return np.eye(3)[None] - np.einsum("ni,nj->nij", normals, normals)
+
+
+def in_tangent_planes(tensors: np.ndarray, projectors: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) P T P: the ``tensors`` (n, 3, 3) projected into the tangent planes of their
+    ``projectors`` (tangent_projectors)."""
+    return np.einsum("nij,njk,nkl->nil", projectors, tensors, projectors)
+
+
 def rigid_body_modes(vertices: np.ndarray) -> np.ndarray:
     """(6n, 6) the three translations and three rotations (about the centroid) of the nodes."""
     n = len(vertices)

@@ -20,6 +20,7 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from ..errors import InputError
+from ..linalg import in_tangent_planes, tangent_projectors
 from ..mesh import TriMesh
 
 __all__ = ["GuidingField", "SizeMap", "AnisotropyMap", "Orientation", "FieldSettings", "guiding_field",
@@ -236,13 +237,13 @@ def smooth_directions(mesh: TriMesh, directions: np.ndarray, normals: np.ndarray
     neighbours, projected onto each tangent plane; ``weights`` (n,) favour strongly directed vertices."""
     adjacency = _adjacency(mesh)
     w = np.ones(mesh.n_vertices) if weights is None else np.asarray(weights, dtype=float)
-    P = np.eye(3)[None] - np.einsum("ni,nj->nij", normals, normals)
+    P = tangent_projectors(normals)
     tensors = np.einsum("ni,nj->nij", directions, directions) * w[:, None, None]
     direction = directions
     for _ in range(iterations):
         flat = tensors.reshape(len(tensors), 9)
         averaged = (0.5 * flat + 0.5 * (adjacency @ flat) / np.maximum(np.asarray(adjacency.sum(axis=1)), 1.0))
-        tensors = np.einsum("nij,njk,nkl->nil", P, averaged.reshape(-1, 3, 3), P)
+        tensors = in_tangent_planes(averaged.reshape(-1, 3, 3), P)
         direction = _line_tensor_direction(tensors, normals)
     return direction
 
@@ -268,8 +269,8 @@ def symmetrise(mesh: TriMesh, field: GuidingField, planes) -> GuidingField:
         anisotropy = 0.5 * (anisotropy + anisotropy[partner])
         reflected = direction[partner] @ R.T
         tensors = 0.5 * (np.einsum("ni,nj->nij", direction, direction) + np.einsum("ni,nj->nij", reflected, reflected))
-        P = np.eye(3)[None] - np.einsum("ni,nj->nij", field.normals, field.normals)
-        direction = _line_tensor_direction(np.einsum("nij,njk,nkl->nil", P, tensors, P), field.normals)
+        direction = _line_tensor_direction(in_tangent_planes(tensors, tangent_projectors(field.normals)),
+                                           field.normals)
     return GuidingField(size=size, anisotropy=anisotropy, direction=direction, normals=field.normals)
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import InputError
+from ..linalg import in_tangent_planes, tangent_projectors
 from ..mesh import PolyMesh, TriMesh
 
 __all__ = ["node_membrane_forces", "surface_membrane_forces", "beam_cell_counts", "node_tributary_areas"]
@@ -68,8 +69,7 @@ def node_membrane_forces(polymesh: PolyMesh, axial_forces: np.ndarray, normals: 
 
 def _tangent(tensors: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """P T P with P = I - n n^T: (n, 3, 3) tensors projected into the tangent planes."""
-    P = np.eye(3)[None] - np.einsum("ni,nj->nij", normals, normals)
-    return np.einsum("nij,njk,nlk->nil", P, tensors, P)
+    return in_tangent_planes(tensors, tangent_projectors(normals))
 
 
 def surface_membrane_forces(mesh: TriMesh, polymesh: PolyMesh, axial_forces: np.ndarray,

@@ -20,7 +20,16 @@ import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from ..errors import InputError, MechanismError
-from ..linalg import assemble_blocks, block_diagonal, congruent, count_free_rigid_modes, free_rigid_motions, node_dofs
+from ..linalg import (
+    assemble_blocks,
+    block_diagonal,
+    congruent,
+    count_free_rigid_modes,
+    free_rigid_motions,
+    in_tangent_planes,
+    node_dofs,
+    tangent_projectors,
+)
 from ..mesh import TriMesh
 from .loads import GRAVITY, LoadCase, equilibrium_error, resultant
 from .supports import Supports
@@ -274,8 +283,7 @@ def _local_components(frames: np.ndarray, tensors: np.ndarray) -> np.ndarray:
 
 def _tangent(tensors: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """Tensors (n,3,3) projected onto the tangent planes of the unit normals (n,3)."""
-    P = np.eye(3)[None] - np.einsum("ni,nj->nij", normals, normals)
-    return np.einsum("nij,njk,nkl->nil", P, tensors, P)
+    return in_tangent_planes(tensors, tangent_projectors(normals))
 
 
 def _vertex_tensors(mesh: TriMesh, frames: np.ndarray, forces: np.ndarray, area: np.ndarray) -> np.ndarray:
