@@ -142,3 +142,21 @@ def test_a_column_inside_the_roof_holds_the_grid_node_nearest_it():
     assert inside[0] == nearest
     assert np.linalg.norm(grid.nodes[nearest] - mesh.vertices[crown]) < grid.beam_lengths.mean()
     assert np.all(grid.supports[grid.boundary])
+
+
+def test_a_nearest_point_far_off_the_roof_is_refused_and_a_column_foot_under_it_is_not():
+    """Points given in millimetres and read as metres (6000, 4000) are kilometres off a 24 m roof:
+    they used to snap to its corners without a word. A column's foot 4 m under the roof still
+    selects the vertex above it, and a point far out towards a corner, that corner."""
+    from engine.structure.supports import NEAREST_REACH
+
+    x, y = np.meshgrid(np.linspace(-12, 12, 25), np.linspace(-8, 8, 17), indexing="ij")
+    roof = np.c_[x.ravel(), y.ravel(), np.full(x.size, 4.0)]
+    assert roof[select_nearest(roof, [[6.0, 4.0, 0.0]])[0]] == pytest.approx([6.0, 4.0, 4.0])
+    with pytest.raises(SelectionError, match=r"'nearest' point 1 \[6000.0, 4000.0, 0.0\] lies 7\d{3} m") as error:
+        select_nearest(roof, [[6.0, 4.0, 0.0], [6000.0, 4000.0, 0.0]])
+    assert "in metres" in error.value.hint
+    across = np.linalg.norm(np.ptp(roof, axis=0))
+    select_nearest(roof, [[0.0, 0.0, 4.0 + 0.99 * NEAREST_REACH * across]])  # within reach
+    with pytest.raises(SelectionError):
+        select_nearest(roof, [[0.0, 0.0, 4.0 + 1.01 * NEAREST_REACH * across]])

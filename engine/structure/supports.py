@@ -167,8 +167,25 @@ def select_ids(n_nodes: int, ids: list[int]) -> np.ndarray:
     return _nonempty(ids_arr, "'ids'")
 
 
+#: A 'nearest' point may lie this many times the surface's size across (its box's diagonal) from
+#: the node it selects: a column's foot under its roof, or a point far out towards a corner, but not
+#: a point in millimetres read as metres (a thousand times too far) or in the wrong coordinates.
+NEAREST_REACH = 5.0
+
+
 def select_nearest(points: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    """The node nearest to each target point (m)."""
+    """The node nearest to each target point (m). A target farther from every node than
+    NEAREST_REACH times the nodes' size across is refused (SelectionError), naming it."""
+    points = np.asarray(points, dtype=float)
     targets = np.atleast_2d(np.asarray(targets, dtype=float))
     d = np.linalg.norm(points[None, :, :] - targets[:, None, :], axis=2)
-    return _nonempty(d.argmin(axis=1), "'nearest'")
+    nearest = d.argmin(axis=1)
+    across = float(np.linalg.norm(np.ptp(points, axis=0))) if len(points) else 0.0
+    far = np.flatnonzero(d[np.arange(len(targets)), nearest] > NEAREST_REACH * across)
+    if len(far):
+        i = int(far[0])
+        raise SelectionError(f"'nearest' point {i} {[float(f'{c:.6g}') for c in targets[i]]} lies "
+                             f"{d[i, nearest[i]]:.4g} m from the nearest vertex of the surface, itself "
+                             f"{across:.3g} m across",
+                             hint="give points on or near the roof, in metres (or with units: \"6000 mm\")")
+    return _nonempty(nearest, "'nearest'")

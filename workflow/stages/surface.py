@@ -156,11 +156,15 @@ def resolve_loads(mesh: TriMesh, project: Project) -> tuple[dict[str, LoadCase],
     panel_weight = project.carried_panel_weight_N_per_m2
     for name, spec in project.loads.cases.items():
         nodes, forces = [], []
-        for point in spec.points:
-            if point.node is not None:
-                node = int(select_ids(mesh.n_vertices, [point.node])[0])
-            else:
-                node = int(select_nearest(mesh.vertices, np.array(point.nearest))[0])
+        for index, point in enumerate(spec.points):
+            try:
+                if point.node is not None:
+                    node = int(select_ids(mesh.n_vertices, [point.node])[0])
+                else:
+                    node = int(select_nearest(mesh.vertices, np.array(point.nearest))[0])
+            except GridshellError as exc:
+                exc.args = (f"loads.cases.{name}.points[{index}]: {exc.args[0]}",)
+                raise
             nodes.append(node)
             forces.append([*point.force, *point.moment])
         area_true = np.array(spec.area_vector("area_true")) - [0.0, 0.0, spec.panels * panel_weight]
