@@ -124,7 +124,8 @@ def test_the_free_rigid_motions_of_a_plane_held_in_its_plane_are_named():
 def test_a_column_inside_the_roof_holds_the_grid_node_nearest_it():
     """A cap on its edge and on a column under its crown: the remeshed grid is held at its edge
     and at the node nearest the crown, inside the grid (the crown's support used to go to the
-    nearest edge node, and the grid to the analysis without its column)."""
+    nearest edge node, and the grid to the analysis without its column); at 80 cells that node was
+    within COLUMN_SNAP of its shortest beam of the crown, and is moved onto it."""
     from engine.remeshing.field import GuidingField
     from engine.remeshing.voronoi import RemeshSettings, remesh
 
@@ -135,13 +136,15 @@ def test_a_column_inside_the_roof_holds_the_grid_node_nearest_it():
     n = mesh.n_vertices
     field = GuidingField(size=np.ones(n), anisotropy=np.ones(n), direction=np.tile([1.0, 0, 0], (n, 1)),
                          normals=mesh.vertex_normals)
-    grid = remesh(mesh, field, RemeshSettings(n_cells=40), support_vertices=held).polymesh
-    inside = np.flatnonzero(grid.supports & ~grid.boundary)
-    assert len(inside) == 1
-    nearest = np.linalg.norm(grid.nodes - mesh.vertices[crown], axis=1).argmin()
-    assert inside[0] == nearest
-    assert np.linalg.norm(grid.nodes[nearest] - mesh.vertices[crown]) < grid.beam_lengths.mean()
-    assert np.all(grid.supports[grid.boundary])
+    for cells in (40, 80):
+        grid = remesh(mesh, field, RemeshSettings(n_cells=cells), support_vertices=held).polymesh
+        inside = np.flatnonzero(grid.supports & ~grid.boundary)
+        assert len(inside) == 1
+        nearest = np.linalg.norm(grid.nodes - mesh.vertices[crown], axis=1).argmin()
+        assert inside[0] == nearest
+        assert np.linalg.norm(grid.nodes[nearest] - mesh.vertices[crown]) < grid.beam_lengths.mean()
+        assert np.all(grid.supports[grid.boundary])
+    assert np.linalg.norm(grid.nodes[nearest] - mesh.vertices[crown]) < 1e-9
 
 
 def test_a_nearest_point_far_off_the_roof_is_refused_and_a_column_foot_under_it_is_not():
@@ -160,3 +163,38 @@ def test_a_nearest_point_far_off_the_roof_is_refused_and_a_column_foot_under_it_
     select_nearest(roof, [[0.0, 0.0, 4.0 + 0.99 * NEAREST_REACH * across]])  # within reach
     with pytest.raises(SelectionError):
         select_nearest(roof, [[0.0, 0.0, 4.0 + 1.01 * NEAREST_REACH * across]])
+
+
+def test_remesh_json_says_how_far_each_column_is_from_its_node(tmp_path):
+    """A cap held on its edge and a column under its crown, run to the remesh from a PLY whose red
+    vertices are the supports: remesh.json's ``columns`` has the crown and the offset of the
+    interior supported node written in the grid's OBJ and node flags, measured here."""
+    import json
+
+    from engine.mesh import TriMesh
+    from workflow.config import project_from_surface
+    from workflow.progress import Progress
+    from workflow.runner import run_project
+    from workflow.stages import STAGES
+    from workflow.surface_io import write_surface_ply
+
+    mesh = parametric.cap(span=10.0, span_to_rise=5.0, rings=10)
+    crown = int(np.argmax(mesh.vertices[:, 2]))
+    held = mesh.boundary_vertices.copy()
+    held[crown] = True
+    path = write_surface_ply(TriMesh(vertices=mesh.vertices, faces=mesh.faces, flagged=held), tmp_path / "cap.ply")
+    project = project_from_surface(str(path), "flagged")
+    project = project.model_copy(update={"remesh": project.remesh.model_copy(update={"n_cells": 40})})
+    out = tmp_path / "out"
+    assert run_project(project, out, STAGES, until="remesh", progress=Progress(enabled=False)).message is None
+    (column,) = json.loads((out / "04-remesh" / "remesh.json").read_text())["columns"]
+    assert column["column_m"] == pytest.approx(mesh.vertices[crown].tolist())
+    nodes = np.array([line.split()[1:4] for line in (out / "04-remesh" / "gridshell.obj").read_text().splitlines()
+                      if line.startswith("v ")], dtype=float)
+    flags = json.loads((out / "04-remesh" / "gridshell.nodes.json").read_text())
+    supports, boundary = np.zeros(len(nodes), bool), np.zeros(len(nodes), bool)
+    supports[flags["supports"]] = True
+    boundary[flags["boundary"]] = True
+    (inside,) = np.flatnonzero(supports & ~boundary)
+    assert column["node"] == f"N{inside + 1:04d}"
+    assert column["offset_m"] == pytest.approx(np.linalg.norm(nodes[inside] - mesh.vertices[crown]), abs=1e-9)

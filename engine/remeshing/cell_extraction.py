@@ -390,26 +390,16 @@ def _polygons(mesh: TriMesh, fine: _Fine, labels: np.ndarray, centroids: np.ndar
     boundary_ids = boundary_ids[boundary_ids < fine.n_surface_vertices]
     supports = support_nodes(mesh, nodes, boundary, support_vertices, boundary_ids=boundary_ids)
     loops = tuple(np.split(flat, offsets[1:-1]))
+    if support_vertices is not None and np.any(support_vertices):
+        columns = inside_supports(mesh, np.asarray(support_vertices, dtype=bool), boundary_ids)
+        nodes = onto_columns(nodes, loops, supports & ~boundary, mesh.vertices[columns])
     return PolyMesh(nodes=nodes, faces=loops, boundary=boundary, supports=supports, corners=corners)
 
 
-def support_nodes(mesh: TriMesh, nodes: np.ndarray, boundary: np.ndarray, support_vertices: np.ndarray | None,
-                  *, boundary_ids: np.ndarray | None = None) -> np.ndarray:
-    """Boundary nodes whose nearest boundary vertex of the surface is supported, the boundary node
-    nearest to each supported boundary vertex, and the node nearest to each supported vertex inside
-    the surface (a column under the roof: held at its nearest node, not moved to the edge)
-    (``boundary_ids``: the surface's boundary vertices, when known)."""
-    supports = np.zeros(len(nodes), dtype=bool)
-    if support_vertices is None or not np.any(support_vertices):
-        return supports
-    support_vertices = np.asarray(support_vertices, dtype=bool)
-    if boundary_ids is None:
-        boundary_ids = np.flatnonzero(mesh.boundary_vertices)
-    if len(boundary_ids) and np.any(boundary):
-        _, nearest = cKDTree(mesh.vertices[boundary_ids]).query(nodes[boundary])
-        supports[np.flatnonzero(boundary)[support_vertices[boundary_ids[nearest]]]] = True
-    # a supported vertex within half an edge of the surface's boundary is on it (a modeller's
-    # flag one vertex in from the edge: hyperbol2 has six 1-2 mm in)
+def inside_supports(mesh: TriMesh, support_vertices: np.ndarray, boundary_ids: np.ndarray) -> np.ndarray:
+    """(n,) bool: the supported vertices inside the surface (columns under the roof), more than
+    half a median edge from its boundary (``boundary_ids``): a flag one vertex in from the edge is on
+    it (hyperbol2 has six, 1-2 mm in)."""
     on_edge = np.zeros(len(support_vertices), dtype=bool)
     on_edge[boundary_ids] = True
     if len(boundary_ids):
@@ -419,9 +409,52 @@ def support_nodes(mesh: TriMesh, nodes: np.ndarray, boundary: np.ndarray, suppor
         flagged = np.flatnonzero(support_vertices & ~on_edge)
         distance, _ = cKDTree(mesh.vertices[boundary_ids]).query(mesh.vertices[flagged])
         on_edge[flagged[distance <= half_edge]] = True
-    inside = support_vertices & ~on_edge
+    return support_vertices & ~on_edge
+
+
+#: A node is moved onto the column nearest it while the move is under this share of its shortest beam.
+COLUMN_SNAP = 0.4
+
+
+def onto_columns(nodes: np.ndarray, loops: tuple, supports: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """``nodes`` with the supported node nearest each of the ``columns`` (k, 3) moved onto it, where
+    that move is under COLUMN_SNAP of the node's shortest beam (a column stands where it was
+    modelled, not half a cell off; a longer move could fold the cells round it)."""
+    nodes = np.array(nodes, dtype=float)
+    held = np.flatnonzero(supports)
+    if not len(columns) or not len(held):
+        return nodes
+    shortest = np.full(len(nodes), np.inf)
+    for loop in loops:
+        lengths = np.linalg.norm(nodes[np.roll(loop, -1)] - nodes[loop], axis=1)
+        np.minimum.at(shortest, loop, lengths)
+        np.minimum.at(shortest, np.roll(loop, -1), lengths)
+    distance, nearest = cKDTree(nodes[held]).query(columns)
+    node = held[nearest]
+    move = distance < COLUMN_SNAP * shortest[node]
+    nodes[node[move]] = columns[move]
+    return nodes
+
+
+def support_nodes(mesh: TriMesh, nodes: np.ndarray, boundary: np.ndarray, support_vertices: np.ndarray | None,
+                  *, boundary_ids: np.ndarray | None = None) -> np.ndarray:
+    """Boundary nodes whose nearest boundary vertex of the surface is supported, the boundary node
+    nearest to each supported boundary vertex, and the node nearest to each supported vertex inside
+    the surface (a column under the roof: held at its nearest node, not moved to the edge;
+    inside_supports) (``boundary_ids``: the surface's boundary vertices, when known)."""
+    supports = np.zeros(len(nodes), dtype=bool)
+    if support_vertices is None or not np.any(support_vertices):
+        return supports
+    support_vertices = np.asarray(support_vertices, dtype=bool)
+    if boundary_ids is None:
+        boundary_ids = np.flatnonzero(mesh.boundary_vertices)
+    if len(boundary_ids) and np.any(boundary):
+        _, nearest = cKDTree(mesh.vertices[boundary_ids]).query(nodes[boundary])
+        supports[np.flatnonzero(boundary)[support_vertices[boundary_ids[nearest]]]] = True
+    inside = inside_supports(mesh, support_vertices, boundary_ids)
+    on_edge = support_vertices & ~inside
     candidates = np.flatnonzero(boundary) if np.any(boundary) else np.arange(len(nodes))
-    _, nearest_node = cKDTree(nodes[candidates]).query(mesh.vertices[support_vertices & on_edge])
+    _, nearest_node = cKDTree(nodes[candidates]).query(mesh.vertices[on_edge])
     supports[candidates[nearest_node]] = True
     if inside.any():
         _, nearest_node = cKDTree(nodes).query(mesh.vertices[inside])

@@ -21,6 +21,7 @@ import numpy as np
 from engine.findings import Finding
 from engine.geometry.symmetry import symmetrised_grid, symmetry_record
 from engine.mesh import PolyMesh, TriMesh
+from engine.parts import node_id
 from engine.remeshing.collapse import CollapseReport, Normals, collapse_short_beams
 from engine.remeshing.field import GuidingField, guiding_field
 from engine.remeshing.grid_quality import polymesh_quality
@@ -105,6 +106,9 @@ def _voronoi(surface: SurfaceResult, field: GuidingField, project: Project, ctx:
     if buildable["collapsed_beams"] or buildable["flipped_beams"]:  # the figures of the grid as written
         quality.update(polymesh_quality(polymesh, mesh=surface.mesh, field=field))
     quality["buildable"] = buildable
+    columns = column_nodes(surface, polymesh)
+    if columns:
+        quality["columns"] = columns
     quality["coarsened"] = {"cells_asked": int(asked), "cells_built": int(polymesh.n_faces), "remeshes": remeshes}
     quality.update({"max_size_ratio_D": project.field.max_size_ratio, "max_aspect_A": project.field.max_aspect})
     if rounds:
@@ -293,6 +297,27 @@ def too_fine_finding(record: dict, stage: str, size_key: str = "[section] diamet
                             "they are not collapsed"),
                    fix=f"fewer cells ([remesh] n_cells), a smaller beam ({size_key}) or smaller joints "
                        "([fabrication.joints] kind, hub_radius, sleeve_length)").to_dict()
+
+
+def column_nodes(surface: SurfaceResult, polymesh: PolyMesh) -> list[dict]:
+    """Each support inside the surface (a column under the roof) with the grid node that stands on
+    it (numbered as in the remeshed grid's OBJ) and how far that node is from it (JSON-ready; empty
+    without columns): the remesher moves the
+    node onto the column where that is under COLUMN_SNAP of its shortest beam, else the node stays
+    where the cells put it."""
+    from engine.remeshing.cell_extraction import inside_supports
+
+    held = np.zeros(surface.mesh.n_vertices, dtype=bool)
+    held[surface.supports.nodes] = True
+    columns = np.flatnonzero(inside_supports(surface.mesh, held, np.flatnonzero(surface.mesh.boundary_vertices)))
+    inside = np.flatnonzero(polymesh.supports & ~polymesh.boundary)
+    if not len(columns) or not len(inside):
+        return []
+    points = surface.mesh.vertices[columns]
+    distance = np.linalg.norm(points[:, None, :] - polymesh.nodes[inside][None, :, :], axis=2)
+    nearest = distance.argmin(axis=1)
+    return [{"column_m": [float(c) for c in p], "node": node_id(int(inside[k])), "offset_m": float(distance[i, k])}
+            for i, (p, k) in enumerate(zip(points, nearest))]
 
 
 def asymmetric_finding(record: dict, mesh: TriMesh) -> dict:
