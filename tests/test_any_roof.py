@@ -188,8 +188,9 @@ def test_a_roof_too_small_for_its_joints_is_coarsened_no_further_than_the_remesh
     """A 5 m dome in glulam 200 x 160 on steel nodes: its joints take beams of 0.9-1.2 m, so the
     remesh asked 4 cells of a roof the remesher cannot divide in four and the stage failed ("the
     tessellation degenerated", with a hint to ask for more cells). It now stops at
-    MIN_COARSENED_CELLS, and the stage finishes with the grid_coarsened and grid_too_fine findings
-    naming the section's keys."""
+    MIN_COARSENED_CELLS, and the stage finishes with the grid_coarsened finding naming the section's
+    keys. Where the beams are still too short there, grid_too_fine's fix no longer offers fewer
+    cells."""
     from workflow.progress import Progress
     from workflow.runner import run_project
     from workflow.stages import STAGES
@@ -210,6 +211,13 @@ def test_a_roof_too_small_for_its_joints_is_coarsened_no_further_than_the_remesh
     findings = {f["kind"]: f for f in summary.findings}
     assert findings["grid_coarsened"]["limit"] == 80
     assert "[section] height, width" in findings["grid_coarsened"]["fix"]
+    # at the fewest cells the remesher makes, fewer cells is no fix
+    from workflow.stages.remesh import too_fine_finding
+
+    record = {"shortest_beam_mm_at_120deg": 1146.0, "mean_beam_m": 1.186, "short_share_before": 0.74}
+    assert "fewer cells" in too_fine_finding(record, "optimize", cells=MIN_COARSENED_CELLS + 1)["fix"]
+    fewest = too_fine_finding(record, "optimize", "[section] height, width", cells=MIN_COARSENED_CELLS)
+    assert "fewer cells" not in fewest["fix"] and "[section] height, width" in fewest["fix"]
 
 
 def test_a_panel_larger_than_every_sheet_is_a_finding_with_its_dxf(tmp_path):

@@ -108,7 +108,7 @@ def run_remesh(surface: SurfaceResult, field: GuidingField, project: Project, ct
     polymesh, buildable = buildable_grid(built.polymesh, project, max_share=COARSEN_SHARE,
                                          normals=lambda points: closest.closest_normals(points)[1])
     if buildable["too_fine"]:
-        ctx.report_findings([too_fine_finding(buildable, "remesh", project.section.size_key())])
+        ctx.report_findings([too_fine_finding(buildable, "remesh", project.section.size_key(), cells=polymesh.n_faces)])
     write_polymesh_obj(polymesh, ctx.folder / "gridshell.obj",
                        header=f"{project.project.name}: {NAMES[kind]} lattice grid-shell (remesh)")
     quality = polymesh_quality(polymesh, mesh=surface.mesh, field=field)

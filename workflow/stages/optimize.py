@@ -234,7 +234,8 @@ def run(surface: SurfaceResult, field: GuidingField, remesh: RemeshedGrid, proje
     buildable.update({"collapsed_beams": collapsed, "flipped_beams": flipped, "removed_beams": removed,
                       "reoptimised": rounds, "grading_kept": grading_kept, "short_share_at_grading": share_kept})
     if buildable["too_fine"]:
-        ctx.report_findings([too_fine_finding(buildable, "optimize", project.section.size_key())])
+        ctx.report_findings([too_fine_finding(buildable, "optimize", project.section.size_key(),
+                                              cells=result.polymesh.n_faces)])
     elif not grading_kept:
         ctx.report_findings([grading_finding(share_kept, result.quality, project.section.size_key())])
     elif compressed_grading(result.quality):

@@ -287,16 +287,20 @@ def short_share(polymesh: PolyMesh, project: Project) -> float:
     return short_count(polymesh, project) / max(len(polymesh.edges), 1)
 
 
-def too_fine_finding(record: dict, stage: str, size_key: str = "[section] diameter") -> dict:
-    """The finding that the joints are too big for the grid (JSON-ready)."""
+def too_fine_finding(record: dict, stage: str, size_key: str = "[section] diameter", cells: int | None = None) -> dict:
+    """The finding that the joints are too big for the grid (JSON-ready). ``cells``: the grid's,
+    where at MIN_COARSENED_CELLS or fewer the fix no longer offers fewer cells (the roof is too small
+    for its joints at any count)."""
+    fewest = cells is not None and cells <= MIN_COARSENED_CELLS
     return Finding(kind="grid_too_fine", parts=["grid"], measure=record["shortest_beam_mm_at_120deg"],
                    limit=1000 * record["mean_beam_m"], unit="mm", stage=stage,
                    message=(f"{100 * record['short_share_before']:.0f} % of the beams are shorter than the joints "
                             f"and the shortest cut take ({record['shortest_beam_mm_at_120deg']:.0f} mm between "
                             f"120-degree joints, the mean beam is {1000 * record['mean_beam_m']:.0f} mm): "
-                            "they are not collapsed"),
-                   fix=f"fewer cells ([remesh] n_cells), a smaller beam ({size_key}) or smaller joints "
-                       "([fabrication.joints] kind, hub_radius, sleeve_length)").to_dict()
+                            "they are not collapsed" + (f"; the grid has {cells} cells, the fewest the remesher "
+                                                         "makes for its joints" if fewest else "")),
+                   fix=("" if fewest else "fewer cells ([remesh] n_cells), ") + f"a smaller beam ({size_key}) or "
+                       "smaller joints ([fabrication.joints] kind, hub_radius, sleeve_length)").to_dict()
 
 
 def column_nodes(surface: SurfaceResult, polymesh: PolyMesh) -> list[dict]:
