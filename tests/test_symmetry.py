@@ -76,16 +76,18 @@ def test_without_planes_no_symmetry_step_runs(tmp_path, monkeypatch):
     """No plane: the remesh and optimiser never call the symmetry steps, and the records are as before."""
     import engine.geometry.symmetry as symmetry
 
-    def refuse(*args, **kwargs):
-        raise AssertionError("a symmetry step ran without planes")
-
-    for name in ("mirror_partners", "symmetrise_points", "symmetrised_grid", "symmetry_record"):
-        monkeypatch.setattr(symmetry, name, refuse)
+    # imported before the patches: a module first imported under them would keep the refusing
+    # stand-ins as its own names after the test (monkeypatch restores what it found)
     import engine.remeshing.optimize
     import engine.remeshing.voronoi
     import workflow.stages.optimize
     import workflow.stages.remesh
 
+    def refuse(*args, **kwargs):
+        raise AssertionError("a symmetry step ran without planes")
+
+    for name in ("mirror_partners", "symmetrise_points", "symmetrised_grid", "symmetry_record"):
+        monkeypatch.setattr(symmetry, name, refuse)
     for module in (engine.remeshing.voronoi, engine.remeshing.optimize, workflow.stages.remesh,
                    workflow.stages.optimize):
         for name in ("mirror_partners", "symmetrise_points", "symmetrised_grid", "symmetry_record"):
