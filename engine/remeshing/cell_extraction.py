@@ -391,8 +391,8 @@ def _polygons(mesh: TriMesh, fine: _Fine, labels: np.ndarray, centroids: np.ndar
     supports = support_nodes(mesh, nodes, boundary, support_vertices, boundary_ids=boundary_ids)
     loops = tuple(np.split(flat, offsets[1:-1]))
     if support_vertices is not None and np.any(support_vertices):
-        columns = inside_supports(mesh, np.asarray(support_vertices, dtype=bool), boundary_ids)
-        nodes = onto_columns(nodes, loops, supports & ~boundary, mesh.vertices[columns])
+        columns = column_points(mesh, inside_supports(mesh, np.asarray(support_vertices, dtype=bool), boundary_ids))
+        nodes = onto_columns(nodes, loops, supports & ~boundary, columns)
     return PolyMesh(nodes=nodes, faces=loops, boundary=boundary, supports=supports, corners=corners)
 
 
@@ -412,14 +412,65 @@ def inside_supports(mesh: TriMesh, support_vertices: np.ndarray, boundary_ids: n
     return support_vertices & ~on_edge
 
 
-#: A node is moved onto the column nearest it while the move is under this share of its shortest beam.
-COLUMN_SNAP = 0.4
+def column_points(mesh: TriMesh, inside: np.ndarray) -> np.ndarray:
+    """(k, 3) the columns among the supported vertices inside the surface (``inside``, n bool): each
+    group of them joined by edges that lies within two median edges of its centre, at its vertex
+    nearest that centre. A larger group is a supported region (a box of the surface), not a column."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    ids = np.flatnonzero(inside)
+    if not len(ids):
+        return np.zeros((0, 3))
+    edges = mesh.edges
+    lengths = np.linalg.norm(mesh.vertices[edges[:, 1]] - mesh.vertices[edges[:, 0]], axis=1)
+    both = inside[edges[:, 0]] & inside[edges[:, 1]]
+    local = np.full(len(inside), -1)
+    local[ids] = np.arange(len(ids))
+    a, b = local[edges[both, 0]], local[edges[both, 1]]
+    count, label = connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(len(ids), len(ids))),
+                                        directed=False)
+    reach = 2.0 * float(np.median(lengths))
+    points = []
+    for group in range(count):
+        members = mesh.vertices[ids[label == group]]
+        centre = members.mean(axis=0)
+        distance = np.linalg.norm(members - centre, axis=1)
+        if distance.max() <= reach:
+            points.append(members[distance.argmin()])
+    return np.array(points).reshape(-1, 3)
+
+
+#: A node is moved onto the column nearest it while the move is under this share of its shortest
+#: beam and leaves every corner of its cells turning as before (_keeps_corners).
+COLUMN_SNAP = 1.0
+
+
+def _corner_turns(points: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """(k,) the sign of each corner's turn of the polygon ``points`` (k, 3) about ``normal``."""
+    before, after = points - np.roll(points, 1, axis=0), np.roll(points, -1, axis=0) - points
+    return np.sign(np.cross(before, after) @ normal)
+
+
+def _keeps_corners(nodes: np.ndarray, loops: tuple, node: int, target: np.ndarray) -> bool:
+    """Whether moving ``node`` to ``target`` leaves every corner of its cells turning the way it did
+    (about each cell's normal before the move): no cell folds or turns over."""
+    for loop in loops:
+        if node not in loop:
+            continue
+        points = nodes[loop]
+        normal = np.cross(points - points.mean(axis=0), np.roll(points, -1, axis=0) - points.mean(axis=0)).sum(axis=0)
+        moved = points.copy()
+        moved[np.flatnonzero(loop == node)] = target
+        if not np.array_equal(_corner_turns(points, normal), _corner_turns(moved, normal)):
+            return False
+    return True
 
 
 def onto_columns(nodes: np.ndarray, loops: tuple, supports: np.ndarray, columns: np.ndarray) -> np.ndarray:
     """``nodes`` with the supported node nearest each of the ``columns`` (k, 3) moved onto it, where
-    that move is under COLUMN_SNAP of the node's shortest beam (a column stands where it was
-    modelled, not half a cell off; a longer move could fold the cells round it)."""
+    that move is under COLUMN_SNAP of the node's shortest beam and no cell round it folds (a column
+    stands where it was modelled, not half a cell off)."""
     nodes = np.array(nodes, dtype=float)
     held = np.flatnonzero(supports)
     if not len(columns) or not len(held):
@@ -430,9 +481,9 @@ def onto_columns(nodes: np.ndarray, loops: tuple, supports: np.ndarray, columns:
         np.minimum.at(shortest, loop, lengths)
         np.minimum.at(shortest, np.roll(loop, -1), lengths)
     distance, nearest = cKDTree(nodes[held]).query(columns)
-    node = held[nearest]
-    move = distance < COLUMN_SNAP * shortest[node]
-    nodes[node[move]] = columns[move]
+    for column, node, move in zip(columns, held[nearest], distance):
+        if move < COLUMN_SNAP * shortest[node] and _keeps_corners(nodes, loops, node, column):
+            nodes[node] = column
     return nodes
 
 

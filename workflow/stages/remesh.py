@@ -306,18 +306,17 @@ def too_fine_finding(record: dict, stage: str, size_key: str = "[section] diamet
 def column_nodes(surface: SurfaceResult, polymesh: PolyMesh) -> list[dict]:
     """Each support inside the surface (a column under the roof) with the grid node that stands on
     it (numbered as in the remeshed grid's OBJ) and how far that node is from it (JSON-ready; empty
-    without columns): the remesher moves the
-    node onto the column where that is under COLUMN_SNAP of its shortest beam, else the node stays
-    where the cells put it."""
-    from engine.remeshing.cell_extraction import inside_supports
+    without columns): the remesher moves the node onto the column where that is under COLUMN_SNAP
+    of its shortest beam and folds no cell, else the node stays where the cells put it."""
+    from engine.remeshing.cell_extraction import column_points, inside_supports
 
     held = np.zeros(surface.mesh.n_vertices, dtype=bool)
     held[surface.supports.nodes] = True
-    columns = np.flatnonzero(inside_supports(surface.mesh, held, np.flatnonzero(surface.mesh.boundary_vertices)))
+    points = column_points(surface.mesh, inside_supports(surface.mesh, held,
+                                                         np.flatnonzero(surface.mesh.boundary_vertices)))
     inside = np.flatnonzero(polymesh.supports & ~polymesh.boundary)
-    if not len(columns) or not len(inside):
+    if not len(points) or not len(inside):
         return []
-    points = surface.mesh.vertices[columns]
     distance = np.linalg.norm(points[:, None, :] - polymesh.nodes[inside][None, :, :], axis=2)
     nearest = distance.argmin(axis=1)
     return [{"column_m": [float(c) for c in p], "node": node_id(int(inside[k])), "offset_m": float(distance[i, k])}
