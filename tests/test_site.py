@@ -71,9 +71,14 @@ def test_a_roof_in_site_coordinates_is_built_to_the_end(tmp_path):
     surface = build_surface(project)[0]
     path = tmp_path / "roof.ply"
     trimesh.Trimesh(surface.vertices + SITE, surface.faces, process=False).export(path)
+    # the mock-up's symmetry planes move with it (through the origin they are refused: the roof is
+    # not symmetric about them)
+    planes = [plane.model_copy(update={"point": [float(c) for c in np.add(plane.point, SITE)]})
+              for plane in project.field.symmetry_planes]
     project = project.model_copy(update={
         "surface": project.surface.model_copy(update={"template": None, "file": str(path), "parameters": {}}),
-        "supports": [project.supports[0].model_copy(update={"select": "boundary"})]})
+        "supports": [project.supports[0].model_copy(update={"select": "boundary"})],
+        "field": project.field.model_copy(update={"symmetry_planes": planes})})
     out = tmp_path / "out"
     summary = run_project(project, out, STAGES, progress=Progress(enabled=False))
     assert summary.message is None, summary.message
