@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _cli import gridshell_command  # noqa: E402
+from _cli import run_gridshell, table_header, table_row  # noqa: E402
 
 
 @dataclass
@@ -272,27 +270,15 @@ def run_case(case: Case, out: Path, cells: int, timeout: float) -> dict:
     path.parent.mkdir(parents=True, exist_ok=True)
     case.make(path)
     run_dir = out / "runs" / case.name
-    started = time.perf_counter()
-    try:
-        done = subprocess.run([*gridshell_command(), "run", "--surface", str(path), *case.flags, "--cells", str(cells),
-                               "--out", str(run_dir), "--quiet", "--force"], capture_output=True, text=True,
-                              timeout=timeout)
-        code, stderr = done.returncode, done.stderr
-    except subprocess.TimeoutExpired:
-        code, stderr = -1, f"timed out after {timeout:.0f} s"
-    seconds = time.perf_counter() - started
-    report = (run_dir / "report.html").is_file() and code == 0
-    error = next((line for line in stderr.splitlines() if line.startswith("error")), stderr.strip()[-120:])
+    ended = run_gridshell(["run", "--surface", str(path), *case.flags, "--cells", str(cells), "--out", str(run_dir),
+                           "--quiet", "--force"], run_dir, timeout)
     notes = ""
     if (run_dir / "01-surface" / "surface.json").is_file():
         notes = "; ".join(json.loads((run_dir / "01-surface" / "surface.json").read_text()).get(
             "cleaning", {}).get("notes", []))
-    if case.refused is None:
-        expected = report
-    else:
-        expected = code == 2 and case.refused in stderr and "Traceback" not in stderr
-    return {"name": case.name, "exit": code, "seconds": round(seconds, 1), "report": report, "expected": expected,
-            "said": error if code else notes}
+    expected = ended.report if case.refused is None else ended.refused_with(case.refused)
+    return {"name": case.name, "exit": ended.code, "seconds": round(ended.seconds, 1), "report": ended.report,
+            "expected": expected, "said": ended.error(120) if ended.code else notes}
 
 
 def main() -> int:
@@ -305,13 +291,12 @@ def main() -> int:
     wanted = [m for m in args.match.split(",") if m]
     cases = [c for c in CASES if not wanted or any(m in c.name for m in wanted)]
     print(f"awkward_exports: {len(cases)} files, the quick start at {args.cells} cells, into {args.out}")
-    print(f"{'case':<20} {'exit':>4} {'s':>7} {'report':>6} {'as meant':>8}  said")
+    print(table_header(20))
     rows = []
     for case in cases:
         row = run_case(case, args.out, args.cells, args.timeout)
         rows.append(row)
-        print(f"{row['name']:<20} {row['exit']:>4} {row['seconds']:>7} {'yes' if row['report'] else 'no':>6} "
-              f"{'yes' if row['expected'] else 'NO':>8}  {row['said'][:110]}", flush=True)
+        print(table_row(row, 20, 110), flush=True)
     met = sum(r["expected"] for r in rows)
     print(f"{met} of {len(rows)} ended as meant (the report, or a refusal with its message)")
     return 0 if met == len(rows) else 1

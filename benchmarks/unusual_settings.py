@@ -17,9 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
-import time
 import tomllib
 from collections import Counter
 from dataclasses import dataclass
@@ -28,7 +26,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _cli import gridshell_command  # noqa: E402
+from _cli import run_gridshell, table_header, table_row  # noqa: E402
 
 
 @dataclass
@@ -176,23 +174,14 @@ def run_case(case: Case, surface: Path, out: Path, cells: int, timeout: float) -
     project = folder / f"{case.name}.toml"
     project.write_text(project_text(case, surface, cells), encoding="utf-8")
     run_dir = out / "runs" / case.name
-    started = time.perf_counter()
-    try:
-        done = subprocess.run([*gridshell_command(), "run", str(project), "--out", str(run_dir), "--quiet", "--force"],
-                              capture_output=True, text=True, timeout=timeout)
-        code, stderr = done.returncode, done.stderr
-    except subprocess.TimeoutExpired:
-        code, stderr = -1, f"timed out after {timeout:.0f} s"
-    seconds = time.perf_counter() - started
-    report = (run_dir / "report.html").is_file() and code == 0
-    error = next((line for line in stderr.splitlines() if line.startswith("error")), stderr.strip()[-160:])
+    ended = run_gridshell(["run", str(project), "--out", str(run_dir), "--quiet", "--force"], run_dir, timeout)
     if case.refused is None:
-        expected = report and "Traceback" not in stderr
+        expected = ended.report and "Traceback" not in ended.stderr
     else:
-        expected = code == 2 and case.refused in stderr and "Traceback" not in stderr
-    said = error if code else f"{_verdicts(run_dir)}; {_findings(run_dir) or 'no finding'}"
-    return {"name": case.name, "exit": code, "seconds": round(seconds, 1), "report": report, "expected": expected,
-            "said": said}
+        expected = ended.refused_with(case.refused)
+    said = ended.error(160) if ended.code else f"{_verdicts(run_dir)}; {_findings(run_dir) or 'no finding'}"
+    return {"name": case.name, "exit": ended.code, "seconds": round(ended.seconds, 1), "report": ended.report,
+            "expected": expected, "said": said}
 
 
 def main() -> int:
@@ -211,13 +200,12 @@ def main() -> int:
     cases = [c for c in CASES if not wanted or any(m in c.name for m in wanted)]
     print(f"unusual_settings: {len(cases)} cases on {generated.name} ({generated.span_m:.1f} m span), "
           f"{args.cells} cells, into {args.out}")
-    print(f"{'case':<28} {'exit':>4} {'s':>7} {'report':>6} {'as meant':>8}  said")
+    print(table_header(28))
     rows = []
     for case in cases:
         row = run_case(case, surface, args.out, args.cells, args.timeout)
         rows.append(row)
-        print(f"{row['name']:<28} {row['exit']:>4} {row['seconds']:>7} {'yes' if row['report'] else 'no':>6} "
-              f"{'yes' if row['expected'] else 'NO':>8}  {row['said'][:120]}", flush=True)
+        print(table_row(row, 28, 120), flush=True)
     met = sum(r["expected"] for r in rows)
     print(f"{met} of {len(rows)} ended as meant (the report, or a refusal naming the key)")
     return 0 if met == len(rows) else 1
