@@ -222,6 +222,11 @@ class TriMesh:
         return _readonly(unique_edges(self.faces))
 
     @cached_property
+    def edge_lengths(self) -> np.ndarray:
+        """(n_edges,) lengths of ``edges``, m."""
+        return _readonly(np.linalg.norm(self.vertices[self.edges[:, 1]] - self.vertices[self.edges[:, 0]], axis=1))
+
+    @cached_property
     def boundary_loops(self) -> list[np.ndarray]:
         """Ordered vertex loops of the boundary, longest (outer) first."""
         return boundary_loops(self.faces)

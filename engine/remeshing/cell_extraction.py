@@ -388,11 +388,13 @@ def _polygons(mesh: TriMesh, fine: _Fine, labels: np.ndarray, centroids: np.ndar
                                                                        local_size)
     boundary_ids = np.unique(np.concatenate(fine.loops)) if fine.loops else np.zeros(0, dtype=np.int64)
     boundary_ids = boundary_ids[boundary_ids < fine.n_surface_vertices]
-    supports = support_nodes(mesh, nodes, boundary, support_vertices, boundary_ids=boundary_ids)
     loops = tuple(np.split(flat, offsets[1:-1]))
-    if support_vertices is not None and np.any(support_vertices):
-        columns = column_points(mesh, inside_supports(mesh, np.asarray(support_vertices, dtype=bool), boundary_ids))
-        nodes = onto_columns(nodes, loops, supports & ~boundary, columns)
+    if support_vertices is None or not np.any(support_vertices):
+        supports = np.zeros(len(nodes), dtype=bool)
+    else:
+        inside = inside_supports(mesh, np.asarray(support_vertices, dtype=bool), boundary_ids)
+        supports = support_nodes(mesh, nodes, boundary, support_vertices, boundary_ids=boundary_ids, inside=inside)
+        nodes = onto_columns(nodes, loops, supports & ~boundary, column_points(mesh, inside))
     return PolyMesh(nodes=nodes, faces=loops, boundary=boundary, supports=supports, corners=corners)
 
 
@@ -403,9 +405,7 @@ def inside_supports(mesh: TriMesh, support_vertices: np.ndarray, boundary_ids: n
     on_edge = np.zeros(len(support_vertices), dtype=bool)
     on_edge[boundary_ids] = True
     if len(boundary_ids):
-        edges = mesh.edges
-        half_edge = 0.5 * float(np.median(np.linalg.norm(mesh.vertices[edges[:, 1]] - mesh.vertices[edges[:, 0]],
-                                                          axis=1)))
+        half_edge = 0.5 * float(np.median(mesh.edge_lengths))
         flagged = np.flatnonzero(support_vertices & ~on_edge)
         distance, _ = cKDTree(mesh.vertices[boundary_ids]).query(mesh.vertices[flagged])
         on_edge[flagged[distance <= half_edge]] = True
@@ -423,14 +423,13 @@ def column_points(mesh: TriMesh, inside: np.ndarray) -> np.ndarray:
     if not len(ids):
         return np.zeros((0, 3))
     edges = mesh.edges
-    lengths = np.linalg.norm(mesh.vertices[edges[:, 1]] - mesh.vertices[edges[:, 0]], axis=1)
     both = inside[edges[:, 0]] & inside[edges[:, 1]]
     local = np.full(len(inside), -1)
     local[ids] = np.arange(len(ids))
     a, b = local[edges[both, 0]], local[edges[both, 1]]
     count, label = connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(len(ids), len(ids))),
                                         directed=False)
-    reach = 2.0 * float(np.median(lengths))
+    reach = 2.0 * float(np.median(mesh.edge_lengths))
     points = []
     for group in range(count):
         members = mesh.vertices[ids[label == group]]
@@ -488,11 +487,12 @@ def onto_columns(nodes: np.ndarray, loops: tuple, supports: np.ndarray, columns:
 
 
 def support_nodes(mesh: TriMesh, nodes: np.ndarray, boundary: np.ndarray, support_vertices: np.ndarray | None,
-                  *, boundary_ids: np.ndarray | None = None) -> np.ndarray:
+                  *, boundary_ids: np.ndarray | None = None, inside: np.ndarray | None = None) -> np.ndarray:
     """Boundary nodes whose nearest boundary vertex of the surface is supported, the boundary node
     nearest to each supported boundary vertex, and the node nearest to each supported vertex inside
     the surface (a column under the roof: held at its nearest node, not moved to the edge;
-    inside_supports) (``boundary_ids``: the surface's boundary vertices, when known)."""
+    inside_supports) (``boundary_ids``: the surface's boundary vertices, and ``inside``: inside_supports,
+    when known)."""
     supports = np.zeros(len(nodes), dtype=bool)
     if support_vertices is None or not np.any(support_vertices):
         return supports
@@ -502,7 +502,8 @@ def support_nodes(mesh: TriMesh, nodes: np.ndarray, boundary: np.ndarray, suppor
     if len(boundary_ids) and np.any(boundary):
         _, nearest = cKDTree(mesh.vertices[boundary_ids]).query(nodes[boundary])
         supports[np.flatnonzero(boundary)[support_vertices[boundary_ids[nearest]]]] = True
-    inside = inside_supports(mesh, support_vertices, boundary_ids)
+    if inside is None:
+        inside = inside_supports(mesh, support_vertices, boundary_ids)
     on_edge = support_vertices & ~inside
     candidates = np.flatnonzero(boundary) if np.any(boundary) else np.arange(len(nodes))
     _, nearest_node = cKDTree(nodes[candidates]).query(mesh.vertices[on_edge])

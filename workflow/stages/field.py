@@ -42,8 +42,7 @@ def check_symmetry_planes(mesh: TriMesh, project: Project) -> None:
     planes = project.field.to_settings().symmetry_planes
     if not planes:
         return
-    edges = mesh.edges
-    edge = float(np.median(np.linalg.norm(mesh.vertices[edges[:, 1]] - mesh.vertices[edges[:, 0]], axis=1)))
+    edge = float(np.median(mesh.edge_lengths))
     low, high = mesh.bounds
     allowed = SYMMETRY_GAP_SHARE * float(np.linalg.norm(high - low)) + 2.0 * edge
     centre = 0.5 * (low + high)
